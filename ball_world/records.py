@@ -1,0 +1,89 @@
+"""What the node hands to its sinks (MCAP recording, Rerun logging) after each step.
+
+The flow is one-directional: the node steps the World, packs one StepRecord, and every sink
+writes it. Sinks never touch the World or ROS, so the offline converter can feed them from a
+recording exactly as the live node does.
+"""
+from dataclasses import dataclass, field
+from typing import Optional, Protocol
+
+import numpy as np
+
+PACKAGE_NAME = 'ball_world'
+
+
+@dataclass(frozen=True)
+class AppliedImpulse:
+    """An impulse the node accepted and applied before a step."""
+
+    ball: int
+    jx: float  # N*s along world x
+    jy: float  # N*s along world y
+    frame_id: str  # 'ball_<i>', as it arrived
+    cdr: bytes  # the Vector3Stamped as recorded: CDR, header.stamp = sim time of the step
+
+
+@dataclass(frozen=True)
+class WorldSnapshot:
+    """The static part of a world: what sinks need once per segment (start or reset)."""
+
+    radii: np.ndarray  # (N,)
+    masses: np.ndarray  # (N,)
+    walls: np.ndarray  # (M, 4) x1, y1, x2, y2
+    positions: np.ndarray  # (N, 2) at step 0
+    velocities: np.ndarray  # (N, 2) at step 0
+    dt_ns: int
+    frame_id: str
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """Everything a sink needs to label a segment of a run.
+
+    parameters: the node's effective parameters (name -> plain Python value), enough to
+    rebuild the same world. topics: logical name ('balls', 'state', 'impulse') -> resolved
+    ROS topic name ('/balls', '/sim2/balls', ...). segment: 0 at start, +1 on every reset.
+    log_offset_ns: added to the simulation stamp to get a log time that never decreases
+    across resets.
+    """
+
+    parameters: dict
+    topics: dict
+    segment: int
+    log_offset_ns: int
+    package_version: str
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """One step's output. Arrays are owned by the record (copies), never the live World."""
+
+    step: int  # k: this record is the state at the end of step k (k = 0: initial state)
+    stamp_ns: int  # simulation time k * dt, integer nanoseconds
+    log_time_ns: int  # stamp_ns + segment log offset: never decreases within a recording
+    positions: np.ndarray  # (N, 2)
+    velocities: np.ndarray  # (N, 2)
+    ball_ball: int  # ball-ball collisions resolved in this step
+    ball_wall: int  # ball-wall collisions resolved in this step
+    kinetic_energy: float  # J
+    momentum: np.ndarray  # (2,) kg*m/s
+    balls_cdr: bytes  # geometry_msgs/PoseArray, CDR, as published
+    state_cdr: bytes  # std_msgs/Float64MultiArray, CDR, as published
+    impulses: tuple = field(default_factory=tuple)  # AppliedImpulse applied before this step
+    real_time_factor: Optional[float] = None  # simulated / wall time, when known
+
+
+class Sink(Protocol):
+    """A destination for a run: the MCAP recorder and the Rerun logger implement this."""
+
+    def start_segment(self, world: WorldSnapshot, info: RunInfo) -> None:
+        """Begin a segment: called once at start and again after every reset."""
+
+    def write_step(self, record: StepRecord) -> None:
+        """Write one step; must not block for long (the node calls it on its stepping path)."""
+
+    def flush(self) -> None:
+        """Make everything written so far durable (called about once a second)."""
+
+    def close(self) -> None:
+        """Finish the file so every reader opens it (summary, index, footer)."""

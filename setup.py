@@ -1,0 +1,30 @@
+"""Installs ball_world as an ament_python package (colcon) or into a virtual environment (pip)."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'ball_world'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
+    ],
+    install_requires=['setuptools', 'numpy'],
+    zip_safe=True,
+    maintainer='ball_world developers',
+    maintainer_email='ball_world@example.com',
+    description='An exact 2D elastic-collision world as a ROS 2 node, with MCAP and Rerun output.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'ball_world_sim = ball_world.headless:main',
+        ],
+    },
+)

@@ -1,0 +1,220 @@
+"""The seed's collision rules on hand-computed cases, and the core's invariants."""
+import math
+
+from hypothesis import given, settings, strategies as st
+import numpy as np
+import pytest
+
+from ball_world.broadphase import grid_pairs
+from ball_world.physics import World
+from ball_world.scenario import build_world
+
+BOX = [[0.0, 0.0, 10.0, 0.0], [10.0, 0.0, 10.0, 10.0], [10.0, 10.0, 0.0, 10.0],
+       [0.0, 10.0, 0.0, 0.0]]
+
+
+def one_ball(x, y, vx, vy, walls, radius=0.5):
+    return World([[x, y]], [[vx, vy]], [radius], [1.0], walls=walls)
+
+
+# Ball and wall -------------------------------------------------------------------------
+
+@pytest.mark.parametrize('side', [-1.0, 1.0])
+def test_vertical_wall_reflects_vx_from_either_side(side):
+    # Wall x = 5; ball 0.55 m away on either side, moving towards it at 1 m/s.
+    world = one_ball(5.0 + side * 0.55, 2.0, -side * 1.0, 0.3, [[5.0, 0.0, 5.0, 10.0]])
+    stats = world.step(0.1)  # moves 0.1 m: |r_x - x_w| = 0.45 < 0.5, approaching
+    assert stats.ball_wall == 1
+    np.testing.assert_array_equal(world.velocities[0], [side * 1.0, 0.3])
+
+
+@pytest.mark.parametrize('side', [-1.0, 1.0])
+def test_horizontal_wall_reflects_vy_from_either_side(side):
+    world = one_ball(3.0, 5.0 + side * 0.55, 0.7, -side * 1.0, [[0.0, 5.0, 10.0, 5.0]])
+    stats = world.step(0.1)
+    assert stats.ball_wall == 1
+    np.testing.assert_array_equal(world.velocities[0], [0.7, side * 1.0])
+
+
+def test_oblique_wall_uses_v_prime_equals_2_v_dot_w_w_minus_v():
+    # Wall along w = (1, 1)/sqrt(2) through the origin; ball just off it, moving at it.
+    w = np.array([1.0, 1.0]) / math.sqrt(2.0)
+    v = np.array([1.0, -2.0])
+    normal = np.array([-1.0, 1.0]) / math.sqrt(2.0)
+    start = np.array([5.0, 5.0]) + normal * 0.48 - v * 0.01
+    world = one_ball(*start, *v, [[0.0, 0.0, 10.0, 10.0]])
+    stats = world.step(0.01)
+    assert stats.ball_wall == 1
+    expected = 2.0 * np.dot(v, w) * w - v
+    np.testing.assert_allclose(world.velocities[0], expected, rtol=0, atol=1e-15)
+    assert np.dot(world.velocities[0], normal) > 0  # now leaving the wall
+
+
+def test_segment_end_point_reflects_about_end_to_centre_normal():
+    # Segment from (0, 0) to (5, 0); a ball beyond its end (5, 0), moving left-down.
+    v = np.array([-1.0, -1.0])
+    centre_after = np.array([5.3, 0.3])  # |s| = 0.424 < 0.5 from the end point
+    world = one_ball(*(centre_after - v * 0.01), *v, [[0.0, 0.0, 5.0, 0.0]])
+    stats = world.step(0.01)
+    assert stats.ball_wall == 1
+    n = np.array([0.3, 0.3]) / math.hypot(0.3, 0.3)
+    np.testing.assert_allclose(world.velocities[0], v - 2 * np.dot(v, n) * n, atol=1e-15)
+    np.testing.assert_allclose(world.velocities[0], [1.0, 1.0], atol=1e-15)
+
+
+def test_ball_past_the_end_of_a_segment_does_not_collide():
+    world = one_ball(6.0, 0.3, 0.0, -1.0, [[0.0, 0.0, 5.0, 0.0]])
+    world.step(0.01)
+    assert world.velocities[0].tolist() == [0.0, -1.0]
+
+
+def test_touching_but_leaving_a_wall_is_left_alone():
+    world = one_ball(5.3, 2.0, 1.0, 0.0, [[5.0, 0.0, 5.0, 10.0]])  # overlapping, separating
+    stats = world.step(0.01)
+    assert stats.ball_wall == 0
+    assert world.velocities[0].tolist() == [1.0, 0.0]
+
+
+# Ball and ball -------------------------------------------------------------------------
+
+def test_head_on_unequal_masses_match_momentum_and_energy():
+    m1, m2, u1, u2 = 1.0, 3.0, 2.0, -1.0
+    world = World([[0.0, 0.0], [1.05, 0.0]], [[u1, 0.0], [u2, 0.0]], [0.5, 0.5], [m1, m2])
+    stats = world.step(0.02)  # gap closes by 0.06 m: touching and approaching
+    assert stats.ball_ball == 1
+    # 1D elastic collision, from conservation of momentum and kinetic energy.
+    v1 = ((m1 - m2) * u1 + 2 * m2 * u2) / (m1 + m2)
+    v2 = ((m2 - m1) * u2 + 2 * m1 * u1) / (m1 + m2)
+    np.testing.assert_allclose(world.velocities, [[v1, 0.0], [v2, 0.0]], atol=1e-15)
+    assert (v1, v2) == (-2.5, 0.5)
+
+
+def test_glancing_hit_of_equal_masses_leaves_perpendicular_velocities():
+    world = World([[0.0, 0.0], [0.8, 0.5]], [[1.0, 0.0], [0.0, 0.0]], [0.5, 0.5], [2.0, 2.0])
+    stats = world.step(0.01)
+    assert stats.ball_ball == 1
+    va, vb = world.velocities
+    assert abs(np.dot(va, vb)) < 1e-15
+    np.testing.assert_allclose(va + vb, [1.0, 0.0], atol=1e-15)
+    # The struck ball moves along the line of centres at the moment of detection.
+    rel = world.positions[1] - world.positions[0]
+    assert abs(rel[0] * vb[1] - rel[1] * vb[0]) < 1e-15
+
+
+def test_seed_formula_on_an_arbitrary_pair():
+    ra, rb = np.array([0.0, 0.0]), np.array([0.6, 0.7])
+    va, vb = np.array([1.5, 0.2]), np.array([-0.4, -0.9])
+    ma, mb = 1.3, 0.7
+    h = 1e-3
+    world = World([ra - va * h, rb - vb * h], [va, vb], [0.5, 0.5], [ma, mb])
+    world.step(h)
+    d = world.positions[0] - world.positions[1]
+    exp_a = va - 2 * mb / (ma + mb) * np.dot(va - vb, d) / np.dot(d, d) * d
+    exp_b = vb - 2 * ma / (ma + mb) * np.dot(vb - va, -d) / np.dot(d, d) * -d
+    np.testing.assert_allclose(world.velocities, [exp_a, exp_b], atol=1e-15)
+
+
+def test_overlapping_but_separating_pair_is_left_alone():
+    world = World([[0.0, 0.0], [0.8, 0.0]], [[-1.0, 0.0], [1.0, 0.0]], [0.5, 0.5], [1.0, 1.0])
+    stats = world.step(0.01)
+    assert stats.ball_ball == 0
+    assert world.velocities.tolist() == [[-1.0, 0.0], [1.0, 0.0]]
+
+
+def test_three_ball_contact_resolves_pairwise_and_conserves_energy():
+    # A ball hits two touching balls at once (Newton's cradle in a line).
+    world = World([[0.0, 0.0], [0.99, 0.0], [1.98, 0.0]], [[1.0, 0.0], [0.0, 0.0], [0.0, 0.0]],
+                  [0.5, 0.5, 0.5], [1.0, 1.0, 1.0])
+    e0 = world.kinetic_energy()
+    world.step(0.001)
+    np.testing.assert_allclose(world.velocities, [[0, 0], [0, 0], [1, 0]], atol=1e-15)
+    assert world.kinetic_energy() == pytest.approx(e0, rel=1e-15)
+
+
+def test_impulse_changes_velocity_by_j_over_m():
+    world = World([[1.0, 1.0]], [[0.5, 0.0]], [0.2], [4.0])
+    world.apply_impulse(0, 2.0, -1.0)
+    assert world.velocities[0].tolist() == [1.0, -0.25]
+
+
+# Tunnelling ----------------------------------------------------------------------------
+
+def test_ball_at_1000_m_per_s_stays_in_a_10_m_box():
+    world = World([[5.0, 5.0]], [[1000.0, 371.0]], [0.1], [1.0], walls=BOX)
+    for _ in range(500):
+        world.step(0.01)
+        assert np.all(world.positions > 0.0) and np.all(world.positions < 10.0)
+    assert np.hypot(*world.velocities[0]) == pytest.approx(math.hypot(1000.0, 371.0))
+
+
+def test_fast_balls_never_pass_through_each_other():
+    # Head-on at 500 m/s each; without substeps they would swap sides in one step.
+    world = World([[2.0, 5.0], [8.0, 5.0]], [[500.0, 0.0], [-500.0, 0.0]], [0.2, 0.2],
+                  [1.0, 1.0], walls=BOX)
+    world.step(0.01)
+    assert world.positions[0, 0] < world.positions[1, 0]
+    assert world.velocities[0, 0] < 0 < world.velocities[1, 0]
+
+
+# Broadphase ----------------------------------------------------------------------------
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 300), st.integers(0, 2**31), st.floats(0.0, 1.0))
+def test_grid_pairs_equal_all_pairs(n, seed, margin):
+    rng = np.random.default_rng(seed)
+    positions = rng.uniform(-5, 5, (n, 2))
+    radii = rng.uniform(0.05, 0.4, n)
+    a, b = grid_pairs(positions, radii, margin)
+    got = set(zip(a.tolist(), b.tolist()))
+    d = np.sqrt(((positions[:, None] - positions[None]) ** 2).sum(-1))
+    reach = radii[:, None] + radii[None] + margin
+    i, j = np.nonzero(np.triu(d < reach, k=1))
+    assert got == set(zip(i.tolist(), j.tolist()))
+    assert len(got) == len(a)
+
+
+# Invariants over long random runs ------------------------------------------------------
+
+def random_world(seed, count=60):
+    return build_world({'random.count': count, 'random.seed': seed, 'random.speed': 8.0,
+                        'random.radius': [0.1, 0.6],
+                        'walls': [2.0, 2.0, 4.0, 3.0, 7.0, 8.0, 7.5, 6.0]})
+
+
+@settings(max_examples=8, deadline=None)
+@given(st.integers(0, 10_000))
+def test_long_run_conserves_energy_momentum_free_and_stays_inside(seed):
+    world = random_world(seed)
+    e0 = world.kinetic_energy()
+    collisions = 0
+    for _ in range(1500):
+        stats = world.step(1 / 60)
+        collisions += stats.ball_ball + stats.ball_wall
+        assert stats.unresolved == 0
+    assert collisions > 100  # the run really exercised collisions
+    assert np.all(np.isfinite(world.positions)) and np.all(np.isfinite(world.velocities))
+    assert np.all(world.positions > 0.0) and np.all(world.positions < 10.0)
+    assert abs(world.kinetic_energy() - e0) <= 1e-12 * e0
+
+
+def test_momentum_is_conserved_without_walls():
+    world = build_world({'random.count': 80, 'random.seed': 3, 'random.speed': 5.0})
+    walls_free = World(world.positions, world.velocities, world.radii, world.masses)
+    p0 = walls_free.momentum()
+    collisions = 0
+    for _ in range(200):
+        collisions += walls_free.step(1 / 60).ball_ball
+    assert collisions > 10
+    np.testing.assert_allclose(walls_free.momentum(), p0, rtol=0, atol=1e-12)
+
+
+def test_identical_inputs_give_bit_identical_trajectories():
+    runs = []
+    for _ in range(2):
+        world = random_world(42)
+        for k in range(600):
+            if k == 100:
+                world.apply_impulse(3, 0.5, -0.25)
+            world.step(1 / 60)
+        runs.append((world.positions.tobytes(), world.velocities.tobytes()))
+    assert runs[0] == runs[1]
