@@ -167,6 +167,20 @@ def encode_state(positions: np.ndarray, velocities: np.ndarray, stamp_ns=None) -
         return buf.tobytes()
 
 
+def encode_float64_vector(values, label: str) -> bytes:
+    """std_msgs/msg/Float64MultiArray with one labelled dimension: a short vector of numbers.
+
+    Used for the per-step `stats` topic, whose label names the entries in order.
+    """
+    values = np.ascontiguousarray(values, dtype=np.float64).reshape(-1)
+    n = values.size
+    out = _U32.pack(1) + _string_bytes(label, 4)
+    out += b'\x00' * _pad(len(out), 4) + struct.pack('<II', n, n)
+    out += struct.pack('<II', 0, n)
+    out += b'\x00' * (_pad(len(out), 8) if n else 0)
+    return ENCAPSULATION + out + values.tobytes()
+
+
 def encode_vector3_stamped(stamp_ns: int, frame_id: str, x: float, y: float,
                            z: float) -> bytes:
     """geometry_msgs/msg/Vector3Stamped: how impulses arrive and how they are recorded."""

@@ -30,6 +30,8 @@ from ball_world.broadphase import NeighbourLists, segment_offsets
 
 #: Largest distance a ball may travel in one substep, as a fraction of the smallest radius.
 MAX_TRAVEL = 0.5
+#: Substeps per step that a commanded speed may demand at most (see World.speed_limit).
+SPEED_LIMIT_SUBSTEPS = 1000
 #: Safety cap on resolution rounds per substep; contacts left approaching (never seen in
 #: practice) are resolved at the end of the next substep, and counted.
 MAX_ROUNDS = 10_000
@@ -101,6 +103,16 @@ class World:
     def momentum(self):
         """Total linear momentum (px, py), kg m/s."""
         return self.masses @ self.velocities
+
+    def speed_limit(self, dt):
+        """Fastest speed an impulse may give a ball: SPEED_LIMIT_SUBSTEPS substeps per step.
+
+        Collisions conserve energy, so speeds stay bounded by what commands put in; the
+        limit keeps one absurd command from making a single step take hours.
+        """
+        if len(self) == 0:
+            return math.inf
+        return SPEED_LIMIT_SUBSTEPS * MAX_TRAVEL * self.min_radius / dt
 
     # Inputs -----------------------------------------------------------------------------
 

@@ -11,6 +11,12 @@ import numpy as np
 
 PACKAGE_NAME = 'ball_world'
 
+#: The entries of the per-step `stats` topic, in order (its layout label joins them by '.').
+#: real_time_factor is NaN where unknown (offline runs, the first step).
+STATS_FIELDS = ('kinetic_energy', 'momentum_x', 'momentum_y', 'ball_ball', 'ball_wall',
+                'real_time_factor')
+STATS_LABEL = '.'.join(STATS_FIELDS)
+
 
 @dataclass(frozen=True)
 class AppliedImpulse:
@@ -69,6 +75,7 @@ class StepRecord:
     momentum: np.ndarray  # (2,) kg*m/s
     balls_cdr: bytes  # geometry_msgs/PoseArray, CDR, as published
     state_cdr: bytes  # std_msgs/Float64MultiArray, CDR, as published
+    stats_cdr: bytes  # std_msgs/Float64MultiArray, CDR: STATS_FIELDS in order, as published
     impulses: tuple = field(default_factory=tuple)  # AppliedImpulse applied before this step
     real_time_factor: Optional[float] = None  # simulated / wall time, when known
 
