@@ -24,6 +24,7 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'ball_world = ball_world.node:main',
             'ball_world_sim = ball_world.headless:main',
         ],
     },

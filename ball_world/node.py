@@ -1,0 +1,330 @@
+"""The ball_world node: a thin ROS 2 shell around a Simulation.
+
+It owns no physics and no file format. It declares the parameters, steps the Simulation
+on a steady-clock timer, publishes each step's ready-made CDR bytes, turns impulse
+messages into queued impulses (or counted rejections), serves ~/reset, ~/pause and
+~/step, and hands every step to the recording sinks.
+"""
+import sys
+import time
+
+from geometry_msgs.msg import PoseArray, Vector3Stamped
+from rcl_interfaces.msg import SetParametersResult
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock as ClockMsg
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool, Trigger
+from visualization_msgs.msg import MarkerArray
+
+from ball_world.cdr import decode_vector3_stamped, encode_clock
+from ball_world.impulses import check_impulse, ImpulseRejected
+from ball_world.markers import MarkerBuilder
+from ball_world.parameters import current_values, declare_all, ParameterError, SPEC_BY_NAME
+from ball_world.scenario import build_world, describe, ScenarioError, step_duration_ns
+from ball_world.simulation import Simulation
+
+#: Seconds between the node's progress lines (achieved rate, real-time factor, rejections).
+REPORT_PERIOD = 10.0
+#: Seconds between flushes of the recordings: what a SIGKILL can lose at most.
+FLUSH_PERIOD = 1.0
+#: Impulses buffered by the subscription before DDS would have to drop any.
+IMPULSE_QUEUE_DEPTH = 100_000
+
+STEP_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+MARKER_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+IMPULSE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=IMPULSE_QUEUE_DEPTH,
+                         reliability=ReliabilityPolicy.RELIABLE)
+
+
+class StartupError(Exception):
+    """The node cannot start; the message is the one line to print."""
+
+
+def open_sinks(values, on_failure):
+    """The recording sinks the parameters ask for, opened now so a bad path fails at start."""
+    sinks = []
+    try:
+        if values['record.mcap']:
+            from ball_world.mcap_sink import McapSink
+            sinks.append(McapSink(values['record.mcap']))
+        if values['record.rerun']:
+            from ball_world.rerun_sink import RerunSink
+            sinks.append(RerunSink(values['record.rerun'], every=values['record.rerun_every']))
+    except OSError as error:
+        for sink in sinks:
+            sink.close()
+        name = 'record.mcap' if not sinks and values['record.mcap'] else 'record.rerun'
+        raise StartupError(f"parameter '{name}': cannot record to {error}") from None
+    return sinks
+
+
+class BallWorld(Node):
+    """Steps the world at rate_hz and speaks ROS for it."""
+
+    def __init__(self, **kwargs):
+        super().__init__('ball_world', **kwargs)
+        try:
+            declare_all(self)
+        except ParameterError as error:
+            raise StartupError(str(error)) from None
+        values = current_values(self)
+        try:
+            topics = {name: self.resolve_topic_name(name)
+                      for name in ('balls', 'state', 'stats', 'impulse')}
+            self.simulation = Simulation(values, open_sinks(values, self._on_sink_failure),
+                                         topics=topics, on_sink_failure=self._on_sink_failure)
+        except ScenarioError as error:
+            raise StartupError(str(error)) from None
+
+        self.balls_pub = self.create_publisher(PoseArray, 'balls', STEP_QOS)
+        self.state_pub = self.create_publisher(Float64MultiArray, 'state', STEP_QOS)
+        self.stats_pub = self.create_publisher(Float64MultiArray, 'stats', STEP_QOS)
+        self.markers_pub = self.create_publisher(MarkerArray, 'markers', MARKER_QOS)
+        self.clock_pub = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
+        self.create_subscription(Vector3Stamped, 'impulse', self._on_impulse, IMPULSE_QOS,
+                                 raw=True)
+        self.create_service(Trigger, '~/reset', self._on_reset)
+        self.create_service(SetBool, '~/pause', self._on_pause)
+        self.create_service(Trigger, '~/step', self._on_step)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        self.paused = False
+        self.finished = False
+        self.steps_done = 0
+        self._warned = set()
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._markers = MarkerBuilder()
+        self._rebuild_markers()
+        self._timer = self.create_timer(self._period(values['rate_hz']), self._on_timer,
+                                        clock=self._steady)
+        self._markers_timer = None
+        self._set_markers_rate(values['markers.rate_hz'])
+        self.create_timer(FLUSH_PERIOD, self.simulation.flush, clock=self._steady)
+        self.create_timer(REPORT_PERIOD, self._report, clock=self._steady)
+        self._window = (time.monotonic(), 0, 0)
+        self._start_wall = time.monotonic()
+        self._publish(self.simulation.last_record)
+        self.get_logger().info(
+            f'world: {describe(self.simulation.world, self.simulation.dt_ns)}, rate '
+            f"{values['rate_hz']:g} Hz; publishing {topics['balls']}, {topics['state']}, "
+            f"{topics['stats']}")
+
+    # Stepping ---------------------------------------------------------------------------
+
+    @staticmethod
+    def _period(rate_hz):
+        return 0.0 if rate_hz == 0.0 else 1.0 / rate_hz
+
+    def _on_timer(self):
+        if not self.paused and not self.finished:
+            self.step_once()
+
+    def step_once(self):
+        """Advance one step, publish it, stop at max_steps."""
+        simulation = self.simulation
+        elapsed = time.monotonic() - self._start_wall
+        simulated = (simulation.step_index + 1) * simulation.dt_ns * 1e-9
+        rtf = simulated / elapsed if elapsed > 0 else None
+        record, rejected = simulation.step(real_time_factor=rtf)
+        for rejection in rejected:
+            self._warn_rejection(rejection)
+        self._publish(record)
+        self.steps_done += 1
+        max_steps = self.get_parameter('max_steps').value
+        if max_steps and simulation.step_index >= max_steps:
+            self.get_logger().info(f'max_steps {max_steps} reached at t = '
+                                   f'{record.stamp_ns / 1e9:.6g} s; stopping')
+            self.finished = True
+        return record
+
+    def _publish(self, record):
+        self.balls_pub.publish(record.balls_cdr)
+        self.state_pub.publish(record.state_cdr)
+        self.stats_pub.publish(record.stats_cdr)
+        if self.get_parameter('publish_clock').value:
+            self.clock_pub.publish(encode_clock(record.stamp_ns))
+
+    # Markers ----------------------------------------------------------------------------
+
+    def _rebuild_markers(self):
+        world = self.simulation.world
+        self._markers.reset(world.radii, world.walls.segments, self.simulation.frame_id)
+
+    def _publish_markers(self):
+        simulation = self.simulation
+        self.markers_pub.publish(self._markers.build(
+            simulation.world.positions, simulation.stamp_ns, simulation.frame_id))
+
+    def _set_markers_rate(self, rate_hz):
+        if self._markers_timer is not None:
+            self.destroy_timer(self._markers_timer)
+            self._markers_timer = None
+        if rate_hz > 0.0:
+            self._publish_markers()
+            self._markers_timer = self.create_timer(1.0 / rate_hz, self._publish_markers,
+                                                    clock=self._steady)
+
+    # Impulses ---------------------------------------------------------------------------
+
+    def _on_impulse(self, data):
+        simulation = self.simulation
+        try:
+            try:
+                stamp_ns, frame_id, x, y, z = decode_vector3_stamped(data)
+            except ValueError as error:
+                raise ImpulseRejected('malformed_message', f'undecodable impulse: {error}')
+            ball, jx, jy = check_impulse(
+                frame_id, x, y, z, len(simulation.world), stamp_ns, simulation.stamp_ns,
+                time.time_ns())
+        except ImpulseRejected as rejection:
+            simulation.count_rejection(rejection.reason)
+            self._warn_rejection(rejection)
+            return
+        simulation.queue_impulse(ball, jx, jy, frame_id)
+
+    def _warn_rejection(self, rejection):
+        count = self.simulation.rejected.get(rejection.reason, 0)
+        self.get_logger().warning(
+            f'rejected impulse ({rejection.reason}, {count} so far): {rejection}',
+            throttle_duration_sec=5.0, throttle_time_source_type=self._steady)
+
+    # Services ---------------------------------------------------------------------------
+
+    def _on_reset(self, request, response):
+        values = current_values(self)
+        try:
+            record = self.simulation.reset(values)
+        except ScenarioError as error:
+            response.success = False
+            response.message = f'reset refused, world unchanged: {error}'
+            return response
+        self._start_wall = time.monotonic()
+        self._rebuild_markers()
+        self._publish(record)
+        if self._markers_timer is not None:
+            self._publish_markers()
+        response.success = True
+        response.message = (f'reset to step 0: '
+                            f'{describe(self.simulation.world, self.simulation.dt_ns)}')
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_pause(self, request, response):
+        was = self.paused
+        self.paused = bool(request.data)
+        if not self.paused and was:
+            # Resume the real-time factor from now, not from before the pause.
+            simulated = self.simulation.step_index * self.simulation.dt_ns * 1e-9
+            self._start_wall = time.monotonic() - simulated
+        state = 'paused' if self.paused else 'running'
+        response.success = True
+        response.message = (f'already {state}' if was == self.paused else state) + \
+            f' at step {self.simulation.step_index}'
+        return response
+
+    def _on_step(self, request, response):
+        if not self.paused:
+            response.success = False
+            response.message = 'not paused: call ~/pause with data: true first'
+            return response
+        if self.finished:
+            response.success = False
+            response.message = 'max_steps reached; nothing more to step'
+            return response
+        record = self.step_once()
+        response.success = True
+        response.message = f'step {record.step} at t = {record.stamp_ns / 1e9:.9g} s'
+        return response
+
+    # Parameters -------------------------------------------------------------------------
+
+    def _on_set_parameters(self, parameters):
+        """Refuse values that could not make a valid world, with the reason; apply the rest.
+
+        World parameters are checked by building the world they describe (it is built again
+        on ~/reset), so a bad value is refused now, not discovered at the next reset.
+        """
+        changes = {p.name: p.value for p in parameters if p.name in SPEC_BY_NAME}
+        candidate = {**current_values(self), **{
+            name: [float(x) for x in value] if hasattr(value, '__len__')
+            and not isinstance(value, str) else value for name, value in changes.items()}}
+        try:
+            step_duration_ns(candidate)
+            if any(SPEC_BY_NAME[name].applies == 'reset' for name in changes):
+                build_world(candidate)
+        except ScenarioError as error:
+            return SetParametersResult(successful=False, reason=str(error))
+        if 'rate_hz' in changes:
+            self._timer.timer_period_ns = int(self._period(candidate['rate_hz']) * 1e9)
+            self._window = (time.monotonic(), self.steps_done, self.simulation.step_index)
+        if 'frame_id' in changes:
+            self.simulation.frame_id = candidate['frame_id']
+            self._markers.frame_id = candidate['frame_id']
+        if 'markers.rate_hz' in changes:
+            self._set_markers_rate(candidate['markers.rate_hz'])
+        return SetParametersResult(successful=True)
+
+    # Reporting and recording ------------------------------------------------------------
+
+    def _report(self):
+        start, steps, _ = self._window
+        now = time.monotonic()
+        rate = (self.steps_done - steps) / (now - start)
+        simulation = self.simulation
+        rtf = rate * simulation.dt_ns * 1e-9
+        rejected = sum(simulation.rejected.values())
+        detail = ', '.join(f'{k} {v}' for k, v in sorted(simulation.rejected.items()))
+        self.get_logger().info(
+            f'step {simulation.step_index}: {rate:.1f} steps/s, real-time factor {rtf:.3f}, '
+            f'rejected impulses {rejected}' + (f' ({detail})' if detail else '')
+            + (' [paused]' if self.paused else ''))
+        self._window = (now, self.steps_done, simulation.step_index)
+
+    def _on_sink_failure(self, failure):
+        self.get_logger().error(
+            f'recording to {type(failure.sink).__name__} stopped: {failure.error}; the '
+            'simulation goes on without it')
+
+    def close(self):
+        """Finish the recordings (called on every way out)."""
+        self.simulation.close()
+
+
+def run(args=None):
+    """Start the node and spin until shutdown or max_steps; return the exit code."""
+    try:
+        rclpy.init(args=args)
+    except Exception as error:  # noqa: B902 - rcl reports bad arguments as generic errors
+        print(f'ball_world: cannot start: {error}', file=sys.stderr)
+        return 2
+    node = None
+    try:
+        node = BallWorld()
+        while rclpy.ok() and not node.finished:
+            rclpy.spin_once(node, timeout_sec=0.1)
+    except StartupError as error:
+        print(f'ball_world: {error}', file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+def main(args=None):
+    sys.exit(run(args))
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,234 @@
+"""The node in-process: topics, stamps, impulses, services, parameters, determinism."""
+import time
+
+from geometry_msgs.msg import PoseArray, Vector3Stamped
+import numpy as np
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool, Trigger
+from visualization_msgs.msg import MarkerArray
+
+from ball_world.node import BallWorld, StartupError
+from ball_world.parameters import current_values
+
+ONE_BALL = {'random.count': 0, 'balls.x': [5.0], 'balls.y': [5.0], 'balls.vx': [0.5],
+            'balls.vy': [0.0], 'balls.radius': [0.5], 'balls.mass': [0.5]}
+
+
+class Harness:
+    """A BallWorld and a probe node in one context, spun by one executor."""
+
+    def __init__(self, **parameters):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        overrides = [Parameter(name, value=value) for name, value in parameters.items()]
+        self.node = BallWorld(context=self.context, parameter_overrides=overrides)
+        self.probe = rclpy.create_node('probe', context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.executor.add_node(self.probe)
+        self.balls = []
+        self.states = []
+        qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+        self.probe.create_subscription(PoseArray, 'balls', self.balls.append, qos)
+        self.probe.create_subscription(Float64MultiArray, 'state', self.states.append, qos)
+        self.impulses = self.probe.create_publisher(Vector3Stamped, 'impulse', qos)
+
+    def spin_until(self, predicate, timeout=10.0):
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            assert time.monotonic() < deadline, 'timed out waiting'
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def call(self, srv_type, name, request):
+        client = self.probe.create_client(srv_type, name)
+        self.spin_until(lambda: client.service_is_ready())
+        future = client.call_async(request)
+        self.spin_until(future.done)
+        return future.result()
+
+    def impulse(self, frame_id, x, y, z=0.0):
+        msg = Vector3Stamped()
+        msg.header.frame_id = frame_id
+        msg.vector.x, msg.vector.y, msg.vector.z = x, y, z
+        self.spin_until(lambda: self.impulses.get_subscription_count() > 0)
+        self.impulses.publish(msg)
+
+    def close(self):
+        self.node.close()
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.probe.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+@pytest.fixture
+def harness_factory():
+    made = []
+
+    def make(**parameters):
+        parameters.setdefault('markers.rate_hz', 0.0)
+        made.append(Harness(**parameters))
+        return made[-1]
+
+    yield make
+    for harness in made:
+        harness.close()
+
+
+def state_rows(msg):
+    return np.array(msg.data).reshape(-1, 4)
+
+
+def test_balls_and_state_stamps_advance_by_exactly_dt(harness_factory):
+    h = harness_factory(rate_hz=200.0, dt=0.01, **{'random.count': 30})
+    h.spin_until(lambda: len(h.balls) >= 20 and len(h.states) >= 20)
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in h.balls]
+    assert np.all(np.diff(stamps) == 10_000_000)
+    assert all(m.header.frame_id == 'world' for m in h.balls)
+    last = h.balls[-1]
+    assert len(last.poses) == 30
+    assert all(p.position.z == 0.0 and p.orientation.w == 1.0 for p in last.poses)
+    # The published poses of a step are the state rows of the same step.
+    for pose_msg, state_msg in zip(h.balls, h.states):
+        rows = state_rows(state_msg)
+        assert [[p.position.x, p.position.y] for p in pose_msg.poses] == rows[:, :2].tolist()
+    dims = h.states[-1].layout.dim
+    assert [(d.label, d.size, d.stride) for d in dims] == [('ball', 30, 120),
+                                                           ('x_y_vx_vy', 4, 4)]
+
+
+def test_impulse_changes_velocity_by_j_over_m_at_the_next_step(harness_factory):
+    h = harness_factory(**ONE_BALL)
+    assert h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True)).success
+    h.impulse('ball_0', 1.0, -0.5)
+    h.spin_until(lambda: h.node.simulation.queued == 1)
+    h.states.clear()
+    assert h.call(Trigger, '/ball_world/step', Trigger.Request()).success
+    h.spin_until(lambda: h.states)
+    assert state_rows(h.states[-1])[0, 2:].tolist() == [0.5 + 1.0 / 0.5, -0.5 / 0.5]
+
+
+@pytest.mark.parametrize('frame_id, vector, reason', [
+    ('ball_7', (1.0, 0.0, 0.0), 'unknown_ball'),
+    ('', (1.0, 0.0, 0.0), 'empty_frame_id'),
+    ('ball_x', (1.0, 0.0, 0.0), 'malformed_frame_id'),
+    ('ball_01', (1.0, 0.0, 0.0), 'malformed_frame_id'),
+    ('ball_0', (float('nan'), 0.0, 0.0), 'non_finite'),
+    ('ball_0', (0.0, float('inf'), 0.0), 'non_finite'),
+    ('ball_0', (1.0, 0.0, 0.1), 'nonzero_z'),
+    ('ball_0', (1e308, 1e308, 0.0), 'overflow'),
+    ('ball_0', (1e9, 0.0, 0.0), 'too_fast'),
+])
+def test_bad_impulses_are_rejected_counted_and_never_applied(harness_factory, frame_id,
+                                                             vector, reason):
+    h = harness_factory(**ONE_BALL)
+    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
+    before = h.node.simulation.world.velocities.copy()
+    h.impulse(frame_id, *vector)
+    h.spin_until(lambda: h.node.simulation.rejected.get(reason, 0) == 1
+                 or h.node.simulation.queued)
+    h.call(Trigger, '/ball_world/step', Trigger.Request())
+    assert h.node.simulation.rejected == {reason: 1}
+    assert h.node.simulation.world.velocities.tolist() == before.tolist()
+    # The node keeps stepping after a rejection.
+    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=False))
+    step = h.node.simulation.step_index
+    h.spin_until(lambda: h.node.simulation.step_index > step + 3)
+
+
+def test_pause_step_and_reset_do_what_they_say(harness_factory):
+    h = harness_factory(rate_hz=100.0)
+    response = h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
+    assert response.success and 'paused' in response.message
+    again = h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
+    assert again.success and 'already paused' in again.message
+    step = h.node.simulation.step_index
+    for _ in range(5):
+        h.executor.spin_once(timeout_sec=0.02)
+    assert h.node.simulation.step_index == step  # paused: the timer steps nothing
+    assert h.call(Trigger, '/ball_world/step', Trigger.Request()).success
+    assert h.node.simulation.step_index == step + 1
+    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=False))
+    refused = h.call(Trigger, '/ball_world/step', Trigger.Request())
+    assert not refused.success and 'not paused' in refused.message
+    h.spin_until(lambda: h.node.simulation.step_index > step + 5)
+    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
+    h.node.set_parameters([Parameter('random.count', value=5)])
+    assert h.call(Trigger, '/ball_world/reset', Trigger.Request()).success
+    assert h.node.simulation.step_index == 0
+    assert len(h.node.simulation.world) == 5
+    five = h.node.simulation.world.positions.tolist()
+    h.node.set_parameters([Parameter('random.count', value=20)])
+    assert h.call(Trigger, '/ball_world/reset', Trigger.Request()).success
+    # Random balls are drawn in order, so the first five are those of the 5-ball world.
+    assert h.node.simulation.world.positions[:5].tolist() == five
+
+
+def test_invalid_parameter_values_are_refused_and_kept(harness_factory):
+    h = harness_factory()
+    result = h.node.set_parameters([Parameter('balls.x', value=[1.0, 2.0])])[0]
+    assert not result.successful and 'balls.y' in result.reason
+    assert current_values(h.node)['balls.x'] == []
+    result = h.node.set_parameters([Parameter('random.radius', value=[0.5, 0.1])])[0]
+    assert not result.successful and 'random.radius' in result.reason
+    assert list(h.node.get_parameter('random.radius').value) == [0.1, 0.3]
+    result = h.node.set_parameters([Parameter('record.mcap', value='x.mcap')])[0]
+    assert not result.successful
+    assert h.node.get_parameter('record.mcap').value == ''
+    result = h.node.set_parameters([Parameter('rate_hz', value=-1.0)])[0]
+    assert not result.successful
+
+
+def test_rate_change_takes_effect_at_once(harness_factory):
+    h = harness_factory(rate_hz=10.0)
+    assert h.node.set_parameters([Parameter('rate_hz', value=250.0)])[0].successful
+    assert h.node._timer.timer_period_ns == 4_000_000
+
+
+def test_markers_hold_a_sphere_per_ball_and_the_walls(harness_factory):
+    h = harness_factory(**{'markers.rate_hz': 20.0, 'random.count': 7})
+    got = []
+    # Transient local: a late subscriber still gets the last array.
+    qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    h.probe.create_subscription(MarkerArray, 'markers', got.append, qos)
+    h.spin_until(lambda: got)
+    markers = [m for msg in got for m in msg.markers if m.ns == 'balls']
+    spheres = {m.id: m for m in markers}
+    assert sorted(spheres) == list(range(7))
+    radii = h.node.simulation.world.radii
+    assert [spheres[i].scale.x for i in range(7)] == (2 * radii).tolist()
+    walls = [m for msg in got for m in msg.markers if m.ns == 'walls']
+    assert len(walls[-1].points) == 8
+
+
+def test_bad_world_parameters_stop_the_node_with_the_name():
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        with pytest.raises(StartupError, match='balls.radius'):
+            BallWorld(context=context, parameter_overrides=[
+                Parameter(name, value=value) for name, value in
+                {**ONE_BALL, 'balls.radius': [-1.0]}.items()])
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+def test_same_parameters_and_impulses_give_bit_identical_poses(harness_factory):
+    runs = []
+    for _ in range(2):
+        h = harness_factory(**{'random.count': 40, 'random.seed': 7})
+        h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
+        h.call(Trigger, '/ball_world/reset', Trigger.Request())
+        for k in range(60):
+            if k in (5, 30):
+                h.impulse(f'ball_{k % 40}', 0.3, -0.2)
+                h.spin_until(lambda: h.node.simulation.queued == 1)
+            h.call(Trigger, '/ball_world/step', Trigger.Request())
+        runs.append(h.node.simulation.world.positions.tobytes())
+    assert runs[0] == runs[1]
