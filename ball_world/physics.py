@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from ball_world.broadphase import NeighbourLists, segment_offsets
+from ball_world.broadphase import dot_rows, NeighbourLists, segment_offsets, take_rows
 
 #: Largest distance a ball may travel in one substep, as a fraction of the smallest radius.
 MAX_TRAVEL = 0.5
@@ -97,8 +97,7 @@ class World:
 
     def kinetic_energy(self):
         """Total kinetic energy, J."""
-        speed2 = np.einsum('ij,ij->i', self.velocities, self.velocities)
-        return 0.5 * float(np.dot(self.masses, speed2))
+        return 0.5 * float(np.dot(self.masses, dot_rows(self.velocities, self.velocities)))
 
     def momentum(self):
         """Total linear momentum (px, py), kg m/s."""
@@ -127,7 +126,7 @@ class World:
     def _max_speed(self):
         if len(self) == 0:
             return 0.0
-        return math.sqrt(float(np.einsum('ij,ij->i', self.velocities, self.velocities).max()))
+        return math.sqrt(float(dot_rows(self.velocities, self.velocities).max()))
 
     def _plan(self, speed, duration):
         """Substeps needed so that no ball travels more than MAX_TRAVEL * min radius."""
@@ -169,24 +168,21 @@ class World:
         lists = self.neighbours
         lists.update(x, self.radii, self.walls, speed * h)
 
-        pair_a, pair_b, pair_rel = self._touching_pairs(lists.ball_a, lists.ball_b)
-        wall_ball, wall_offset, wall_dir, wall_interior = self._touching_walls(
-            lists.wall_ball, lists.wall_index)
+        pair_a, pair_b, pair_rel = self._touching_pairs(lists)
+        wall_ball, wall_offset, wall_dir, wall_interior = self._touching_walls(lists)
         if len(pair_a) == 0 and len(wall_ball) == 0:
             return 0.0
 
         fastest = 0.0
         for _ in range(MAX_ROUNDS):
-            approaching_pairs = np.einsum(
-                'ij,ij->i', pair_rel, v[pair_a] - v[pair_b]) < 0.0
-            approaching_walls = np.einsum('ij,ij->i', wall_offset, v[wall_ball]) < 0.0
-            n_pairs = int(np.count_nonzero(approaching_pairs))
-            n_walls = int(np.count_nonzero(approaching_walls))
-            if n_pairs == 0 and n_walls == 0:
-                break
-            totals[3] += 1
+            approaching_pairs = dot_rows(
+                pair_rel, take_rows(v, pair_a) - take_rows(v, pair_b)) < 0.0
+            approaching_walls = dot_rows(wall_offset, take_rows(v, wall_ball)) < 0.0
             pairs = np.flatnonzero(approaching_pairs)
             walls = np.flatnonzero(approaching_walls)
+            if len(pairs) == 0 and len(walls) == 0:
+                break
+            totals[3] += 1
             pairs, walls = self._conflict_free(pair_a, pair_b, wall_ball, pairs, walls)
             if len(pairs):
                 self._collide_pairs(pair_a[pairs], pair_b[pairs], pair_rel[pairs])
@@ -195,30 +191,29 @@ class World:
                 self._collide_walls(
                     wall_ball[walls], wall_offset[walls], wall_dir[walls], wall_interior[walls])
                 totals[1] += len(walls)
-            moved = np.concatenate((pair_a[pairs], pair_b[pairs], wall_ball[walls]))
-            fastest = max(fastest, math.sqrt(float(
-                np.einsum('ij,ij->i', v[moved], v[moved]).max())))
+            moved = take_rows(v, np.concatenate((pair_a[pairs], pair_b[pairs], wall_ball[walls])))
+            fastest = max(fastest, math.sqrt(float(dot_rows(moved, moved).max())))
         else:
-            totals[4] += n_pairs + n_walls
+            totals[4] += len(pairs) + len(walls)
         return fastest
 
-    def _touching_pairs(self, a, b):
+    def _touching_pairs(self, lists):
         """Candidate pairs that touch: |r_a - r_b| < R_a + R_b. Returns a, b, r_a - r_b."""
-        rel = self.positions[a] - self.positions[b]
-        reach = self.radii[a] + self.radii[b]
-        touching = np.einsum('ij,ij->i', rel, rel) < reach * reach
-        return a[touching], b[touching], rel[touching]
+        a = lists.ball_a
+        b = lists.ball_b
+        rel = take_rows(self.positions, a) - take_rows(self.positions, b)
+        touching = np.flatnonzero(dot_rows(rel, rel) < lists.reach2)
+        return np.take(a, touching), np.take(b, touching), take_rows(rel, touching)
 
-    def _touching_walls(self, balls, walls):
+    def _touching_walls(self, lists):
         """Candidate ball-wall pairs that touch: |s| < R, with s the offset from the wall."""
-        w = self.walls
+        balls = lists.wall_ball
         offsets, interior = segment_offsets(
-            self.positions[balls], w.starts[walls], w.directions[walls], w.lengths[walls],
-            w.ends[walls])
-        reach = self.radii[balls]
-        touching = np.einsum('ij,ij->i', offsets, offsets) < reach * reach
-        return (balls[touching], offsets[touching], w.directions[walls[touching]],
-                interior[touching])
+            take_rows(self.positions, balls), lists.wall_starts, lists.wall_directions,
+            lists.wall_lengths, lists.wall_ends)
+        touching = np.flatnonzero(dot_rows(offsets, offsets) < lists.wall_radius2)
+        return (np.take(balls, touching), take_rows(offsets, touching),
+                take_rows(lists.wall_directions, touching), np.take(interior, touching))
 
     def _conflict_free(self, pair_a, pair_b, wall_ball, pairs, walls):
         """Keep the contacts whose balls take part in no lower-numbered approaching contact.
@@ -246,30 +241,30 @@ class World:
     def _collide_pairs(self, a, b, rel):
         """The seed's ball-ball response, for pairs that share no ball."""
         v = self.velocities
-        m_a = self.masses[a]
-        m_b = self.masses[b]
-        v_a = v[a]
-        v_b = v[b]
-        dist2 = np.einsum('ij,ij->i', rel, rel)
+        m_a = np.take(self.masses, a)
+        m_b = np.take(self.masses, b)
+        v_a = take_rows(v, a)
+        v_b = take_rows(v, b)
+        dist2 = dot_rows(rel, rel)
         # v_a' = v_a - 2 m_b/(m_a+m_b) ((v_a-v_b).(r_a-r_b)) / |r_a-r_b|^2 (r_a-r_b)
-        k_a = 2.0 * m_b / (m_a + m_b) * np.einsum('ij,ij->i', v_a - v_b, rel) / dist2
+        k_a = 2.0 * m_b / (m_a + m_b) * dot_rows(v_a - v_b, rel) / dist2
         # v_b' = v_b - 2 m_a/(m_a+m_b) ((v_b-v_a).(r_b-r_a)) / |r_b-r_a|^2 (r_b-r_a)
-        k_b = 2.0 * m_a / (m_a + m_b) * np.einsum('ij,ij->i', v_b - v_a, -rel) / dist2
+        k_b = 2.0 * m_a / (m_a + m_b) * dot_rows(v_b - v_a, -rel) / dist2
         v[a] = v_a - k_a[:, None] * rel
         v[b] = v_b - k_b[:, None] * -rel
 
     def _collide_walls(self, balls, offsets, directions, interior):
         """The seed's ball-wall response; about the end-point normal beyond a segment end."""
         v = self.velocities
-        vb = v[balls]
+        vb = take_rows(v, balls)
         # Inside the segment: v' = 2 (v.w) w - v.
-        along = np.einsum('ij,ij->i', vb, directions)
+        along = dot_rows(vb, directions)
         reflected = 2.0 * along[:, None] * directions - vb
         # Beyond an end point: reflect about n = s / |s|: v' = v - 2 (v.n) n.
         ends = ~interior
-        if np.any(ends):
+        if ends.any():
             s = offsets[ends]
-            n = s / np.sqrt(np.einsum('ij,ij->i', s, s))[:, None]
-            vn = np.einsum('ij,ij->i', vb[ends], n)
+            n = s / np.sqrt(dot_rows(s, s))[:, None]
+            vn = dot_rows(vb[ends], n)
             reflected[ends] = vb[ends] - 2.0 * vn[:, None] * n
         v[balls] = reflected
