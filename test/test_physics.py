@@ -5,8 +5,8 @@ from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
-from ball_world.broadphase import grid_pairs
-from ball_world.physics import World
+from ball_world.broadphase import grid_pairs, wall_pairs
+from ball_world.physics import Walls, World
 from ball_world.scenario import build_world
 
 BOX = [[0.0, 0.0, 10.0, 0.0], [10.0, 0.0, 10.0, 10.0], [10.0, 10.0, 0.0, 10.0],
@@ -164,13 +164,26 @@ def test_grid_pairs_equal_all_pairs(n, seed, margin):
     rng = np.random.default_rng(seed)
     positions = rng.uniform(-5, 5, (n, 2))
     radii = rng.uniform(0.05, 0.4, n)
-    a, b = grid_pairs(positions, radii, margin)
+    a, b, _ = grid_pairs(positions, radii, margin)
     got = set(zip(a.tolist(), b.tolist()))
     d = np.sqrt(((positions[:, None] - positions[None]) ** 2).sum(-1))
     reach = radii[:, None] + radii[None] + margin
     i, j = np.nonzero(np.triu(d < reach, k=1))
     assert got == set(zip(i.tolist(), j.tolist()))
     assert len(got) == len(a)
+    # Reusing the previous cell order after the balls moved gives the same pairs.
+    moved = positions + rng.uniform(-0.3, 0.3, (n, 2))
+    a2, b2, _ = grid_pairs(moved, radii, margin, grid_pairs(positions, radii, margin)[2])
+    d2 = np.sqrt(((moved[:, None] - moved[None]) ** 2).sum(-1))
+    i2, j2 = np.nonzero(np.triu(d2 < reach, k=1))
+    assert set(zip(a2.tolist(), b2.tolist())) == set(zip(i2.tolist(), j2.tolist()))
+
+
+def test_wall_pairs_find_balls_near_walls_and_segment_ends():
+    walls = Walls([[0.0, 0.0, 10.0, 0.0], [5.0, 5.0, 5.0, 6.0]])
+    positions = np.array([[3.0, 0.4], [3.0, 0.6], [5.3, 6.2], [5.0, 6.6], [-0.2, -0.2]])
+    ball, wall = wall_pairs(positions, np.full(5, 0.25), walls, 0.2)
+    assert sorted(zip(ball.tolist(), wall.tolist())) == [(0, 0), (2, 1), (4, 0)]
 
 
 # Invariants over long random runs ------------------------------------------------------
