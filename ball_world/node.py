@@ -88,8 +88,8 @@ class BallWorld(Node):
         self.stats_pub = self.create_publisher(Float64MultiArray, 'stats', STEP_QOS)
         self.markers_pub = self.create_publisher(MarkerArray, 'markers', MARKER_QOS)
         self.clock_pub = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
-        self.create_subscription(Vector3Stamped, 'impulse', self._on_impulse, IMPULSE_QOS,
-                                 raw=True)
+        self._impulse_sub = self.create_subscription(
+            Vector3Stamped, 'impulse', self._on_impulse, IMPULSE_QOS, raw=True)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.create_service(SetBool, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/step', self._on_step)
@@ -124,7 +124,24 @@ class BallWorld(Node):
 
     def _on_timer(self):
         if not self.paused and not self.finished:
+            self._drain_impulses()
             self.step_once()
+
+    def _drain_impulses(self):
+        """Take every impulse waiting in the subscription, in arrival order, before a step.
+
+        The executor hands over one message per wait, which caps a flood at a few thousand
+        impulses a second; taking them here in a loop keeps up with tens of thousands, so
+        none waits behind its step or is dropped. take_message is what the executor itself
+        calls (rclpy Jazzy).
+        """
+        subscription = self._impulse_sub
+        with subscription.handle:
+            while True:
+                taken = subscription.handle.take_message(subscription.msg_type, True)
+                if taken is None:
+                    return
+                self._on_impulse(taken[0])
 
     def step_once(self):
         """Advance one step, publish it, stop at max_steps."""
@@ -238,6 +255,7 @@ class BallWorld(Node):
             response.success = False
             response.message = 'max_steps reached; nothing more to step'
             return response
+        self._drain_impulses()
         record = self.step_once()
         response.success = True
         response.message = f'step {record.step} at t = {record.stamp_ns / 1e9:.9g} s'

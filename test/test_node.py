@@ -232,3 +232,26 @@ def test_same_parameters_and_impulses_give_bit_identical_poses(harness_factory):
             h.call(Trigger, '/ball_world/step', Trigger.Request())
         runs.append(h.node.simulation.world.positions.tobytes())
     assert runs[0] == runs[1]
+
+
+def test_garbage_bytes_and_stale_stamps_are_rejected_and_stepping_goes_on(harness_factory):
+    h = harness_factory(**ONE_BALL)
+    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
+    before = h.node.simulation.world.velocities.copy()
+    step = h.node.simulation.step_index
+    h.spin_until(lambda: h.impulses.get_subscription_count() > 0)
+    for garbage in (b'', b'\x00\x01\x00\x00', b'\x00\x01\x00\x00' + b'\xff' * 40,
+                    bytes(range(256))):
+        h.impulses.publish(garbage)  # a raw publisher: bytes that are not a Vector3Stamped
+    stale = Vector3Stamped()
+    stale.header.frame_id = 'ball_0'
+    stale.header.stamp.sec = 7 * 24 * 3600  # a week of simulated time ahead, and 1970
+    stale.vector.x = 1.0
+    h.impulses.publish(stale)
+    rejected = h.node.simulation.rejected
+    h.spin_until(lambda: sum(rejected.values()) == 5)
+    assert rejected == {'malformed_message': 4, 'stamp_out_of_range': 1}
+    assert h.call(Trigger, '/ball_world/step', Trigger.Request()).success
+    assert h.node.simulation.step_index == step + 1
+    # Only the step itself moved the ball: its velocity is untouched.
+    assert h.node.simulation.world.velocities.tolist() == before.tolist()
