@@ -9,7 +9,10 @@ setup:
 	@scripts/setup.sh
 
 run: setup
-	$(VENV)/bin/ball_world --ros-args --params-file config/ball_world.yaml -p max_steps:=$(STEPS)
+	mkdir -p runs
+	$(VENV)/bin/ball_world --ros-args --params-file config/ball_world.yaml -p max_steps:=$(STEPS) \
+	  -p record.mcap:=runs/ball_world.mcap -p record.rerun:=runs/ball_world.rrd
+	$(VENV)/bin/ball_world_info runs/ball_world.mcap
 
 test: setup
 	$(VENV)/bin/python -m pytest -q test

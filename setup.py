@@ -25,6 +25,11 @@ setup(
     entry_points={
         'console_scripts': [
             'ball_world = ball_world.node:main',
+            'ball_world_info = ball_world.tools.info:main',
+            'ball_world_repair = ball_world.tools.repair:main',
+            'ball_world_replay = ball_world.tools.replay:main',
+            'ball_world_resim = ball_world.tools.resim:main',
+            'ball_world_to_rrd = ball_world.tools.to_rrd:main',
             'ball_world_sim = ball_world.headless:main',
         ],
     },

@@ -1,0 +1,129 @@
+"""ball_world_info: what a recording holds, at a glance, and whether it needs repair.
+
+Reads a finished file through its summary (only the first and last chunks of the stats
+topic are decoded), and a file without summary front to back.
+"""
+import argparse
+import sys
+
+from ball_world.cdr import decode_pose_array, decode_state_layout, decode_vector3_stamped
+from ball_world.recording import Recording, RecordingError
+from ball_world.records import STATS_FIELDS
+
+
+def _seconds(ns):
+    return f'{ns / 1e9:.9g} s'
+
+
+def _energy(message):
+    if message is None:
+        return None
+    return float(decode_state_layout(message.data)[2][STATS_FIELDS.index('kinetic_energy')])
+
+
+def _first(recording, topic):
+    return next(iter(recording.messages([topic])), None) if topic else None
+
+
+def _segment_lines(recording):
+    lines = []
+    segments = recording.segments
+    for position, segment in enumerate(segments):
+        if position + 1 < len(segments):
+            last_log = segments[position + 1].log_offset_ns - segment.dt_ns
+        else:
+            last_log = recording.end_ns if recording.end_ns is not None else 0
+        last_step = max(0, (last_log - segment.log_offset_ns) // segment.dt_ns)
+        lines.append(f'  {segment.index}: from log time {_seconds(segment.log_offset_ns)}, '
+                     f'steps 0-{last_step}, dt {segment.dt_ns / 1e6:.6g} ms, frame '
+                     f"'{segment.frame_id}', written by ball_world {segment.package_version}")
+    return lines
+
+
+def describe(recording):
+    """The report as lines of text."""
+    header = recording.header
+    lines = [f'file:        {recording.path} ({recording.size} bytes)',
+             f'written by:  {header.library} (profile {header.profile!r})']
+    if recording.has_summary:
+        lines.append('summary:     yes (the writer finished the file)')
+    else:
+        lines.append(f'summary:     NO: the writer did not finish ({recording.problem}); '
+                     f'{recording.complete_bytes} of {recording.size} bytes are complete '
+                     'records.')
+        lines.append(f'             Repair it: ball_world_repair {recording.path}')
+    compressions = ', '.join(sorted(c or 'none' for c in recording.compressions)) or 'none'
+    lines.append(f'compression: {compressions} ({recording.chunk_count} chunks)')
+    if recording.start_ns is not None:
+        lines.append(f'duration:    {_seconds(recording.end_ns - recording.start_ns)} (log time '
+                     f'{_seconds(recording.start_ns)} to {_seconds(recording.end_ns)})')
+    balls_topic = recording.topic_of('balls')
+    steps = recording.topics[balls_topic].message_count if balls_topic in recording.topics \
+        else 0
+    lines.append(f'steps:       {steps} in {len(recording.segments)} segments')
+    lines.extend(_segment_lines(recording))
+    first_balls = _first(recording, balls_topic)
+    if first_balls is not None:
+        lines.append(f'balls:       {len(decode_pose_array(first_balls.data)[2])}')
+    lines.append(f'messages:    {recording.message_count}')
+    for info in recording.topics.values():
+        lines.append(f'  {info.topic}  {info.type}  {info.message_count}')
+    lines.extend(_impulse_lines(recording))
+    lines.extend(_energy_lines(recording))
+    return lines
+
+
+def _energy_lines(recording):
+    """Kinetic energy of the first and last recorded steps (and of which segments)."""
+    topic = recording.topic_of('stats')
+    first = _first(recording, topic)
+    if first is None:
+        return []
+    last = recording.last_message(topic)
+    segments = recording.segments
+    first_segment = segments[recording.segment_at(first.log_time_ns)].index
+    last_segment = segments[recording.segment_at(last.log_time_ns)].index
+    start, end = _energy(first), _energy(last)
+    line = (f'energy:      {start:.9g} J at start (segment {first_segment}), {end:.9g} J at '
+            f'end (segment {last_segment})')
+    if first_segment == last_segment and start:
+        line += f', relative change {(end - start) / start:.3g}'
+    return [line]
+
+
+def _impulse_lines(recording, shown=10):
+    topic = recording.topic_of('impulse')
+    count = recording.topics[topic].message_count if topic in recording.topics else 0
+    lines = [f'impulses:    {count}']
+    if count:
+        for position, message in enumerate(recording.messages([topic])):
+            if position == shown:
+                lines.append(f'  ... and {count - shown} more')
+                break
+            stamp_ns, frame_id, x, y, _ = decode_vector3_stamped(message.data)
+            segment = recording.segments[recording.segment_at(message.log_time_ns)]
+            lines.append(f'  segment {segment.index} step {stamp_ns // segment.dt_ns} '
+                         f'({_seconds(stamp_ns)}): {frame_id} J = ({x:.6g}, {y:.6g}) N s')
+    return lines
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(
+        prog='ball_world_info', description='Summarise a ball_world MCAP recording.')
+    parser.add_argument('file', help='the .mcap recording')
+    args = parser.parse_args(argv)
+    try:
+        recording = Recording(args.file)
+        lines = describe(recording)
+    except RecordingError as error:
+        print(f'ball_world_info: {error}', file=sys.stderr)
+        return 2
+    except ValueError as error:  # an undecodable message
+        print(f'ball_world_info: {args.file}: {error}', file=sys.stderr)
+        return 2
+    print('\n'.join(lines))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,171 @@
+"""ball_world_repair: make a recording whose writer was killed readable by every tool again.
+
+A SIGKILLed or crashed recorder leaves an MCAP without summary and footer, possibly ending in
+a torn record. Most readers (rosbags, ros2 bag, Foxglove's indexed view) then refuse the
+file. This copies every complete record (header, schemas, channels, messages, metadata,
+attachments) into a new MCAP written with a summary, in the same order, and reports what it
+kept and what it had to drop. The output is written next to the target and renamed into
+place only when complete, so the input is never damaged, even with -o IN.
+"""
+import argparse
+from dataclasses import dataclass, field
+import os
+import sys
+
+from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
+from mcap.writer import CompressionType, Writer
+
+from ball_world.recording import RecordingError, Scan
+
+_COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
+                 '': CompressionType.NONE}
+
+
+@dataclass
+class RepairReport:
+    """What a repair kept and dropped."""
+
+    source_bytes: int = 0
+    kept_bytes: int = 0  # the complete records end here in the source
+    problem: str = None  # why the source could not be read to its end, if so
+    had_summary: bool = False
+    messages: dict = field(default_factory=dict)  # topic -> count
+    schemas: int = 0
+    channels: int = 0
+    metadata: int = 0
+    attachments: int = 0
+    dropped_messages: int = 0  # on channels never declared
+    start_ns: int = None
+    end_ns: int = None
+
+
+def _first_compression(path, size):
+    """The compression of the source's first chunk ('' when none), so the copy keeps it."""
+    with open(path, 'rb') as stream:
+        for record in Scan(stream, size).records():
+            if isinstance(record, Chunk):
+                return record.compression
+    return 'zstd'
+
+
+def repair(source, target):
+    """Copy every complete record of `source` into a finished MCAP at `target`."""
+    size = os.path.getsize(source)
+    compression = _COMPRESSIONS.get(_first_compression(source, size), CompressionType.ZSTD)
+    report = RepairReport(source_bytes=size)
+    temporary = f'{target}.partial-{os.getpid()}'
+    try:
+        with open(temporary, 'xb') as output, open(source, 'rb') as stream:
+            scan = Scan(stream, size)
+            _copy(scan, Writer(output, compression=compression), report)
+            report.kept_bytes = scan.end
+            report.problem = scan.problem
+            report.had_summary = scan.finished
+        os.replace(temporary, target)
+    except BaseException:
+        if os.path.exists(temporary):
+            os.remove(temporary)
+        raise
+    return report
+
+
+def _copy(scan, writer, report):
+    schemas = {}  # source id -> target id
+    channels = {}  # source id -> (target id, topic)
+    started = False
+    for record in scan.records():
+        if isinstance(record, Header):
+            writer.start(profile=record.profile, library=record.library)
+            started = True
+        elif not started:
+            raise RecordingError('the file does not begin with an MCAP header record')
+        elif isinstance(record, Schema) and record.id not in schemas:
+            schemas[record.id] = writer.register_schema(record.name, record.encoding,
+                                                        record.data)
+            report.schemas += 1
+        elif isinstance(record, Channel) and record.id not in channels:
+            schema = schemas.get(record.schema_id, 0)
+            channel = writer.register_channel(record.topic, record.message_encoding, schema,
+                                              dict(record.metadata))
+            channels[record.id] = (channel, record.topic)
+            report.channels += 1
+        elif isinstance(record, Message):
+            _copy_message(writer, record, channels, report)
+        elif isinstance(record, Metadata):
+            writer.flush()  # keep the metadata between the messages it separated
+            writer.add_metadata(record.name, dict(record.metadata))
+            report.metadata += 1
+        elif isinstance(record, Attachment):
+            writer.add_attachment(record.create_time, record.log_time, record.name,
+                                  record.media_type, record.data)
+            report.attachments += 1
+    if not started:
+        raise RecordingError('no complete MCAP header record')
+    writer.finish()
+
+
+def _copy_message(writer, record, channels, report):
+    if record.channel_id not in channels:
+        report.dropped_messages += 1
+        return
+    channel, topic = channels[record.channel_id]
+    writer.add_message(channel, log_time=record.log_time, data=record.data,
+                       publish_time=record.publish_time, sequence=record.sequence)
+    report.messages[topic] = report.messages.get(topic, 0) + 1
+    report.start_ns = record.log_time if report.start_ns is None else min(
+        report.start_ns, record.log_time)
+    report.end_ns = record.log_time if report.end_ns is None else max(
+        report.end_ns, record.log_time)
+
+
+def default_target(source):
+    """run.mcap -> run.repaired.mcap, beside the input."""
+    root, extension = os.path.splitext(source)
+    return f'{root}.repaired{extension or ".mcap"}'
+
+
+def describe(report, source, target):
+    lines = [f'{source}: {report.source_bytes} bytes, '
+             + ('it had a summary (rewritten anyway)' if report.had_summary else 'no summary')]
+    if report.problem:
+        lines.append(f'  kept the complete records up to byte {report.kept_bytes}; dropped '
+                     f'{report.source_bytes - report.kept_bytes} bytes: {report.problem}')
+    total = sum(report.messages.values())
+    span = ''
+    if total:
+        span = (f', log time {report.start_ns / 1e9:.9g} s to {report.end_ns / 1e9:.9g} s')
+    lines.append(f'  kept {total} messages{span}, {report.schemas} schemas, '
+                 f'{report.channels} channels, {report.metadata} metadata records, '
+                 f'{report.attachments} attachments')
+    for topic, count in sorted(report.messages.items()):
+        lines.append(f'    {topic}: {count}')
+    if report.dropped_messages:
+        lines.append(f'  dropped {report.dropped_messages} messages on undeclared channels')
+    lines.append(f'wrote {target}')
+    return '\n'.join(lines)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(
+        prog='ball_world_repair',
+        description='Recover a truncated MCAP recording (writer killed: no summary, torn '
+                    'last record) into a complete file holding every complete record.')
+    parser.add_argument('input', help='the damaged .mcap')
+    parser.add_argument('-o', '--output', help='where to write (default: '
+                                               'INPUT.repaired.mcap; may be INPUT itself)')
+    args = parser.parse_args(argv)
+    target = args.output or default_target(args.input)
+    try:
+        report = repair(args.input, target)
+    except RecordingError as error:
+        print(f'ball_world_repair: {args.input}: {error}', file=sys.stderr)
+        return 2
+    except OSError as error:
+        print(f'ball_world_repair: {error}', file=sys.stderr)
+        return 2
+    print(describe(report, args.input, target))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

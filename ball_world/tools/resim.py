@@ -1,0 +1,245 @@
+"""ball_world_resim: re-run a recording from its parameters and impulses, and compare bits.
+
+This is the determinism contract checked end to end: each segment's world is rebuilt from
+the parameters in its metadata record, every recorded impulse is queued just before the step
+whose stamp it carries, and every recorded pose, state row and stats entry (except the
+real-time factor, which depends on the wall clock) must be bit-identical to the
+re-simulated one. Exit status: 0 all identical, 1 a difference, 2 an unreadable recording
+or parameters that no longer build a world.
+"""
+import argparse
+from dataclasses import dataclass
+import math
+import sys
+from typing import Optional
+
+import numpy as np
+
+from ball_world.cdr import decode_state_layout
+from ball_world.impulses import ImpulseRejected, parse_ball
+from ball_world.recording import Recording, RecordingError
+from ball_world.records import STATS_FIELDS
+from ball_world.scenario import ScenarioError
+from ball_world.simulation import Simulation
+
+_POSITION_NAMES = ('x', 'y')
+_STATE_NAMES = ('x', 'y', 'vx', 'vy')
+#: Stats entries that follow from the trajectory (the real-time factor does not).
+_COMPARED_STATS = STATS_FIELDS[:-1]
+
+
+@dataclass(frozen=True)
+class Difference:
+    """One recorded value that the re-simulation does not reproduce bit for bit."""
+
+    segment: int
+    step: int
+    what: str  # 'balls x', 'state vy', 'stats kinetic_energy', 'impulse', ...
+    ball: Optional[int]
+    recorded: object
+    resimulated: object
+    size: float  # |recorded - resimulated|, inf when not comparable as numbers
+
+    def describe(self):
+        where = f'segment {self.segment} step {self.step}'
+        if self.ball is not None:
+            where += f' ball {self.ball}'
+        return (f'{where} {self.what}: recorded {self.recorded!r}, re-simulated '
+                f'{self.resimulated!r} (difference {self.size:.3g})')
+
+
+@dataclass
+class SegmentResult:
+    index: int
+    position: int  # in Recording.segments
+    steps: int = 0
+    impulses: int = 0
+    missing: int = 0  # steps absent from the recording (a repaired, truncated file)
+    last_step: int = 0
+    differing_steps: int = 0
+
+
+class Comparison:
+    """Collects differences: the first one met, the largest one, and counts per segment."""
+
+    def __init__(self):
+        self.first = None
+        self.largest = None
+        self.count = 0
+        self.segments = []
+
+    @property
+    def identical(self):
+        return self.count == 0
+
+    def add(self, difference, largest=None):
+        """Count one difference; `largest` is its biggest element when it spans an array."""
+        largest = largest or difference
+        self.count += 1
+        if self.first is None:
+            self.first = difference
+        if self.largest is None or largest.size > self.largest.size:
+            self.largest = largest
+
+    def arrays(self, segment, step, what, names, recorded, resimulated):
+        """Compare two float arrays bit for bit; report the first and largest mismatch."""
+        recorded = np.ascontiguousarray(recorded, dtype=np.float64)
+        resimulated = np.ascontiguousarray(resimulated, dtype=np.float64)
+        if recorded.shape != resimulated.shape:
+            self.add(Difference(segment, step, f'{what} shape', None, recorded.shape,
+                                resimulated.shape, math.inf))
+            return False
+        same = recorded.view(np.uint64) == resimulated.view(np.uint64)
+        if same.all():
+            return True
+        with np.errstate(invalid='ignore'):
+            size = np.abs(recorded - resimulated)
+        size[~np.isfinite(size)] = math.inf
+        size[same] = 0.0
+        found = []
+        for index in (np.argwhere(~same)[0], np.unravel_index(np.argmax(size), size.shape)):
+            index = tuple(int(i) for i in index)
+            ball = index[0] if recorded.ndim == 2 else None
+            found.append(Difference(segment, step, f'{what} {names[index[-1]]}', ball,
+                                    float(recorded[index]), float(resimulated[index]),
+                                    float(size[index])))
+        self.add(*found)
+        return False
+
+
+def _rebuild(segment):
+    simulation = Simulation(segment.parameters, sinks=())
+    if simulation.dt_ns != segment.dt_ns:
+        raise ScenarioError('dt', f'rebuilds dt = {simulation.dt_ns} ns but the segment '
+                                  f'was recorded with {segment.dt_ns} ns')
+    return simulation
+
+
+def _advance(simulation, step, comparison, segment_index):
+    """Step the simulation to `step`, queueing the recorded impulses for the last step."""
+    while simulation.step_index < step.step - 1:
+        simulation.step()
+    if step.step == 0:
+        return simulation.last_record
+    ball_count = len(simulation.world)
+    for impulse in step.impulses:
+        try:
+            ball = parse_ball(impulse.frame_id, ball_count)
+        except ImpulseRejected as error:
+            comparison.add(Difference(segment_index, step.step, 'impulse', None,
+                                      impulse.frame_id, str(error), math.inf))
+            continue
+        simulation.queue_impulse(ball, impulse.x, impulse.y, impulse.frame_id)
+    result, rejected = simulation.step()
+    for rejection in rejected:
+        comparison.add(Difference(segment_index, step.step, 'impulse rejected', None,
+                                  'applied', str(rejection), math.inf))
+    recorded = tuple(impulse.cdr for impulse in step.impulses)
+    resimulated = tuple(impulse.cdr for impulse in result.impulses)
+    if not rejected and recorded != resimulated:
+        comparison.add(Difference(segment_index, step.step, 'impulse message', None,
+                                  len(recorded), len(resimulated), math.inf))
+    return result
+
+
+def _compare_step(step, record, comparison, segment_index):
+    """Compare one recorded step with the re-simulated record; True when identical."""
+    before = comparison.count
+    k = step.step
+    if step.balls_stamp_ns is not None and step.balls_stamp_ns != record.stamp_ns:
+        comparison.add(Difference(segment_index, k, 'balls stamp_ns', None,
+                                  step.balls_stamp_ns, record.stamp_ns, math.inf))
+    if step.positions is not None:
+        comparison.arrays(segment_index, k, 'balls', _POSITION_NAMES, step.positions,
+                          record.positions)
+    if step.state is not None:
+        comparison.arrays(segment_index, k, 'state', _STATE_NAMES, step.state,
+                          np.concatenate((record.positions, record.velocities), axis=1))
+    if step.stats is not None:
+        resimulated = decode_state_layout(record.stats_cdr)[2]
+        count = len(_COMPARED_STATS)
+        comparison.arrays(segment_index, k, 'stats', _COMPARED_STATS, step.stats[:count],
+                          resimulated[:count])
+    return comparison.count == before
+
+
+def resimulate(recording):
+    """Re-simulate every segment of a Recording; returns a Comparison.
+
+    Raises ScenarioError when a segment's parameters do not build a world.
+    """
+    comparison = Comparison()
+    simulation = result = None
+    for step in recording.steps():
+        segment = recording.segments[step.segment]
+        if result is None or result.position != step.segment:
+            simulation = _rebuild(segment)
+            result = SegmentResult(segment.index, step.segment)
+            comparison.segments.append(result)
+            result.missing = step.step
+        elif step.step <= result.last_step:
+            comparison.add(Difference(segment.index, step.step, 'step order', None,
+                                      result.last_step, step.step, math.inf))
+            continue
+        else:
+            result.missing += step.step - result.last_step - 1
+        record = _advance(simulation, step, comparison, segment.index)
+        result.steps += 1
+        result.impulses += len(step.impulses)
+        result.last_step = step.step
+        if not _compare_step(step, record, comparison, segment.index):
+            result.differing_steps += 1
+    return comparison
+
+
+def describe(comparison):
+    lines = []
+    for result in comparison.segments:
+        missing = f', {result.missing} missing from the recording' if result.missing else ''
+        verdict = ('identical' if not result.differing_steps
+                   else f'{result.differing_steps} steps differ')
+        lines.append(f'segment {result.index}: {result.steps} steps compared (last step '
+                     f'{result.last_step}{missing}), {result.impulses} impulses: {verdict}')
+    total = sum(result.steps for result in comparison.segments)
+    if comparison.identical:
+        lines.append(f'all {total} recorded steps re-simulate bit-identically (largest '
+                     'difference 0)')
+    else:
+        lines.append(f'first difference: {comparison.first.describe()}')
+        lines.append(f'largest difference: {comparison.largest.size:.3g} at '
+                     f'{comparison.largest.describe()}')
+    return lines
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(
+        prog='ball_world_resim',
+        description='Re-simulate a recording from its parameters and impulses and check that '
+                    'every recorded pose and state row is bit-identical. Exit 0 if so, 1 if '
+                    'not, 2 if the recording cannot be read or rebuilt.')
+    parser.add_argument('file', help='the .mcap recording')
+    args = parser.parse_args(argv)
+    try:
+        recording = Recording(args.file)
+        if not recording.segments:
+            print(f'ball_world_resim: {args.file}: no ball_world metadata records: not a '
+                  'ball_world recording', file=sys.stderr)
+            return 2
+        comparison = resimulate(recording)
+        if not comparison.segments:
+            print(f'ball_world_resim: {args.file}: no recorded steps to compare',
+                  file=sys.stderr)
+            return 2
+    except RecordingError as error:
+        print(f'ball_world_resim: {error}', file=sys.stderr)
+        return 2
+    except ScenarioError as error:
+        print(f'ball_world_resim: {args.file}: cannot rebuild the world: {error}',
+              file=sys.stderr)
+        return 2
+    print('\n'.join(describe(comparison)))
+    return 0 if comparison.identical else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,169 @@
+"""ball_world_replay across processes: what a subscriber receives, when, and how it stops.
+
+The replay runs as a child process in a DDS domain of its own (random, 100-200); this test
+subscribes in-process in the same domain through a separate rclpy context, and waits with
+deadlines, never fixed sleeps. Timing is checked loosely: median spacing within 0.5x-2x.
+"""
+import os
+from pathlib import Path
+import random
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from ball_world.cdr import decode_pose_array
+from ball_world.mcap_sink import McapSink, OFFERED_QOS_PROFILES
+from ball_world.recording import Recording
+from ball_world.simulation import Simulation
+from ball_world.tools.replay import message_class, qos_profile
+
+ROOT = Path(__file__).resolve().parents[1]
+DOMAIN = random.randint(100, 200)
+DT = 0.05  # 20 Hz
+TOPICS = ('/balls', '/state', '/stats', '/impulse')
+RECEIVE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+
+
+@pytest.fixture(scope='module')
+def recording_path(tmp_path_factory):
+    """50 steps at 20 Hz (51 step messages per topic) with two impulses."""
+    path = tmp_path_factory.mktemp('replay') / 'run.mcap'
+    simulation = Simulation({'rate_hz': 1 / DT, 'random.count': 10, 'random.seed': 2},
+                            sinks=[McapSink(path)])
+    for _ in range(50):
+        if simulation.step_index in (9, 30):
+            simulation.queue_impulse(1, 0.1, -0.2, 'ball_1')
+        simulation.step()
+    simulation.close()
+    return path
+
+
+@pytest.fixture
+def ros():
+    """An rclpy context, node and executor in the test's own domain."""
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=DOMAIN)
+    node = Node('replay_test', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    yield node, executor
+    executor.shutdown(timeout_sec=0)
+    node.destroy_node()
+    rclpy.shutdown(context=context)
+
+
+def start_replay(path, *args):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+               PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get('PYTHONPATH', ''))
+    return subprocess.Popen([sys.executable, '-m', 'ball_world.tools.replay', str(path),
+                             '--wait-for-subscribers', '--delay', '0.3', *args],
+                            cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def subscribe(node, topics_types):
+    """Raw subscriptions; returns {topic: [(arrival monotonic time, bytes)]}."""
+    received = {topic: [] for topic in topics_types}
+    for topic, type_name in topics_types.items():
+        node.create_subscription(
+            message_class(type_name), topic,
+            lambda data, topic=topic: received[topic].append((time.monotonic(), data)),
+            RECEIVE_QOS, raw=True)
+    return received
+
+
+def spin_until(executor, done, timeout):
+    deadline = time.monotonic() + timeout
+    while not done() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+    return done()
+
+
+def stop(child):
+    if child.poll() is None:
+        child.kill()
+    return child.communicate(timeout=10)
+
+
+def test_replay_publishes_the_recording_in_order_with_its_timing_and_clock(
+        recording_path, ros):
+    node, executor = ros
+    recording = Recording(recording_path)
+    recorded = {topic: [] for topic in TOPICS}
+    for message in recording.messages():
+        recorded[message.topic].append(message)
+    assert [len(recorded[t]) for t in TOPICS] == [51, 51, 51, 2]
+    received = subscribe(node, {**{t: recording.topics[t].type for t in TOPICS},
+                                '/clock': 'rosgraph_msgs/msg/Clock'})
+    child = start_replay(recording_path, '--clock')
+    try:
+        assert spin_until(executor, lambda: all(
+            len(received[t]) >= len(recorded[t]) for t in TOPICS), timeout=30), \
+            {t: len(v) for t, v in received.items()}
+        assert child.wait(timeout=15) == 0
+        spin_until(executor, lambda: len(received['/clock']) >= 51, timeout=2)
+    finally:
+        out, err = stop(child)
+    for topic in TOPICS:
+        assert [data for _, data in received[topic]] == \
+            [message.data for message in recorded[topic]], topic
+    stamps = [decode_pose_array(data)[0] for _, data in received['/balls']]
+    assert stamps == [round(k * DT * 1e9) for k in range(51)]
+    clock = [int.from_bytes(data[4:8], 'little', signed=True) * 10**9
+             + int.from_bytes(data[8:12], 'little') for _, data in received['/clock']]
+    # /clock is keep_last 1 and not waited for: a few may be missed, none made up
+    assert clock == sorted(set(clock)) and len(clock) >= 45
+    assert set(clock) <= {m.log_time_ns for m in recorded['/balls']}
+    assert clock[-1] == recorded['/balls'][-1].log_time_ns
+    spacing = np.median(np.diff([t for t, _ in received['/balls']]))
+    assert 0.5 * DT <= spacing <= 2 * DT, spacing
+
+
+def test_replay_loops_filters_remaps_and_stops_cleanly_on_sigterm(recording_path, ros):
+    node, executor = ros
+    received = subscribe(node, {'/replay/balls': 'geometry_msgs/msg/PoseArray',
+                                '/replay/state': 'std_msgs/msg/Float64MultiArray'})
+    child = start_replay(recording_path, '--topics', '/balls', '--loop', '--rate', '5',
+                         '--start-offset', '2.0', '--remap-prefix', '/replay')
+    try:
+        # from 2.0 s on: steps 40-50, 11 per pass; more than 11 proves it loops
+        assert spin_until(executor, lambda: len(received['/replay/balls']) >= 25,
+                          timeout=30)
+        child.send_signal(signal.SIGTERM)
+        code = child.wait(timeout=15)
+    finally:
+        out, err = stop(child)
+    assert code == 0, err
+    stamps = [decode_pose_array(data)[0] for _, data in received['/replay/balls']]
+    assert stamps[:22] == [round(k * DT * 1e9) for k in range(40, 51)] * 2
+    assert received['/replay/state'] == []
+    assert 'stopped' in err
+
+
+def test_replay_refuses_bad_arguments_before_starting_ros(recording_path):
+    for args, complaint in ((['--rate', '0'], '--rate must be > 0'),
+                            (['--topics', '/nope'], 'no such topic in the recording: /nope'),
+                            (['--remap-prefix', 'replay'], "must start with '/'")):
+        result = subprocess.run([sys.executable, '-m', 'ball_world.tools.replay',
+                                 str(recording_path), *args], cwd=ROOT, capture_output=True,
+                                text=True, timeout=60)
+        assert result.returncode == 2 and complaint in result.stderr
+
+
+def test_qos_comes_from_the_recorded_offer_in_either_rosbag2_format():
+    jazzy = qos_profile(OFFERED_QOS_PROFILES)
+    assert (jazzy.reliability, jazzy.durability, jazzy.history, jazzy.depth) == \
+        (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, HistoryPolicy.KEEP_LAST, 10)
+    humble = qos_profile('- history: 1\n  depth: 5\n  reliability: 2\n  durability: 1\n')
+    assert (humble.reliability, humble.durability, humble.depth) == \
+        (ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.TRANSIENT_LOCAL, 5)
+    unknown = qos_profile('')
+    assert (unknown.reliability, unknown.depth) == (ReliabilityPolicy.RELIABLE, 10)
