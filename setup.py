@@ -25,6 +25,7 @@ setup(
     entry_points={
         'console_scripts': [
             'ball_world = ball_world.node:main',
+            'ball_world_bench = ball_world.tools.bench:main',
             'ball_world_info = ball_world.tools.info:main',
             'ball_world_repair = ball_world.tools.repair:main',
             'ball_world_replay = ball_world.tools.replay:main',

@@ -5,12 +5,14 @@ on a steady-clock timer, publishes each step's ready-made CDR bytes, turns impul
 messages into queued impulses (or counted rejections), serves ~/reset, ~/pause and
 ~/step, and hands every step to the recording sinks.
 """
+import signal
 import sys
 import time
 
 from geometry_msgs.msg import PoseArray, Vector3Stamped
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -20,6 +22,7 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
+from ball_world.alloc import tune_allocator
 from ball_world.cdr import decode_vector3_stamped, encode_clock
 from ball_world.impulses import check_impulse, ImpulseRejected
 from ball_world.markers import MarkerBuilder
@@ -329,28 +332,40 @@ class BallWorld(Node):
 
 
 def run(args=None):
-    """Start the node and spin until shutdown or max_steps; return the exit code."""
+    """Start the node and spin until shutdown or max_steps; return the exit code.
+
+    Recordings are closed with SIGINT and SIGTERM blocked, so a second Ctrl-C cannot cut a
+    file short while its summary is being written.
+    """
+    tune_allocator()
     try:
         rclpy.init(args=args)
     except Exception as error:  # noqa: B902 - rcl reports bad arguments as generic errors
         print(f'ball_world: cannot start: {error}', file=sys.stderr)
         return 2
     node = None
+    code = 0
     try:
         node = BallWorld()
         while rclpy.ok() and not node.finished:
             rclpy.spin_once(node, timeout_sec=0.1)
     except StartupError as error:
         print(f'ball_world: {error}', file=sys.stderr)
-        return 2
+        code = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RCLError:
+        # A signal shut the context down in the middle of a callback (a publish then fails):
+        # that is a shutdown too. With the context still valid it is a real error.
+        if rclpy.ok():
+            raise
     finally:
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
         if node is not None:
             node.close()
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return code
 
 
 def main(args=None):

@@ -22,6 +22,7 @@ Choices the seed leaves open, made here:
   ball up, the rest of the step is split again.
 """
 from dataclasses import dataclass
+import importlib.util
 import math
 
 import numpy as np
@@ -30,6 +31,8 @@ from ball_world.broadphase import dot_rows, NeighbourLists, segment_offsets, tak
 
 #: Largest distance a ball may travel in one substep, as a fraction of the smallest radius.
 MAX_TRAVEL = 0.5
+#: The ways a World can step: 'numpy' (pure numpy, the default) or 'numba' (kernels.py).
+BACKENDS = ('numpy', 'numba')
 #: Substeps per step that a commanded speed may demand at most (see World.speed_limit).
 SPEED_LIMIT_SUBSTEPS = 1000
 #: Safety cap on resolution rounds per substep; contacts left approaching (never seen in
@@ -46,6 +49,11 @@ class StepStats:
     substeps: int = 0
     rounds: int = 0
     unresolved: int = 0
+
+
+def numba_installed():
+    """Whether the 'numba' backend can run, without importing numba (half a second)."""
+    return importlib.util.find_spec('numba') is not None
 
 
 class Walls:
@@ -73,7 +81,8 @@ class World:
     reorders them, so users can rely on indices.
     """
 
-    def __init__(self, positions, velocities, radii, masses, walls=(), skin=None):
+    def __init__(self, positions, velocities, radii, masses, walls=(), skin=None,
+                 backend='numpy'):
         self.positions = np.array(positions, dtype=np.float64).reshape(-1, 2)
         self.velocities = np.array(velocities, dtype=np.float64).reshape(-1, 2)
         self.radii = np.array(radii, dtype=np.float64).reshape(-1)
@@ -89,6 +98,15 @@ class World:
             skin = float(self.radii.mean()) * 2.0 if n else 1.0
         self.neighbours = NeighbourLists(skin)
         self._scratch_best = np.empty(n, dtype=np.intp)
+        if backend not in BACKENDS:
+            raise ValueError(f'unknown backend {backend!r}; expected one of {BACKENDS}')
+        if backend == 'numba':
+            # Imported here: numba takes half a second to import, and most runs use numpy.
+            from ball_world import kernels
+            if not kernels.available():
+                raise ValueError("backend 'numba' needs the numba package (pip install numba)")
+            self._kernels = kernels
+        self.backend = backend
 
     def __len__(self):
         return len(self.positions)
@@ -136,9 +154,11 @@ class World:
 
     def step(self, dt):
         """Advance the world by dt seconds; return what happened as StepStats."""
-        totals = [0, 0, 0, 0, 0]
         if len(self) == 0:
             return StepStats(substeps=1)
+        if self.backend == 'numba':
+            return StepStats(*self._kernels.step(self, dt, MAX_TRAVEL))
+        totals = [0, 0, 0, 0, 0]
         speed = self._max_speed()
         count = self._plan(speed, dt)
         h = dt / count

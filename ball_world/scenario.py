@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from ball_world.physics import World
+from ball_world.physics import BACKENDS, numba_installed, World
 
 #: The defaults of INTERFACE.md; config/ball_world.yaml repeats them for users.
 DEFAULTS = {
@@ -33,6 +33,7 @@ DEFAULTS = {
     'publish_clock': False,
     'record.mcap': '',
     'record.rerun': '',
+    'physics.backend': 'numpy',
 }
 
 BALL_FIELDS = ('balls.x', 'balls.y', 'balls.vx', 'balls.vy', 'balls.radius', 'balls.mass')
@@ -258,7 +259,20 @@ def build_world(params):
     extra = random_balls(params, arena, walls, explicit)
     positions, velocities, radii, masses = (
         np.concatenate((a, b)) for a, b in zip(explicit, extra))
-    return World(positions, velocities, radii, masses, walls=np.concatenate((box, walls)))
+    return World(positions, velocities, radii, masses, walls=np.concatenate((box, walls)),
+                 backend=physics_backend(params))
+
+
+def physics_backend(params):
+    """The `physics.backend` parameter, checked: 'numpy', or 'numba' where it is installed."""
+    backend = params.get('physics.backend', DEFAULTS['physics.backend'])
+    if backend not in BACKENDS:
+        raise ScenarioError('physics.backend', f'expected one of {", ".join(BACKENDS)}, got '
+                                               f'{backend!r}')
+    if backend == 'numba' and not numba_installed():
+        raise ScenarioError('physics.backend', "'numba' needs the numba package (pip install "
+                                               'numba); use numpy')
+    return backend
 
 
 def describe(world, dt_ns):

@@ -54,7 +54,6 @@ fi
 
 requirements=(requirements/base.txt)
 [ "$mode" = wheels ] && requirements+=(requirements/ros-wheels.txt)
-[ "${BALL_WORLD_BENCH:-0}" = 1 ] && requirements+=(requirements/bench.txt)
 stamp="$venv/.ball_world-requirements"
 wanted=$(echo "$mode" | cat - "${requirements[@]}" | sha256sum | cut -d' ' -f1)
 if [ "$(cat "$stamp" 2>/dev/null)" != "$wanted" ]; then

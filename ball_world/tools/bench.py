@@ -1,0 +1,679 @@
+"""ball_world_bench: ball_world's World against pymunk (Chipmunk2D) and an all-pairs baseline.
+
+Why a tool and not a note: speed claims rot. This runs every engine in one process on the
+same scene (the issue's: equal balls of radius 0.5 m at a 20% area fraction, all at 24 m/s,
+dt 1/240 s, elastic, no gravity), so the numbers in docs/bench.md can be re-made on any
+machine with one command. Besides steps per second it measures what the node spends per
+step around the physics (CDR encoding, publishing, MCAP recording), the energy drift of each
+engine, and optionally memory growth over a long recorded run.
+"""
+import argparse
+import datetime
+import gc
+import math
+import os
+from pathlib import Path
+import platform
+import statistics
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from ball_world.alloc import MMAP_THRESHOLD_BYTES, TRIM_THRESHOLD_BYTES, tune_allocator
+from ball_world.cdr import decode_pose_array, encode_pose_array
+from ball_world.physics import numba_installed, World
+from ball_world.scenario import arena_walls
+
+RADIUS = 0.5
+AREA_FRACTION = 0.2
+SPEED = 24.0
+DT = 1.0 / 240.0
+MASS = 1.0
+#: The all-pairs baseline holds N x N arrays: past this it only shows what O(N^2) costs.
+ALL_PAIRS_MAX_N = 2000
+#: Resolution rounds per step of the all-pairs baseline before it gives up (never reached).
+ALL_PAIRS_MAX_ROUNDS = 10_000
+FRAME_ID = 'world'
+
+OURS = 'ball_world'
+OURS_NUMBA = 'ball_world (numba)'
+PYMUNK_TREE = 'pymunk (tree)'
+PYMUNK_HASH = 'pymunk (spatial hash)'
+ALL_PAIRS = 'numpy all-pairs'
+ENGINE_CHOICES = {'ours': OURS, 'ours-numba': OURS_NUMBA, 'pymunk-tree': PYMUNK_TREE,
+                  'pymunk-hash': PYMUNK_HASH, 'all-pairs': ALL_PAIRS}
+
+
+# The scene ---------------------------------------------------------------------------------
+
+class Scene:
+    """The issue's start state: N balls on a jittered lattice in a square box, all at SPEED."""
+
+    def __init__(self, n, seed=1):
+        self.n = n
+        self.side = box_side(n)
+        per_row = max(1, math.ceil(math.sqrt(n)))
+        spacing = self.side / per_row
+        rng = np.random.default_rng(seed)
+        cells = rng.choice(per_row * per_row, size=n, replace=False)
+        centres = (np.stack((cells // per_row, cells % per_row), axis=1) + 0.5) * spacing
+        # Each ball stays inside its own lattice cell, so no two overlap and none leaves the
+        # box; the spacing is at least 2.8 r for any N, leaving room to jitter.
+        free = max(0.0, spacing / 2.0 - RADIUS * (1.0 + 1e-6))
+        self.positions = centres + rng.uniform(-free, free, size=(n, 2))
+        heading = rng.uniform(0.0, 2.0 * math.pi, size=n)
+        self.velocities = SPEED * np.stack((np.cos(heading), np.sin(heading)), axis=1)
+
+
+def box_side(n):
+    """Side of the square box that N balls fill to AREA_FRACTION."""
+    return RADIUS * math.sqrt(n * math.pi / AREA_FRACTION)
+
+
+def _escaped(positions, side):
+    """Balls whose centre is outside the box."""
+    return int(np.count_nonzero(((positions < 0.0) | (positions > side)).any(axis=1)))
+
+
+# The engines -------------------------------------------------------------------------------
+
+class OurEngine:
+    """ball_world's World, exactly as the node steps it (pure numpy, or the numba kernels)."""
+
+    def __init__(self, scene, backend='numpy'):
+        walls, _ = arena_walls({'arena': [0.0, 0.0, scene.side, scene.side]})
+        self.side = scene.side
+        self.world = World(scene.positions, scene.velocities, np.full(scene.n, RADIUS),
+                           np.full(scene.n, MASS), walls=walls, backend=backend)
+
+    def run(self, steps):
+        step = self.world.step
+        for _ in range(steps):
+            step(DT)
+
+    def kinetic_energy(self):
+        return self.world.kinetic_energy()
+
+    def escaped(self):
+        return _escaped(self.world.positions, self.side)
+
+
+class PymunkEngine:
+    """pymunk: static segment walls, unit-mass circles, elasticity 1, friction 0, defaults else.
+
+    The spatial hash gets cells of one ball diameter and 10 N cells, pymunk's own advice.
+    """
+
+    def __init__(self, scene, pymunk, spatial_hash):
+        self.name = PYMUNK_HASH if spatial_hash else PYMUNK_TREE
+        self.side = scene.side
+        space = pymunk.Space()
+        space.gravity = (0.0, 0.0)
+        if spatial_hash:
+            space.use_spatial_hash(2.0 * RADIUS, 10 * scene.n)
+        s = scene.side
+        corners = [(0.0, 0.0), (s, 0.0), (s, s), (0.0, s)]
+        shapes = [pymunk.Segment(space.static_body, corners[k], corners[(k + 1) % 4], 0.0)
+                  for k in range(4)]
+        moment = pymunk.moment_for_circle(MASS, 0.0, RADIUS)
+        self.bodies = []
+        for position, velocity in zip(scene.positions.tolist(), scene.velocities.tolist()):
+            body = pymunk.Body(MASS, moment)
+            body.position = position
+            body.velocity = velocity
+            self.bodies.append(body)
+            shapes.append(pymunk.Circle(body, RADIUS))
+        for shape in shapes:
+            shape.elasticity = 1.0
+            shape.friction = 0.0
+        space.add(*self.bodies, *shapes)
+        self.space = space
+
+    def run(self, steps):
+        step = self.space.step
+        for _ in range(steps):
+            step(DT)
+
+    def kinetic_energy(self):
+        return math.fsum(body.kinetic_energy for body in self.bodies)
+
+    def escaped(self):
+        positions = np.array([tuple(body.position) for body in self.bodies])
+        return _escaped(positions, self.side)
+
+
+class AllPairsEngine:
+    """The obvious numpy solution: test all N^2 pairs every step, then the seed's response.
+
+    Contacts are resolved like the World does (rounds of disjoint touching-and-approaching
+    pairs), so its energy is exact too; only the O(N^2) pair search differs.
+    """
+
+    name = ALL_PAIRS
+
+    def __init__(self, scene):
+        self.side = scene.side
+        self.x = scene.positions.copy()
+        self.v = scene.velocities.copy()
+        self.upper = np.triu(np.ones((scene.n, scene.n), dtype=bool), k=1)
+        self.best = np.empty(scene.n, dtype=np.intp)
+
+    def run(self, steps):
+        for _ in range(steps):
+            self._step()
+
+    def _step(self):
+        x = self.x
+        v = self.v
+        x += v * DT
+        dx = x[:, 0:1] - x[:, 0]
+        dy = x[:, 1:2] - x[:, 1]
+        touching = dx * dx + dy * dy < (2.0 * RADIUS) ** 2
+        touching &= self.upper
+        a, b = np.nonzero(touching)
+        if len(a):
+            self._collide(a, b, x[a] - x[b])
+        for axis in (0, 1):
+            low = (x[:, axis] < RADIUS) & (v[:, axis] < 0.0)
+            high = (x[:, axis] > self.side - RADIUS) & (v[:, axis] > 0.0)
+            v[low | high, axis] *= -1.0
+
+    def _collide(self, a, b, rel):
+        v = self.v
+        best = self.best
+        for _ in range(ALL_PAIRS_MAX_ROUNDS):
+            dv = v[a] - v[b]
+            approaching = np.flatnonzero((dv * rel).sum(axis=1) < 0.0)
+            if len(approaching) == 0:
+                return
+            ca = a[approaching]
+            cb = b[approaching]
+            ids = np.arange(len(approaching))
+            best[ca] = best[cb] = len(ids)
+            np.minimum.at(best, ca, ids)
+            np.minimum.at(best, cb, ids)
+            keep = approaching[(best[ca] == ids) & (best[cb] == ids)]
+            pa, pb, r = a[keep], b[keep], rel[keep]
+            # Equal masses: v_a' = v_a - ((v_a - v_b).r / |r|^2) r, and v_b' gets the opposite.
+            impulse = (((v[pa] - v[pb]) * r).sum(axis=1) / (r * r).sum(axis=1))[:, None] * r
+            v[pa] -= impulse
+            v[pb] += impulse
+
+    def kinetic_energy(self):
+        return 0.5 * MASS * float(np.sum(self.v * self.v))
+
+    def escaped(self):
+        return _escaped(self.x, self.side)
+
+
+def make_engine(name, scene, pymunk):
+    if name == OURS:
+        return OurEngine(scene)
+    if name == OURS_NUMBA:
+        return OurEngine(scene, backend='numba')
+    if name == ALL_PAIRS:
+        return AllPairsEngine(scene)
+    return PymunkEngine(scene, pymunk, spatial_hash=name == PYMUNK_HASH)
+
+
+# Timing ------------------------------------------------------------------------------------
+
+def _timed(action, *args):
+    start = time.perf_counter()
+    action(*args)
+    return time.perf_counter() - start
+
+
+def steps_per_second(engine, seconds, repeats, warmup_steps):
+    """Median steps/s of `repeats` runs of about `seconds` each, after a warm-up.
+
+    The warm-up lets the gas thermalise first: every ball starts at the same speed, and
+    within about 100 steps collisions spread the speeds into a Maxwell distribution whose
+    fastest balls (about 3x the start speed) decide how often neighbour lists are rebuilt,
+    in every engine. It then doubles a step count until one batch takes a tenth of
+    `seconds`; that batch sizes the timed runs.
+    """
+    engine.run(warmup_steps)
+    steps = 1
+    while True:
+        elapsed = _timed(engine.run, steps)
+        if elapsed >= seconds / 10.0 or steps >= 1 << 20:
+            break
+        steps *= 2
+    per_run = max(1, round(seconds * steps / max(elapsed, 1e-9)))
+    rates = []
+    for _ in range(repeats):
+        gc.collect()
+        rates.append(per_run / _timed(engine.run, per_run))
+    return statistics.median(rates), rates
+
+
+def energy_change(engine, steps):
+    """Relative kinetic energy change after `steps` steps, and the balls that left the box."""
+    before = engine.kinetic_energy()
+    engine.run(steps)
+    return (engine.kinetic_energy() - before) / before, engine.escaped()
+
+
+def _median_ms(call, repeats):
+    samples = [_timed(call) for _ in range(repeats)]
+    return 1e3 * statistics.median(samples)
+
+
+def bench_cdr(count, repeats):
+    """ball_world.cdr.encode_pose_array against PoseArray objects + serialize_message."""
+    positions = Scene(count).positions
+    stamp_ns = 1_234_567_890
+    ours = encode_pose_array(positions, stamp_ns, FRAME_ID)
+    result = {'count': count,
+              'ours_ms': _median_ms(lambda: encode_pose_array(positions, stamp_ns, FRAME_ID),
+                                    max(20, repeats * 10))}
+    try:
+        from geometry_msgs.msg import Point, Pose, PoseArray
+        from rclpy.serialization import serialize_message
+    except ImportError as error:
+        print(f'rclpy not available ({error}): skipping the serialize_message comparison')
+        return result
+
+    def rclpy_way():
+        message = PoseArray()
+        message.header.frame_id = FRAME_ID
+        message.header.stamp.sec, message.header.stamp.nanosec = divmod(stamp_ns, 10 ** 9)
+        message.poses = [Pose(position=Point(x=x, y=y)) for x, y in positions.tolist()]
+        return serialize_message(message)
+
+    theirs = rclpy_way()
+    # Bytes may differ in alignment padding (rmw leaves stray bytes there): compare values.
+    same = all(np.array_equal(u, w) if isinstance(u, np.ndarray) else u == w
+               for u, w in zip(decode_pose_array(ours), decode_pose_array(theirs)))
+    result.update(rclpy_ms=_median_ms(rclpy_way, repeats), same_values=same)
+    return result
+
+
+class _Publishers:
+    """The node's three step publishers, on their own rclpy context in a random domain."""
+
+    def __init__(self, seed):
+        import rclpy
+        from rclpy.context import Context
+        from geometry_msgs.msg import PoseArray
+        from std_msgs.msg import Float64MultiArray
+        self._rclpy = rclpy
+        self.context = Context()
+        domain = int(np.random.default_rng(seed + os.getpid()).integers(1, 102))
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node('ball_world_bench', context=self.context)
+        self.publishers = [self.node.create_publisher(kind, f'/ball_world_bench/{topic}', 10)
+                           for kind, topic in ((PoseArray, 'balls'), (Float64MultiArray, 'state'),
+                                               (Float64MultiArray, 'stats'))]
+
+    def publish(self, record):
+        for publisher, data in zip(self.publishers,
+                                   (record.balls_cdr, record.state_cdr, record.stats_cdr)):
+            publisher.publish(data)
+
+    def close(self):
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+def _optional(what, make):
+    """make(), or None with one printed line saying why `what` is skipped."""
+    try:
+        return make()
+    except Exception as error:  # noqa: B902 - any failure only drops that one column
+        print(f'{what} skipped: {type(error).__name__}: {error}')
+        return None
+
+
+def _budget_simulation(n, seed, sinks):
+    from ball_world.simulation import Simulation
+    side = box_side(n)
+    simulation = Simulation({'arena': [0.0, 0.0, side, side], 'random.count': n,
+                             'random.radius': [RADIUS, RADIUS], 'random.speed': SPEED,
+                             'random.seed': seed, 'dt': DT}, sinks=sinks)
+    # The scenario draws speeds in [0, random.speed]; the benchmark scene has all at SPEED.
+    heading = np.random.default_rng(seed).uniform(0.0, 2.0 * math.pi, size=n)
+    simulation.world.velocities[:] = SPEED * np.stack((np.cos(heading), np.sin(heading)), 1)
+    return simulation
+
+
+def bench_budget(n, seconds, seed, directory):
+    """Median ms per step of each part of Simulation.step at N balls, plus publishing.
+
+    Runs what Simulation.step does (no impulses), split into timed parts: the physics
+    step; Simulation.record (copies, energy, pose array, state and stats CDR); publishing
+    those bytes; McapSink.write_step.
+    """
+    sink = _optional('MCAP row', lambda: _mcap_sink(Path(directory) / f'budget-{n}.mcap'))
+    publishers = _optional('publish row', lambda: _Publishers(seed))
+    simulation = _budget_simulation(n, seed, [sink] if sink else [])
+    simulation.sinks = []  # records are written below, timed on their own
+    world = simulation.world
+    parts = {'physics': [], 'encode': [], 'publish': [], 'mcap': [], 'total': []}
+    try:
+        deadline = None
+        steps = 0
+        while steps < 10 or time.perf_counter() < deadline:
+            t0 = time.perf_counter()
+            stats = world.step(DT)
+            simulation.step_index += 1
+            t1 = time.perf_counter()
+            record = simulation.record(stats, ())
+            t2 = time.perf_counter()
+            if publishers:
+                publishers.publish(record)
+            t3 = time.perf_counter()
+            if sink:
+                sink.write_step(record)
+            t4 = time.perf_counter()
+            steps += 1
+            if steps == 5:  # warm-up done: lists built, buffers allocated
+                deadline = t4 + seconds
+                parts = {key: [] for key in parts}
+            parts['physics'].append(t1 - t0)
+            parts['encode'].append(t2 - t1)
+            parts['publish'].append(t3 - t2)
+            parts['mcap'].append(t4 - t3)
+            parts['total'].append(t4 - t0)
+    finally:
+        if sink:
+            sink.close()
+        if publishers:
+            publishers.close()
+    result = {key: 1e3 * statistics.median(values) for key, values in parts.items()}
+    result.update(n=n, steps=len(parts['total']), publish_ok=publishers is not None,
+                  mcap_ok=sink is not None)
+    return result
+
+
+def _mcap_sink(path):
+    from ball_world.mcap_sink import McapSink
+    return McapSink(path)
+
+
+def memory_run(minutes, n, seed):
+    """Run the Simulation with an McapSink for `minutes`; resident size at start and end.
+
+    The recording goes to the null device: flat out, 1,000 balls make about 3 GB of MCAP a
+    minute, and what can leak is the process's memory (the writer's chunk and message
+    indexes, scratch buffers), not the file.
+    """
+    import psutil
+    process = psutil.Process()
+    simulation = _budget_simulation(n, seed, [_mcap_sink(os.devnull)])
+    for _ in range(100):  # reach steady state: lists, scratch buffers, first chunk
+        simulation.step()
+    start = process.memory_info().rss
+    peak = start
+    steps = 0
+    produced = 0
+    began = time.monotonic()
+    last_flush = began
+    while time.monotonic() - began < minutes * 60.0:
+        record, _ = simulation.step()
+        produced += len(record.balls_cdr) + len(record.state_cdr) + len(record.stats_cdr)
+        steps += 1
+        now = time.monotonic()
+        if now - last_flush >= 1.0:  # what the node does (FLUSH_PERIOD)
+            simulation.flush()
+            last_flush = now
+            peak = max(peak, process.memory_info().rss)
+    end = process.memory_info().rss
+    simulation.close()
+    return {'n': n, 'minutes': minutes, 'steps': steps, 'start_mb': start / 2 ** 20,
+            'end_mb': end / 2 ** 20, 'peak_mb': max(peak, end) / 2 ** 20,
+            'growth': (end - start) / start, 'produced_mb': produced / 2 ** 20}
+
+
+# Report ------------------------------------------------------------------------------------
+
+def _rate(value):
+    if value is None:
+        return '-'
+    return f'{value:,.0f}' if value >= 100 else f'{value:.3g}'
+
+
+def machine_lines(pymunk, allocator):
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open('/proc/cpuinfo') as cpuinfo:
+            cpu = next((line.split(':', 1)[1].strip() for line in cpuinfo
+                        if line.startswith('model name')), cpu)
+    except OSError:
+        pass
+    try:
+        nproc = len(os.sched_getaffinity(0))
+    except AttributeError:
+        nproc = os.cpu_count()
+    engines = f'numpy {np.__version__}, '
+    engines += (f'pymunk {pymunk.version} (Chipmunk {pymunk.chipmunk_version.split("-")[0]})'
+                if pymunk else 'pymunk not installed')
+    return [f'- Machine: {nproc} CPUs (nproc), {cpu}, {platform.system()} '
+            f'{platform.release()}',
+            f'- Python {platform.python_version()}, {engines}',
+            f'- Allocator: {allocator}',
+            f'- Date: {datetime.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")}']
+
+
+def markdown(results, args, pymunk, allocator, command):
+    engines = results['engines']
+    lines = ['# ball_world benchmark', '', f'Command: `{command}`', '',
+             *machine_lines(pymunk, allocator), '',
+             f'Scene: N equal balls, r = {RADIUS} m, square box of side r sqrt(N pi / '
+             f'{AREA_FRACTION}) ({AREA_FRACTION:.0%} area fraction), jittered-lattice start '
+             f'(the same for every engine), |v| = {SPEED:g} m/s in random directions, '
+             f'dt = 1/{round(1 / DT)} s, elastic, no gravity. pymunk: static segment walls, '
+             'circles of mass 1 with elasticity 1 and friction 0, default iterations (10); '
+             'the spatial hash has cells of one diameter and 10 N cells.', '',
+             f'## Steps per second (median of {args.repeats} runs of about {args.seconds:g} s, '
+             f'after {args.warmup_steps:,} warm-up steps)',
+             '', '| N | ' + ' | '.join(engines) + ' | numpy / pymunk | numba / pymunk |',
+             '|---:|' + '---:|' * (len(engines) + 2)]
+    for n in args.n:
+        row = results['rates'].get(n, {})
+        pymunks = [row[name] for name in (PYMUNK_TREE, PYMUNK_HASH) if row.get(name)]
+        ratios = [f'{row[ours] / max(pymunks):.2f}' if pymunks and row.get(ours) else '-'
+                  for ours in (OURS, OURS_NUMBA)]
+        lines.append(f'| {n:,} | ' + ' | '.join(_rate(row.get(name)) for name in engines)
+                     + f' | {ratios[0]} | {ratios[1]} |')
+    lines += ['', 'Ratios: against the faster pymunk index at that N, measured in the same run.']
+    smallest = min(args.n)
+    row = results['rates'].get(smallest, {})
+    lines += ['', f'## Fixed per-step cost at N = {smallest:,} (median time per step)', '',
+              '| engine | us per step |', '|---|---:|']
+    lines += [f'| {name} | {1e6 / row[name]:,.1f} |' for name in engines if row.get(name)]
+    if results['energy']:
+        lines += ['', '## Kinetic energy', '',
+                  '| engine | N | steps | relative change | balls outside the box |',
+                  '|---|---:|---:|---:|---:|']
+        lines += [f'| {name} | {n:,} | {steps:,} | {change:+.2e} | {escaped} |'
+                  for name, n, steps, change, escaped in results['energy']]
+    cdr = results.get('cdr')
+    if cdr:
+        lines += ['', f'## CDR encoding of a {cdr["count"]:,}-pose PoseArray (median)', '',
+                  '| method | ms |', '|---|---:|',
+                  f'| ball_world.cdr.encode_pose_array | {cdr["ours_ms"]:.3f} |']
+        if 'rclpy_ms' in cdr:
+            lines += [f'| PoseArray pose by pose + rclpy serialize_message | '
+                      f'{cdr["rclpy_ms"]:.1f} |', '',
+                      f'Ratio: {cdr["rclpy_ms"] / cdr["ours_ms"]:,.0f}x; decoded values equal: '
+                      f'{"yes" if cdr["same_values"] else "NO"}.']
+    if results['budget']:
+        lines += ['', '## Node per-step budget (median ms per step)', '',
+                  '| N | physics | encode | publish | MCAP record | total | steps timed |',
+                  '|---:|---:|---:|---:|---:|---:|---:|']
+        for b in results['budget']:
+            publish = f'{b["publish"]:.3f}' if b['publish_ok'] else '-'
+            mcap = f'{b["mcap"]:.3f}' if b['mcap_ok'] else '-'
+            lines.append(f'| {b["n"]:,} | {b["physics"]:.3f} | {b["encode"]:.3f} | {publish} | '
+                         f'{mcap} | {b["total"]:.3f} | {b["steps"]} |')
+        lines += ['', 'encode: Simulation.record (state copies, energy and momentum, PoseArray, '
+                  'state and stats CDR); publish: rclpy publish() of those three byte strings '
+                  'with no subscriber; MCAP record: McapSink.write_step (lz4) to a temporary '
+                  'file; total: median of the per-step sums. The scenario places the balls '
+                  '(random, non-overlapping), all at the scene speed.']
+    memory = results.get('memory')
+    if memory:
+        lines += ['', f'## Memory: {memory["n"]:,} balls recorded to MCAP for '
+                      f'{memory["minutes"]:g} min', '',
+                  f'{memory["steps"]:,} steps; resident {memory["start_mb"]:.1f} MiB at start, '
+                  f'{memory["end_mb"]:.1f} MiB at end (growth {memory["growth"]:+.1%}, peak '
+                  f'{memory["peak_mb"]:.1f} MiB); {memory["produced_mb"]:,.0f} MiB of messages '
+                  'recorded (uncompressed, to the null device).']
+    return '\n'.join(lines) + '\n'
+
+
+def plot(results, args, path):
+    """steps/s against N, log-log, one line per engine, and ideal O(N) from our N=1000."""
+    from matplotlib.figure import Figure
+    figure = Figure(figsize=(7.5, 5.0), layout='constrained')
+    axes = figure.subplots()
+    for name in results['engines']:
+        points = [(n, results['rates'][n][name]) for n in args.n
+                  if results['rates'].get(n, {}).get(name)]
+        if points:
+            axes.plot(*zip(*points), marker='o', label=name)
+    ours = {n: results['rates'][n][OURS] for n in args.n if results['rates'][n].get(OURS)}
+    if ours:
+        anchor = min(ours, key=lambda n: abs(math.log(n / 1000)))
+        ns = np.array(sorted(args.n), dtype=float)
+        axes.plot(ns, ours[anchor] * anchor / ns, linestyle='--', color='grey',
+                  label=f'linear scaling from {OURS} at N={anchor:,}')
+    axes.set_xscale('log')
+    axes.set_yscale('log')
+    axes.set_xlabel('balls N')
+    axes.set_ylabel('steps per second (median)')
+    axes.set_title(f'2D elastic balls, {AREA_FRACTION:.0%} area fraction, dt = 1/{round(1 / DT)}'
+                   ' s')
+    axes.grid(True, which='both', alpha=0.3)
+    axes.legend()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=120)
+
+
+# Command line ------------------------------------------------------------------------------
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(prog='ball_world_bench', description=__doc__.split('\n')[0])
+    parser.add_argument('--n', type=int, nargs='+', default=[100, 1000, 10000, 100000],
+                        help='ball counts (default 100 1000 10000 100000)')
+    parser.add_argument('--repeats', type=int, default=5, help='timed runs per engine and N')
+    parser.add_argument('--seconds', type=float, default=1.0,
+                        help='target length of one timed run, s (default 1)')
+    parser.add_argument('--engines', nargs='+', choices=list(ENGINE_CHOICES),
+                        default=list(ENGINE_CHOICES), help='engines to time (default all)')
+    parser.add_argument('--warmup-steps', type=int, default=240,
+                        help='untimed steps before timing each engine (default 240, 1 s)')
+    parser.add_argument('--energy-steps', type=int, default=2000)
+    parser.add_argument('--energy-n', type=int, default=1000,
+                        help='N of the energy measurement (default 1000)')
+    parser.add_argument('--energy-all', action='store_true',
+                        help='measure the energy change at every N')
+    parser.add_argument('--cdr-poses', type=int, default=10000)
+    parser.add_argument('--budget-n', type=int, nargs='*', default=[1000, 10000],
+                        help='N of the per-step budget (default 1000 10000; none to skip)')
+    parser.add_argument('--no-extras', action='store_true',
+                        help='time the engines only: no energy, CDR or budget sections')
+    parser.add_argument('--memory-minutes', type=float, default=0.0,
+                        help='also record 1,000 balls to MCAP for M minutes; report RSS growth')
+    parser.add_argument('--no-tune-allocator', action='store_true',
+                        help="leave glibc malloc's thresholds at their defaults")
+    parser.add_argument('--seed', type=int, default=1)
+    parser.add_argument('--plot', type=Path, default=Path('docs/bench.png'))
+    parser.add_argument('--markdown', type=Path, help='also write the tables to this file')
+    parser.add_argument('--quick', action='store_true',
+                        help='a tiny configuration (N = 100, 300; short runs) for tests')
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.n, args.repeats, args.seconds, args.warmup_steps = [100, 300], 2, 0.05, 20
+        args.energy_n, args.energy_steps, args.cdr_poses, args.budget_n = 300, 500, 1000, [300]
+    if (any(n < 1 for n in args.n) or args.repeats < 1 or args.seconds <= 0.0
+            or args.warmup_steps < 0):
+        parser.error('--n values and --repeats must be >= 1, --seconds > 0 and '
+                     '--warmup-steps >= 0')
+    return args
+
+
+def _import_pymunk():
+    try:
+        import pymunk
+    except ImportError:
+        print('pymunk not installed: comparing without it (pip install pymunk==7.3.1)')
+        return None
+    return pymunk
+
+
+def run_engines(args, pymunk):
+    names = [ENGINE_CHOICES[key] for key in args.engines]
+    if pymunk is None:
+        names = [name for name in names if name not in (PYMUNK_TREE, PYMUNK_HASH)]
+    if not numba_installed():
+        print('numba not installed: timing the numpy backend only')
+        names = [name for name in names if name != OURS_NUMBA]
+    results = {'engines': names, 'rates': {}, 'energy': []}
+    for n in args.n:
+        scene = Scene(n, args.seed)
+        row = results['rates'].setdefault(n, {})
+        for name in names:
+            if name == ALL_PAIRS and n > ALL_PAIRS_MAX_N:
+                continue
+            engine = make_engine(name, scene, pymunk)
+            row[name], rates = steps_per_second(engine, args.seconds, args.repeats,
+                                                args.warmup_steps)
+            print(f'N={n:,} {name}: {_rate(row[name])} steps/s (runs: '
+                  f'{", ".join(_rate(r) for r in rates)})', flush=True)
+    if not args.no_extras:
+        for n in (args.n if args.energy_all else [args.energy_n]):
+            scene = Scene(n, args.seed)
+            for name in names:
+                if name == ALL_PAIRS and n > ALL_PAIRS_MAX_N:
+                    continue
+                change, escaped = energy_change(make_engine(name, scene, pymunk),
+                                                args.energy_steps)
+                results['energy'].append((name, n, args.energy_steps, change, escaped))
+                print(f'N={n:,} {name}: relative energy change {change:+.2e} after '
+                      f'{args.energy_steps:,} steps, {escaped} outside the box', flush=True)
+    return results
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    command = ' '.join(['ball_world_bench', *(sys.argv[1:] if argv is None else argv)])
+    if args.no_tune_allocator:
+        allocator = 'glibc defaults (--no-tune-allocator)'
+    elif tune_allocator():
+        allocator = (f'tuned (mallopt: mmap threshold {MMAP_THRESHOLD_BYTES >> 20} MiB, trim '
+                     f'threshold {TRIM_THRESHOLD_BYTES >> 20} MiB)')
+    else:
+        allocator = 'not tuned (not glibc, or mallopt refused)'
+    pymunk = _import_pymunk()
+    results = run_engines(args, pymunk)
+    if not args.no_extras:
+        results['cdr'] = bench_cdr(args.cdr_poses, args.repeats)
+        with tempfile.TemporaryDirectory() as directory:
+            results['budget'] = [bench_budget(n, 2.0 * args.seconds, args.seed, directory)
+                                 for n in args.budget_n]
+    else:
+        results['budget'] = []
+    if args.memory_minutes > 0.0:
+        results['memory'] = memory_run(args.memory_minutes, 1000, args.seed)
+    table = markdown(results, args, pymunk, allocator, command)
+    print()
+    print(table, end='')
+    if args.markdown:
+        args.markdown.parent.mkdir(parents=True, exist_ok=True)
+        args.markdown.write_text(table)
+    try:
+        plot(results, args, args.plot)
+    except ImportError:
+        print('matplotlib not installed: no plot (pip install matplotlib)')
+    else:
+        print(f'plot: {args.plot}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
