@@ -37,7 +37,7 @@ ALL_PAIRS_MAX_N = 2000
 ALL_PAIRS_MAX_ROUNDS = 10_000
 FRAME_ID = 'world'
 
-OURS = 'ball_world'
+OURS = 'ball_world (numpy)'
 OURS_NUMBA = 'ball_world (numba)'
 PYMUNK_TREE = 'pymunk (tree)'
 PYMUNK_HASH = 'pymunk (spatial hash)'
