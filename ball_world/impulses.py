@@ -60,7 +60,7 @@ def velocity_after(velocities, masses, ball, jx, jy, speed_limit):
     The limit keeps one command from freezing the node: substeps grow with the fastest
     ball's speed, so a ball at 1e30 m/s would take forever to step.
     """
-    mass = masses[ball]
+    mass = float(masses[ball])  # Python floats: an overflow is inf, not a numpy warning
     vx = float(velocities[ball, 0]) + jx / mass
     vy = float(velocities[ball, 1]) + jy / mass
     speed = math.hypot(vx, vy)
