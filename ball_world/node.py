@@ -23,6 +23,7 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from ball_world.alloc import tune_allocator
+from ball_world.background import BackgroundSink
 from ball_world.cdr import decode_vector3_stamped, encode_clock
 from ball_world.impulses import check_impulse, ImpulseRejected
 from ball_world.markers import MarkerBuilder
@@ -58,7 +59,7 @@ def open_sinks(values, on_failure):
     try:
         if values['record.mcap']:
             from ball_world.mcap_sink import McapSink
-            sinks.append(McapSink(values['record.mcap']))
+            sinks.append(BackgroundSink(McapSink(values['record.mcap'])))
         if values['record.rerun']:
             from ball_world.rerun_sink import RerunSink
             sinks.append(RerunSink(values['record.rerun'], every=values['record.rerun_every']))
@@ -179,6 +180,7 @@ class BallWorld(Node):
     def _rebuild_markers(self):
         world = self.simulation.world
         self._markers.reset(world.radii, world.walls.segments, self.simulation.frame_id)
+        self.markers_pub.publish(self._markers.delete_all())
 
     def _publish_markers(self):
         """Publish the markers, unless that would take more than MARKERS_SHARE of the time.
@@ -191,7 +193,7 @@ class BallWorld(Node):
             return
         simulation = self.simulation
         self.markers_pub.publish(self._markers.build(
-            simulation.world.positions, simulation.stamp_ns, simulation.frame_id))
+            simulation.world.positions, simulation.stamp_ns))
         self._markers_next = now + (time.monotonic() - now) / MARKERS_SHARE
 
     def _set_markers_rate(self, rate_hz):
@@ -300,7 +302,7 @@ class BallWorld(Node):
             self._window = (time.monotonic(), self.steps_done, self.simulation.step_index)
         if 'frame_id' in changes:
             self.simulation.frame_id = candidate['frame_id']
-            self._markers.frame_id = candidate['frame_id']
+            self._rebuild_markers()
         if 'markers.rate_hz' in changes:
             self._set_markers_rate(candidate['markers.rate_hz'])
         return SetParametersResult(successful=True)
@@ -322,9 +324,10 @@ class BallWorld(Node):
         self._window = (now, self.steps_done, simulation.step_index)
 
     def _on_sink_failure(self, failure):
+        sink = getattr(failure.sink, 'sink', failure.sink)  # the one a BackgroundSink wraps
         self.get_logger().error(
-            f'recording to {type(failure.sink).__name__} stopped: {failure.error}; the '
-            'simulation goes on without it')
+            f'recording to {type(sink).__name__} stopped: {failure.error}; the simulation '
+            'goes on without it')
 
     def close(self):
         """Finish the recordings (called on every way out)."""
