@@ -104,7 +104,6 @@ class BallWorld(Node):
         self.paused = False
         self.finished = False
         self.steps_done = 0
-        self._warned = set()
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._markers = MarkerBuilder()
         self._markers_next = 0.0
@@ -115,7 +114,7 @@ class BallWorld(Node):
         self._set_markers_rate(values['markers.rate_hz'])
         self.create_timer(FLUSH_PERIOD, self.simulation.flush, clock=self._steady)
         self.create_timer(REPORT_PERIOD, self._report, clock=self._steady)
-        self._window = (time.monotonic(), 0, 0)
+        self._window = (time.monotonic(), 0)
         self._start_wall = time.monotonic()
         self._publish(self.simulation.last_record)
         self.get_logger().info(
@@ -299,7 +298,7 @@ class BallWorld(Node):
             return SetParametersResult(successful=False, reason=str(error))
         if 'rate_hz' in changes:
             self._timer.timer_period_ns = int(self._period(candidate['rate_hz']) * 1e9)
-            self._window = (time.monotonic(), self.steps_done, self.simulation.step_index)
+            self._window = (time.monotonic(), self.steps_done)
         if 'frame_id' in changes:
             self.simulation.frame_id = candidate['frame_id']
             self._rebuild_markers()
@@ -310,7 +309,7 @@ class BallWorld(Node):
     # Reporting and recording ------------------------------------------------------------
 
     def _report(self):
-        start, steps, _ = self._window
+        start, steps = self._window
         now = time.monotonic()
         rate = (self.steps_done - steps) / (now - start)
         simulation = self.simulation
@@ -321,7 +320,7 @@ class BallWorld(Node):
             f'step {simulation.step_index}: {rate:.1f} steps/s, real-time factor {rtf:.3f}, '
             f'rejected impulses {rejected}' + (f' ({detail})' if detail else '')
             + (' [paused]' if self.paused else ''))
-        self._window = (now, self.steps_done, simulation.step_index)
+        self._window = (now, self.steps_done)
 
     def _on_sink_failure(self, failure):
         sink = getattr(failure.sink, 'sink', failure.sink)  # the one a BackgroundSink wraps
