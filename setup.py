@@ -32,6 +32,7 @@ setup(
             'ball_world_resim = ball_world.tools.resim:main',
             'ball_world_to_rrd = ball_world.tools.to_rrd:main',
             'ball_world_sim = ball_world.headless:main',
+            'ball_world_soak = ball_world.tools.soak:main',
         ],
     },
 )

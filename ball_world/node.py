@@ -53,7 +53,7 @@ class StartupError(Exception):
     """The node cannot start; the message is the one line to print."""
 
 
-def open_sinks(values, on_failure):
+def open_sinks(values):
     """The recording sinks the parameters ask for, opened now so a bad path fails at start."""
     sinks = []
     try:
@@ -81,13 +81,25 @@ class BallWorld(Node):
         except ParameterError as error:
             raise StartupError(str(error)) from None
         values = current_values(self)
+        failures = []
+        topics = {name: self.resolve_topic_name(name)
+                  for name in ('balls', 'state', 'stats', 'impulse')}
+        sinks = open_sinks(values)
         try:
-            topics = {name: self.resolve_topic_name(name)
-                      for name in ('balls', 'state', 'stats', 'impulse')}
-            self.simulation = Simulation(values, open_sinks(values, self._on_sink_failure),
-                                         topics=topics, on_sink_failure=self._on_sink_failure)
+            self.simulation = Simulation(values, sinks, topics=topics,
+                                         on_sink_failure=failures.append)
         except ScenarioError as error:
+            for sink in sinks:
+                sink.close()
             raise StartupError(str(error)) from None
+        if failures:
+            # A recording that fails on its first segment is a bad path, not a run-time fault.
+            self.simulation.close()
+            sink = getattr(failures[0].sink, 'sink', failures[0].sink)
+            name = 'record.mcap' if type(sink).__name__ == 'McapSink' else 'record.rerun'
+            raise StartupError(f"parameter '{name}': cannot record to {values[name]}: "
+                               f'{failures[0].error}')
+        self.simulation.on_sink_failure = self._on_sink_failure
 
         self.balls_pub = self.create_publisher(PoseArray, 'balls', STEP_QOS)
         self.state_pub = self.create_publisher(Float64MultiArray, 'state', STEP_QOS)

@@ -159,8 +159,15 @@ class RerunSink:
         self.path = Path(path)
         directory = self.path.parent
         if not directory.is_dir() or not os.access(directory, os.W_OK):
-            raise OSError(f'cannot write the Rerun recording {str(self.path)!r}: '
-                          f'{str(directory)!r} is not a writable directory')
+            raise OSError(f'{str(self.path)!r}: {str(directory)!r} is not a writable directory')
+        # The SDK opens the file only at the first segment, on its own thread; try it now so
+        # a path that cannot be written (/proc/..., /dev/full) fails at start, not silently.
+        try:
+            with open(self.path, 'wb') as probe:
+                probe.write(b'\0')
+                probe.flush()
+        except OSError as error:
+            raise OSError(f'{str(self.path)!r}: {error.strerror or error}') from None
         self.every = every
         self.stream = None
         self._pending = _Pending()
