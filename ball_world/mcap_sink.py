@@ -25,8 +25,9 @@ from ball_world import __version__
 from ball_world.msgdefs import message_definition, type_hash
 from ball_world.records import PACKAGE_NAME
 
-#: Compression of the MCAP chunks. lz4 is the default because write_step runs on the
-#: stepping path: measured per step (write_step + a flush every 60 steps), lz4 costs 0.12 ms
+#: Compression of the MCAP chunks. lz4 is the default because writing competes with stepping
+#: (the node writes on a background thread, but the Python parts share the GIL): measured per
+#: step (write_step + a flush every 60 steps), lz4 costs 0.12 ms
 #: at 1,000 balls and 0.9 ms at 10,000 (p99 2.2 ms), zstd 0.23 ms and 3.6 ms (p99 9.5 ms,
 #: more than the 7 ms the 10,000-ball physics step takes). zstd files are 2-2.6x smaller
 #: (19 vs 49 kB per step at 1,000 balls, 260 vs 505 kB at 10,000): choose it for archives.
