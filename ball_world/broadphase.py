@@ -154,10 +154,6 @@ class NeighbourLists:
         self.reach2 = np.empty(0)
         self.wall_ball = self.wall_index = _EMPTY
 
-    def invalidate(self):
-        """Forget the lists (the world changed in a way the bound does not cover)."""
-        self.moved = np.inf
-
     def update(self, positions, radii, walls, moved):
         """Account for `moved` metres of travel; rebuild if the skin may be closed."""
         self.moved += moved
