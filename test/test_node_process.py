@@ -7,6 +7,7 @@ import sys
 import time
 
 from geometry_msgs.msg import PoseArray, Vector3Stamped
+from node_process import finish
 import numpy as np
 import pytest
 import rclpy
@@ -21,16 +22,6 @@ ROOT = Path(__file__).resolve().parents[1]
 def start_node(*ros_args, tmp_path=None):
     return subprocess.Popen([EXECUTABLE, '--ros-args', *ros_args], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=os.environ.copy())
-
-
-def finish(process, timeout=20):
-    try:
-        out, err = process.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        out, err = process.communicate()
-        pytest.fail(f'node did not exit: {err}')
-    return process.returncode, out, err
 
 
 @pytest.fixture

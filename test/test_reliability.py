@@ -22,6 +22,7 @@ import time
 from geometry_msgs.msg import PoseArray
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+from node_process import finish
 import numpy as np
 import pytest
 import rclpy
@@ -62,17 +63,6 @@ def start_node(*parameters, limit_file_size=None):
 
     return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=os.environ.copy(), preexec_fn=limit)
-
-
-def finish(process, timeout=EXIT_TIMEOUT):
-    """(exit code, stdout, stderr) once the node has exited on its own."""
-    try:
-        out, err = process.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        out, err = process.communicate()
-        pytest.fail(f'the node did not exit within {timeout} s: {err[-2000:]}')
-    return process.returncode, out, err
 
 
 def step_of(msg):
@@ -240,7 +230,7 @@ def test_file_size_limit_mid_run_is_reported_once_and_stepping_goes_on(probes, p
     max_steps = max(600, probe.steps[-1] + 500)  # the .rrd reaches the limit too
     probe.set_node_parameters(max_steps=max_steps, rate_hz=0.0)
     probe.spin_until_exit(process)
-    code, _, err = finish(process)
+    code, _, err = finish(process, EXIT_TIMEOUT)
     assert code == 0, err  # not killed by SIGXFSZ: Python ignores it, the write fails
     assert f'max_steps {max_steps} reached' in err
     assert err.count(RECORDING_FAILED) == 1, err
@@ -269,7 +259,7 @@ def test_unwritable_recording_stops_the_start_with_one_line(parameter, path, tmp
         regular = tmp_path / 'a_file'
         regular.write_text('not a directory')
         path = path.replace('FILE', str(regular))
-    code, out, err = finish(start_node(f'{parameter}:={path}', 'max_steps:=5'))
+    code, out, err = finish(start_node(f'{parameter}:={path}', 'max_steps:=5'), EXIT_TIMEOUT)
     assert code != 0
     lines = [line for line in err.splitlines() if line.strip()]
     assert len(lines) == 1, err
@@ -339,7 +329,7 @@ def test_stalled_and_vanished_subscribers_never_block_stepping(probes, processes
         vanishing.spin_until(lambda: len(vanishing.steps) > seen + 5, process=process)
         vanishing.node.destroy_subscription(vanishing.subscription)
         vanishing.close()
-        code, _, err = finish(process)
+        code, _, err = finish(process, EXIT_TIMEOUT)
     finally:
         frozen.send_signal(signal.SIGCONT)
     assert code == 0, err
@@ -371,7 +361,7 @@ def test_signal_while_recording_finishes_mcap_and_rrd(sig, probes, processes, tm
     probe.listen()
     probe.spin_until(lambda: probe.steps and probe.steps[-1] >= 150, process=process)
     process.send_signal(sig)
-    code, out, err = finish(process)
+    code, out, err = finish(process, EXIT_TIMEOUT)
     assert code == 0, err
     assert 'Traceback' not in out + err
 
