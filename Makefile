@@ -1,9 +1,11 @@
-# The two commands of the README. Both set everything up first (scripts/setup.sh is fast
-# when nothing changed), so they work on a fresh clone.
-.PHONY: run test setup
+# The commands of the README. Each sets everything up first (scripts/setup.sh is fast when
+# nothing changed), so they work on a fresh clone.
+.PHONY: run test setup bench soak
 VENV := .venv
 # Steps of the main job (60 Hz): 1800 is 30 s; 0 runs until Ctrl-C.
 STEPS ?= 1800
+# Arguments of the benchmark and of the soak runs, e.g. make soak ARGS='kill --times 10'.
+ARGS ?=
 
 setup:
 	@scripts/setup.sh
@@ -16,3 +18,9 @@ run: setup
 
 test: setup
 	$(VENV)/bin/python -m pytest -q test
+
+bench: setup
+	$(VENV)/bin/python -m benchmarks.bench $(ARGS)
+
+soak: setup
+	$(VENV)/bin/python -m benchmarks.soak $(ARGS)

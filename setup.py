@@ -8,7 +8,7 @@ package_name = 'ball_world'
 setup(
     name=package_name,
     version='0.1.0',
-    packages=find_packages(exclude=['test']),
+    packages=find_packages(exclude=['test', 'test.*', 'benchmarks']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -24,15 +24,13 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'ball_world = ball_world.node:main',
-            'ball_world_bench = ball_world.tools.bench:main',
+            'ball_world = ball_world.ros.node:main',
             'ball_world_info = ball_world.tools.info:main',
             'ball_world_repair = ball_world.tools.repair:main',
             'ball_world_replay = ball_world.tools.replay:main',
             'ball_world_resim = ball_world.tools.resim:main',
             'ball_world_to_rrd = ball_world.tools.to_rrd:main',
-            'ball_world_sim = ball_world.headless:main',
-            'ball_world_soak = ball_world.tools.soak:main',
+            'ball_world_sim = ball_world.tools.sim:main',
         ],
     },
 )

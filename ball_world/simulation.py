@@ -9,12 +9,11 @@ from dataclasses import dataclass
 import math
 
 from ball_world import __version__
-from ball_world.cdr import (encode_float64_vector, encode_pose_array, encode_state,
-                            encode_vector3_stamped)
-from ball_world.impulses import ImpulseRejected, velocity_after
-from ball_world.records import (AppliedImpulse, RunInfo, STATS_LABEL, StepRecord,
-                                WorldSnapshot)
-from ball_world.scenario import build_world, DEFAULTS, step_duration_ns
+from ball_world.core.impulses import ImpulseRejected, velocity_after
+from ball_world.core.scenario import build_world, DEFAULTS, step_duration_ns
+from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
+                                 encode_vector3_stamped)
+from ball_world.step_record import AppliedImpulse, RunInfo, STATS_LABEL, StepRecord, WorldSnapshot
 
 DEFAULT_TOPICS = {'balls': '/balls', 'state': '/state', 'stats': '/stats',
                   'impulse': '/impulse'}

@@ -52,7 +52,7 @@ if [ ! -x "$venv/bin/python" ] || ! is_python312 "$venv/bin/python"; then
   "$python" -m venv $venv_flags "$venv"
 fi
 
-requirements=(requirements/base.txt)
+requirements=(requirements/base.txt benchmarks/requirements.txt)
 [ "$mode" = wheels ] && requirements+=(requirements/ros-wheels.txt)
 stamp="$venv/.ball_world-requirements"
 wanted=$(echo "$mode" | cat - "${requirements[@]}" | sha256sum | cut -d' ' -f1)

@@ -3,7 +3,7 @@ import threading
 
 import pytest
 
-from ball_world.background import BackgroundSink
+from ball_world.recording.writer_thread import BackgroundSink
 
 
 class Log:

@@ -3,7 +3,7 @@
 No timing is asserted (machines differ); only that every section is produced, that our
 engine has a number at every N, and that its energy change is rounding noise.
 """
-from ball_world.tools.bench import main
+from benchmarks.bench import main
 
 PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
 

@@ -14,7 +14,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from ball_world import cdr, msgdefs
+from ball_world.msgs import cdr, definitions as msgdefs
 
 SIZES = (0, 1, 7, 1000)
 FRAMES = ('map', 'world_frame', 'ab', '')

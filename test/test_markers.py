@@ -4,7 +4,7 @@ import pytest
 from rclpy.serialization import deserialize_message
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ball_world.markers import ball_colour, MarkerBuilder
+from ball_world.msgs.markers import ball_colour, MarkerBuilder
 
 BOX = np.array([[0.0, 0.0, 10.0, 0.0], [10.0, 0.0, 10.0, 10.0]])
 

@@ -12,8 +12,8 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
-from ball_world.node import BallWorld, StartupError
-from ball_world.parameters import current_values
+from ball_world.ros.node import BallWorld, StartupError
+from ball_world.ros.parameters import current_values
 
 ONE_BALL = {'random.count': 0, 'balls.x': [5.0], 'balls.y': [5.0], 'balls.vx': [0.5],
             'balls.vy': [0.0], 'balls.radius': [0.5], 'balls.mass': [0.5]}

@@ -6,9 +6,9 @@ from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
-from ball_world.broadphase import grid_pairs, wall_pairs
-from ball_world.physics import BACKENDS, Walls, World
-from ball_world.scenario import build_world
+from ball_world.core.broadphase import grid_pairs, wall_pairs
+from ball_world.core.scenario import build_world
+from ball_world.core.world import BACKENDS, Walls, World
 
 BOX = [[0.0, 0.0, 10.0, 0.0], [10.0, 0.0, 10.0, 10.0], [10.0, 10.0, 0.0, 10.0],
        [0.0, 10.0, 0.0, 0.0]]

@@ -27,10 +27,10 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.typesys import get_typestore, Stores
 import yaml
 
-from ball_world.cdr import decode_pose_array, encode_pose_array
-from ball_world.mcap_sink import McapSink
-from ball_world.msgdefs import message_definition, type_hash
-from ball_world.recording import feed_sinks, Recording, Scan
+from ball_world.msgs.cdr import decode_pose_array, encode_pose_array
+from ball_world.msgs.definitions import message_definition, type_hash
+from ball_world.recording.mcap_reader import feed_sinks, Recording, Scan
+from ball_world.recording.mcap_writer import McapSink
 from ball_world.simulation import Simulation
 from ball_world.tools import info, repair, resim
 
@@ -352,7 +352,7 @@ def test_resim_notices_an_impulse_moved_to_another_ball(recorded, tmp_path, caps
 
 WRITER = textwrap.dedent("""
     import sys
-    from ball_world.mcap_sink import McapSink
+    from ball_world.recording.mcap_writer import McapSink
     from ball_world.simulation import Simulation
     params = {'rate_hz': 20.0, 'random.count': 40, 'random.seed': 5}
     sim = Simulation(params, sinks=[McapSink(sys.argv[1], chunk_bytes=20000)])

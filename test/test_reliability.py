@@ -34,8 +34,8 @@ import rerun as rr
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import get_typestore, Stores
 
-from ball_world.mcap_sink import CHUNK_BYTES
-from ball_world.recording import Recording
+from ball_world.recording.mcap_reader import Recording
+from ball_world.recording.mcap_writer import CHUNK_BYTES
 from ball_world.simulation import Simulation
 
 BIN = Path(sys.executable).parent

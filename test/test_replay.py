@@ -19,9 +19,9 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ball_world.cdr import decode_pose_array
-from ball_world.mcap_sink import McapSink, OFFERED_QOS_PROFILES
-from ball_world.recording import Recording
+from ball_world.msgs.cdr import decode_pose_array
+from ball_world.recording.mcap_reader import Recording
+from ball_world.recording.mcap_writer import McapSink, OFFERED_QOS_PROFILES
 from ball_world.simulation import Simulation
 from ball_world.tools.replay import message_class, qos_profile
 

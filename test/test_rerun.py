@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import rerun as rr
 
-from ball_world.mcap_sink import McapSink
-from ball_world.rerun_sink import (ARENA, ARROW_SECONDS, BALLS, COLLISIONS, ENERGY, IMPULSES,
-                                   MOMENTUM, RerunSink, SIM_TIME, STEP, WALLS)
+from ball_world.recording.mcap_writer import McapSink
+from ball_world.recording.rerun_log import (ARENA, ARROW_SECONDS, BALLS, COLLISIONS, ENERGY,
+                                            IMPULSES, MOMENTUM, RerunSink, SIM_TIME, STEP, WALLS)
 from ball_world.simulation import Simulation
 from ball_world.tools import to_rrd
 

@@ -6,9 +6,9 @@ topic are decoded), and a file without summary front to back.
 import argparse
 import sys
 
-from ball_world.cdr import decode_pose_array, decode_state_layout, decode_vector3_stamped
-from ball_world.recording import Recording, RecordingError
-from ball_world.records import STATS_FIELDS
+from ball_world.msgs.cdr import decode_pose_array, decode_state_layout, decode_vector3_stamped
+from ball_world.recording.mcap_reader import Recording, RecordingError
+from ball_world.step_record import STATS_FIELDS
 
 
 def _seconds(ns):

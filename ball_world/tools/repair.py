@@ -15,7 +15,7 @@ import sys
 from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
-from ball_world.recording import RecordingError, Scan
+from ball_world.recording.mcap_reader import RecordingError, Scan
 
 _COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
                  '': CompressionType.NONE}

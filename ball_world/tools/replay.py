@@ -22,8 +22,8 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 import yaml
 
-from ball_world.cdr import encode_clock
-from ball_world.recording import Recording, RecordingError
+from ball_world.msgs.cdr import encode_clock
+from ball_world.recording.mcap_reader import Recording, RecordingError
 
 DEFAULT_DEPTH = 10
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'

@@ -15,12 +15,12 @@ from typing import Optional
 
 import numpy as np
 
-from ball_world.cdr import decode_state_layout
-from ball_world.impulses import ImpulseRejected, parse_ball
-from ball_world.recording import Recording, RecordingError
-from ball_world.records import STATS_FIELDS
-from ball_world.scenario import ScenarioError
+from ball_world.core.impulses import ImpulseRejected, parse_ball
+from ball_world.core.scenario import ScenarioError
+from ball_world.msgs.cdr import decode_state_layout
+from ball_world.recording.mcap_reader import Recording, RecordingError
 from ball_world.simulation import Simulation
+from ball_world.step_record import STATS_FIELDS
 
 _POSITION_NAMES = ('x', 'y')
 _STATE_NAMES = ('x', 'y', 'vx', 'vy')

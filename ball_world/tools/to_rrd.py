@@ -97,9 +97,9 @@ def parse_args(argv):
 def main(argv=None):
     args = parse_args(argv)
     # Imported here: rerun takes a while to import, and --help should not wait for it.
-    from ball_world.recording import feed_sinks, Recording, RecordingError
-    from ball_world.rerun_sink import RerunSink
-    from ball_world.scenario import ScenarioError
+    from ball_world.recording.mcap_reader import feed_sinks, Recording, RecordingError
+    from ball_world.recording.rerun_log import RerunSink
+    from ball_world.core.scenario import ScenarioError
 
     progress = sink = None
     try:

@@ -3,7 +3,8 @@ import argparse
 import sys
 import time
 
-from ball_world.scenario import build_world, DEFAULTS, describe, ScenarioError, step_duration_ns
+from ball_world.core.scenario import (build_world, DEFAULTS, describe, ScenarioError,
+                                      step_duration_ns)
 
 
 def main(argv=None):

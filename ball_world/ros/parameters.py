@@ -13,7 +13,7 @@ from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterVal
                               ParameterUninitializedException)
 from rclpy.parameter import Parameter
 
-from ball_world.scenario import DEFAULTS
+from ball_world.core.scenario import DEFAULTS
 
 _TYPES = {
     float: ParameterType.PARAMETER_DOUBLE,

@@ -37,7 +37,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from ball_world.records import PACKAGE_NAME
+from ball_world.step_record import PACKAGE_NAME
 
 APPLICATION_ID = PACKAGE_NAME
 

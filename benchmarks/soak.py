@@ -28,7 +28,7 @@ import warnings
 
 import numpy as np
 
-from ball_world.cdr import decode_pose_array, decode_state_layout
+from ball_world.msgs.cdr import decode_pose_array, decode_state_layout
 
 #: Simulated seconds per step in every node run here.
 DT = 0.01
@@ -141,7 +141,7 @@ def arena_side(balls):
 class Listener:
     """A node in its own context that hears the soaked node's `balls` (and `stats`).
 
-    It takes the messages as CDR bytes and decodes only what it needs with ball_world.cdr:
+    It takes the messages as CDR bytes and decodes only what it needs with ball_world.msgs.cdr:
     rclpy's conversion of a 1,000-pose PoseArray would cost this process a whole core at
     100 Hz, taken from the node it measures.
     """
@@ -322,7 +322,7 @@ def _rrd_row(findings):
 
 
 def run_kill(args, workdir):
-    from ball_world.recording import Recording, RecordingError
+    from ball_world.recording.mcap_reader import Recording, RecordingError
     from ball_world.tools import repair, resim
     rng = np.random.default_rng(args.seed)
     losses, problems, rrd_results = [], [], []
@@ -411,8 +411,8 @@ def _sender(ns, rate, seconds, balls, seed, start, results):
     from rclpy.duration import Duration
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from ball_world.cdr import encode_vector3_stamped
-    from ball_world.node import IMPULSE_QUEUE_DEPTH
+    from ball_world.msgs.cdr import encode_vector3_stamped
+    from ball_world.ros.node import IMPULSE_QUEUE_DEPTH
     context = rclpy.Context()
     rclpy.init(context=context)
     node = rclpy.create_node(f'soak_sender_{seed}', context=context)
@@ -457,7 +457,7 @@ def _sender(ns, rate, seconds, balls, seed, start, results):
 
 
 def run_flood(args, workdir):
-    from ball_world.recording import Recording
+    from ball_world.recording.mcap_reader import Recording
     ns = namespace()
     path = Path(workdir) / 'flood.mcap'
     node = NodeProcess(workdir, ns, 'flood', {**world_parameters(args), 'rate_hz': 100.0,
@@ -603,7 +603,7 @@ def run_steps(args, workdir):
 # memory ---------------------------------------------------------------------------------------
 
 def run_memory(args, workdir):
-    from ball_world.recording import Recording
+    from ball_world.recording.mcap_reader import Recording
     ns = namespace()
     mcap_path, rrd_path = Path(workdir) / 'memory.mcap', Path(workdir) / 'memory.rrd'
     recordings = {}
@@ -676,7 +676,7 @@ def _size_mb(path):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(
-        prog='ball_world_soak',
+        prog='python -m benchmarks.soak',
         description='Long reliability runs of the ball_world node. Each prints progress to '
                     'stderr and a Markdown table row (case | what happened | figure) to '
                     'stdout; exit 0 if its checks held, 1 if not, 2 if it could not run.')

@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from ball_world.broadphase import dot_rows, NeighbourLists, segment_offsets, take_rows
+from ball_world.core.broadphase import dot_rows, NeighbourLists, segment_offsets, take_rows
 
 #: Largest distance a ball may travel in one substep, as a fraction of the smallest radius.
 MAX_TRAVEL = 0.5
@@ -102,7 +102,7 @@ class World:
             raise ValueError(f'unknown backend {backend!r}; expected one of {BACKENDS}')
         if backend == 'numba':
             # Imported here: numba takes half a second to import, and most runs use numpy.
-            from ball_world import kernels
+            from ball_world.core import numba_backend as kernels
             if not kernels.available():
                 raise ValueError("backend 'numba' needs the numba package (pip install numba)")
             self._kernels = kernels

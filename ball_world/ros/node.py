@@ -22,13 +22,13 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
-from ball_world.alloc import tune_allocator
-from ball_world.background import BackgroundSink
-from ball_world.cdr import decode_vector3_stamped, encode_clock
-from ball_world.impulses import check_impulse, ImpulseRejected
-from ball_world.markers import MarkerBuilder
-from ball_world.parameters import current_values, declare_all, ParameterError, SPEC_BY_NAME
-from ball_world.scenario import build_world, describe, ScenarioError, step_duration_ns
+from ball_world.core.alloc import tune_allocator
+from ball_world.core.impulses import check_impulse, ImpulseRejected
+from ball_world.core.scenario import build_world, describe, ScenarioError, step_duration_ns
+from ball_world.msgs.cdr import decode_vector3_stamped, encode_clock
+from ball_world.msgs.markers import MarkerBuilder
+from ball_world.recording.writer_thread import BackgroundSink
+from ball_world.ros.parameters import current_values, declare_all, ParameterError, SPEC_BY_NAME
 from ball_world.simulation import Simulation
 
 #: Seconds between the node's progress lines (achieved rate, real-time factor, rejections).
@@ -58,10 +58,10 @@ def open_sinks(values):
     sinks = []
     try:
         if values['record.mcap']:
-            from ball_world.mcap_sink import McapSink
+            from ball_world.recording.mcap_writer import McapSink
             sinks.append(BackgroundSink(McapSink(values['record.mcap'])))
         if values['record.rerun']:
-            from ball_world.rerun_sink import RerunSink
+            from ball_world.recording.rerun_log import RerunSink
             sinks.append(RerunSink(values['record.rerun'], every=values['record.rerun_every']))
     except OSError as error:
         for sink in sinks:

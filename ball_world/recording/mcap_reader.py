@@ -27,13 +27,12 @@ from mcap.stream_reader import breakup_chunk
 import numpy as np
 import yaml
 
-from ball_world.cdr import (decode_pose_array, decode_state, decode_state_layout,
-                            decode_vector3_stamped)
-from ball_world.impulses import ImpulseRejected, parse_ball
-from ball_world.mcap_sink import flatten_parameters, METADATA_NAME, TOPIC_TYPES
-from ball_world.records import (AppliedImpulse, RunInfo, STATS_FIELDS, StepRecord,
-                                WorldSnapshot)
-from ball_world.scenario import build_world, DEFAULTS
+from ball_world.core.impulses import ImpulseRejected, parse_ball
+from ball_world.core.scenario import build_world, DEFAULTS
+from ball_world.msgs.cdr import (decode_pose_array, decode_state, decode_state_layout,
+                                 decode_vector3_stamped)
+from ball_world.recording.mcap_writer import flatten_parameters, METADATA_NAME, TOPIC_TYPES
+from ball_world.step_record import AppliedImpulse, RunInfo, STATS_FIELDS, StepRecord, WorldSnapshot
 
 MAGIC = b'\x89MCAP0\r\n'
 _RECORD_HEAD = struct.Struct('<BQ')

@@ -22,8 +22,8 @@ import numpy as np
 import yaml
 
 from ball_world import __version__
-from ball_world.msgdefs import message_definition, type_hash
-from ball_world.records import PACKAGE_NAME
+from ball_world.msgs.definitions import message_definition, type_hash
+from ball_world.step_record import PACKAGE_NAME
 
 #: Compression of the MCAP chunks. lz4 is the default because writing competes with stepping
 #: (the node writes on a background thread, but the Python parts share the GIL): measured per

@@ -21,10 +21,10 @@ import time
 
 import numpy as np
 
-from ball_world.alloc import MMAP_THRESHOLD_BYTES, TRIM_THRESHOLD_BYTES, tune_allocator
-from ball_world.cdr import decode_pose_array, encode_pose_array
-from ball_world.physics import numba_installed, World
-from ball_world.scenario import arena_walls
+from ball_world.core.alloc import MMAP_THRESHOLD_BYTES, TRIM_THRESHOLD_BYTES, tune_allocator
+from ball_world.core.scenario import arena_walls
+from ball_world.core.world import numba_installed, World
+from ball_world.msgs.cdr import decode_pose_array, encode_pose_array
 
 RADIUS = 0.5
 AREA_FRACTION = 0.2
@@ -263,7 +263,7 @@ def _median_ms(call, repeats):
 
 
 def bench_cdr(count, repeats):
-    """ball_world.cdr.encode_pose_array against PoseArray objects + serialize_message."""
+    """ball_world.msgs.cdr.encode_pose_array against PoseArray objects + serialize_message."""
     positions = Scene(count).positions
     stamp_ns = 1_234_567_890
     ours = encode_pose_array(positions, stamp_ns, FRAME_ID)
@@ -390,7 +390,7 @@ def bench_budget(n, seconds, seed, directory):
 
 
 def _mcap_sink(path):
-    from ball_world.mcap_sink import McapSink
+    from ball_world.recording.mcap_writer import McapSink
     return McapSink(path)
 
 
@@ -495,7 +495,7 @@ def markdown(results, args, pymunk, allocator, command):
     if cdr:
         lines += ['', f'## CDR encoding of a {cdr["count"]:,}-pose PoseArray (median)', '',
                   '| method | ms |', '|---|---:|',
-                  f'| ball_world.cdr.encode_pose_array | {cdr["ours_ms"]:.3f} |']
+                  f'| ball_world.msgs.cdr.encode_pose_array | {cdr["ours_ms"]:.3f} |']
         if 'rclpy_ms' in cdr:
             lines += [f'| PoseArray pose by pose + rclpy serialize_message | '
                       f'{cdr["rclpy_ms"]:.1f} |', '',
@@ -557,7 +557,7 @@ def plot(results, args, path):
 # Command line ------------------------------------------------------------------------------
 
 def parse_args(argv):
-    parser = argparse.ArgumentParser(prog='ball_world_bench', description=__doc__.split('\n')[0])
+    parser = argparse.ArgumentParser(prog='python -m benchmarks.bench', description=__doc__.split('\n')[0])
     parser.add_argument('--n', type=int, nargs='+', default=[100, 1000, 10000, 100000],
                         help='ball counts (default 100 1000 10000 100000)')
     parser.add_argument('--repeats', type=int, default=5, help='timed runs per engine and N')

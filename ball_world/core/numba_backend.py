@@ -278,7 +278,7 @@ def _step(x, v, radii, masses, dt, min_radius, max_travel, starts, ends, directi
 def step(world, dt, max_travel):
     """One step of `world` by the compiled kernel; returns the five StepStats counters."""
     walls = world.walls
-    from ball_world.physics import MAX_ROUNDS
+    from ball_world.core.world import MAX_ROUNDS
     counters = np.zeros(5, dtype=np.int64)
     _step(world.positions, world.velocities, world.radii, world.masses, dt, world.min_radius,
           max_travel, walls.starts, walls.ends, walls.directions, walls.lengths, MAX_ROUNDS,

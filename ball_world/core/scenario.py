@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from ball_world.physics import BACKENDS, numba_installed, World
+from ball_world.core.world import BACKENDS, numba_installed, World
 
 #: The defaults of INTERFACE.md; config/ball_world.yaml repeats them for users.
 DEFAULTS = {
