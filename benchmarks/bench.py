@@ -557,7 +557,8 @@ def plot(results, args, path):
 # Command line ------------------------------------------------------------------------------
 
 def parse_args(argv):
-    parser = argparse.ArgumentParser(prog='python -m benchmarks.bench', description=__doc__.split('\n')[0])
+    parser = argparse.ArgumentParser(prog='python -m benchmarks.bench',
+                                     description=__doc__.split('\n')[0])
     parser.add_argument('--n', type=int, nargs='+', default=[100, 1000, 10000, 100000],
                         help='ball counts (default 100 1000 10000 100000)')
     parser.add_argument('--repeats', type=int, default=5, help='timed runs per engine and N')
