@@ -1,0 +1,39 @@
+"""The largest and smallest worlds ball_world promises to step, in one place.
+
+Why limits at all: every number a user can type (a parameter, a spawn request, an impulse, a
+value in a recording) reaches the core, and a value that is merely valid can still make a
+step take hours (a radius of 1e-300 m needs 1e8 substeps), overflow (two masses of 1e308 kg
+add to infinity) or exhaust memory (10 million balls). Inside these limits every world
+steps in bounded time and memory; outside them it is refused with one line naming the value.
+The node, the scenario builder, the services and the offline tools all check against this
+module, so a recording can never hold a world the node would refuse.
+"""
+
+#: Balls in one world (explicit, random and spawned together).
+MAX_BALLS = 100_000
+#: Wall segments in one world, the arena's four included.
+MAX_WALLS = 1_000
+#: Largest |x| or |y| of a ball centre, a wall end point or an arena edge, m. At 1e6 m a
+#: float64 still resolves 1.2e-10 m.
+COORDINATE_LIMIT = 1e6
+#: Radius of a ball, m.
+MIN_RADIUS = 1e-3
+MAX_RADIUS = 1e3
+#: Largest radius over smallest radius within one world: the broadphase's cells are sized
+#: by the largest ball, so this bounds how many balls one cell can hold.
+MAX_RADIUS_RATIO = 100.0
+#: Mass of a ball, kg.
+MIN_MASS = 1e-6
+MAX_MASS = 1e6
+#: Shortest wall segment, m.
+MIN_WALL_LENGTH = 1e-6
+#: Substeps one seed-mode step may need: no ball may be fast enough to need more (initial
+#: velocities, impulses, set states; collisions cannot exceed it because the bound is taken
+#: on the energy, see core.world.World.reachable_speed).
+MAX_SUBSTEPS = 1_000
+#: Simulated seconds per step, s (dt is kept in whole nanoseconds, at least 1 ns).
+MAX_DT = 3600.0
+#: Simulation time fits builtin_interfaces/Time (int32 seconds): a run stops before it.
+MAX_SIM_TIME_NS = (2**31 - 1) * 10**9
+#: Length of a frame id or an entity name, characters.
+MAX_NAME_LENGTH = 256
