@@ -10,13 +10,31 @@ import math
 
 from ball_world import __version__
 from ball_world.core.impulses import ImpulseRejected, velocity_after
-from ball_world.core.scenario import build_world, DEFAULTS, step_duration_ns
+from ball_world.core.limits import MAX_SIM_TIME_NS
+from ball_world.core.parameters import checked
+from ball_world.core.scenario import build_world, step_duration_ns
 from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
                                  encode_vector3_stamped)
 from ball_world.step_record import AppliedImpulse, RunInfo, STATS_LABEL, StepRecord, WorldSnapshot
 
 DEFAULT_TOPICS = {'balls': '/balls', 'state': '/state', 'stats': '/stats',
                   'impulse': '/impulse'}
+
+
+@dataclass(frozen=True)
+class BuiltWorld:
+    """A world built from parameters, not yet in use: building may run on another thread."""
+
+    parameters: dict
+    world: object
+    dt_ns: int
+
+
+def build(parameters):
+    """Check the parameters and build their world (raises ScenarioError); touches nothing."""
+    parameters = checked(parameters)
+    return BuiltWorld(parameters=parameters, world=build_world(parameters),
+                      dt_ns=step_duration_ns(parameters))
 
 
 @dataclass(frozen=True)
@@ -43,25 +61,34 @@ class Simulation:
         self.log_offset_ns = 0
         self.last_log_ns = None
         self.rejected = {}
+        self.applied = 0
+        self.discarded = 0
         self._queue = deque()
         self.reset(parameters)
 
     # Life cycle ------------------------------------------------------------------------
 
-    def reset(self, parameters):
+    def reset(self, parameters, built=None):
         """Rebuild the world from parameters, back to step 0 (raises ScenarioError).
 
+        `built` is the result of build(parameters) when it was made beforehand (the node
+        builds large worlds off its executor thread). Impulses queued for the old world are
+        discarded and counted in `discarded`; the number is returned in `last_discarded`.
         Recordings go on: the new segment's log times continue after the last one, so a
         file never goes back in time.
         """
-        parameters = {**DEFAULTS, **parameters}
-        world = build_world(parameters)
-        dt_ns = step_duration_ns(parameters)
+        if built is None:
+            built = build(parameters)
+        parameters, world, dt_ns = built.parameters, built.world, built.dt_ns
         self.parameters = parameters
         self.world = world
         self.dt_ns = dt_ns
         self.frame_id = str(parameters['frame_id'])
+        self.names = [f'ball_{i}' for i in range(len(world))]
+        self.index_of = {name: i for i, name in enumerate(self.names)}
         self.step_index = 0
+        self.last_discarded = len(self._queue)
+        self.discarded += self.last_discarded
         self._queue.clear()
         self.segment += 1
         if self.last_log_ns is not None:
@@ -80,6 +107,11 @@ class Simulation:
     def stamp_ns(self):
         """Simulation time of the current step, integer nanoseconds."""
         return self.step_index * self.dt_ns
+
+    @property
+    def out_of_time(self):
+        """Whether the next step would end past the last time a ROS stamp can carry."""
+        return (self.step_index + 1) * self.dt_ns > MAX_SIM_TIME_NS
 
     def close(self):
         """Finish every sink's file."""
@@ -106,18 +138,24 @@ class Simulation:
     def _apply_queued(self, stamp_ns):
         """Apply queued impulses in order; returns (applied, rejected) lists."""
         world = self.world
-        limit = world.speed_limit(self.dt_ns * 1e-9)
         applied = []
         rejected = []
+        if not self._queue:
+            return applied, rejected
+        limit = world.speed_limit(self.dt_ns * 1e-9)
+        energy = world.kinetic_energy()
+        lightest = float(world.masses.min())
         while self._queue:
             ball, jx, jy, frame_id = self._queue.popleft()
             try:
-                vx, vy = velocity_after(world.velocities, world.masses, ball, jx, jy, limit)
+                _, _, energy = velocity_after(world.velocities, world.masses, ball, jx, jy,
+                                              limit, energy, lightest)
             except ImpulseRejected as rejection:
                 self.count_rejection(rejection.reason)
                 rejected.append(rejection)
                 continue
             world.apply_impulse(ball, jx, jy)
+            self.applied += 1
             applied.append(AppliedImpulse(
                 ball=ball, jx=jx, jy=jy, frame_id=frame_id,
                 cdr=encode_vector3_stamped(stamp_ns, frame_id, jx, jy, 0.0)))

@@ -102,9 +102,17 @@ def test_signals_shut_down_cleanly(sig, probe):
 @pytest.mark.parametrize('content, parameter', [
     ('random.radius: [0.5, 0.1]', 'random.radius'),
     ('balls.x: [1.0]\n    balls.y: [1.0, 2.0]', 'balls.y'),
-    ('arena: [0, 0, 10, 10]', 'arena'),
+    ('arena: [0.0, 0.0, 1.0e100, 10.0]', 'arena'),
     ('random.count: 100000', 'random.count'),
     ('rate_hz: -5.0', 'rate_hz'),
+    ('rate_hz: 1.0e-300', 'rate_hz'),  # with dt 0: steps of 1e300 s
+    ('walls: [1.0e-200, 1.0, 0.0, 1.0]', 'walls'),  # no length once rounded
+    ('random.radius: [1.0e-9, 1.0e-9]', 'random.radius'),  # 1e8 substeps per step
+    ('balls.x: [1.0, 3.0]\n    balls.y: [1.0, 1.0]\n    balls.vx: [1.0, 0.0]\n'
+     '    balls.vy: [0.0, 0.0]\n    balls.radius: [0.5, 0.5]\n'
+     '    balls.mass: [1.0e308, 1.0e308]', 'balls.mass'),
+    ('frame_id: ' + 'f' * 300, 'frame_id'),
+    ('dt: 3601.0', 'dt'),
 ])
 def test_bad_parameter_file_exits_non_zero_with_one_clear_line(tmp_path, content, parameter):
     params = tmp_path / 'bad.yaml'
@@ -114,6 +122,22 @@ def test_bad_parameter_file_exits_non_zero_with_one_clear_line(tmp_path, content
     lines = [line for line in err.splitlines() if line.strip()]
     assert len(lines) == 1, err
     assert parameter in lines[0] and 'Traceback' not in err
+
+
+def test_integers_for_doubles_and_an_empty_arena_are_taken_as_users_mean_them():
+    code, _, err = finish(start_node('-p', 'rate_hz:=0', '-p', 'dt:=1', '-p', 'max_steps:=2',
+                                     '-p', 'arena:=[]', '-p', 'random.count:=0',
+                                     '-p', 'walls:=[0, 0, 10, 0]', '-p', 'random_count:=5'))
+    assert code == 0, err
+    assert '0 balls' in err and '1 walls' in err and 'dt 1 s' in err
+    assert "ignoring unknown parameter 'random_count'; did you mean 'random.count'?" in err
+
+
+def test_help_prints_usage_and_starts_nothing():
+    result = subprocess.run([EXECUTABLE, '--help'], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0
+    assert result.stdout.startswith('usage: ball_world')
+    assert 'random.count (integer, default 20; 0 to 100000)' in result.stdout
 
 
 def test_installed_defaults_file_starts_the_node():

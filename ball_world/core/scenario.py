@@ -1,107 +1,77 @@
 """Parameters to a World: the arena, extra walls, explicit balls and random balls.
 
 Every way a set of parameters can fail to make a valid world raises ScenarioError naming
-the parameter, so the node can stop with one clear line instead of a traceback. Random
-balls come from numpy's PCG64 generator seeded with `random.seed`, so the same parameters
-give the same world on any machine with the same numpy.
+the parameter, so the node can stop with one clear line instead of a traceback. Values are
+first checked one by one against the parameter table (core.parameters), then as a world:
+balls inside the arena and clear of walls and of each other, radii and masses within the
+limits (core.limits), and no ball able to go faster than the world can step.
+
+Building is O(N) in time and memory: overlaps are found with the broadphase grid, never
+with an N x N matrix, so the largest world (limits.MAX_BALLS) builds in about a second.
+
+Random balls come from numpy's PCG64 generator seeded with `random.seed`, so the same
+parameters give the same world on any machine with the same numpy. The random numbers are
+drawn in blocks, but consumed in the same order and transformed with the same arithmetic as
+one `rng.uniform(low, high)` call each, so worlds are identical to those of earlier versions.
 """
 import math
 
 import numpy as np
 
-from ball_world.core.world import BACKENDS, numba_installed, World
+from ball_world.core import limits
+from ball_world.core.broadphase import grid_pairs, wall_pairs
+from ball_world.core.parameters import (BALL_FIELDS, checked, DEFAULTS, list_text,
+                                        number_text, ParameterError)
+from ball_world.core.world import BACKENDS, numba_installed, Walls, World
 
-#: The defaults of INTERFACE.md; config/ball_world.yaml repeats them for users.
-DEFAULTS = {
-    'rate_hz': 60.0,
-    'dt': 0.0,
-    'max_steps': 0,
-    'frame_id': 'world',
-    'arena': [0.0, 0.0, 10.0, 10.0],
-    'walls': [],
-    'balls.x': [],
-    'balls.y': [],
-    'balls.vx': [],
-    'balls.vy': [],
-    'balls.radius': [],
-    'balls.mass': [],
-    'random.count': 20,
-    'random.seed': 0,
-    'random.radius': [0.1, 0.3],
-    'random.speed': 2.0,
-    'random.density': 1.0,
-    'publish_clock': False,
-    'record.mcap': '',
-    'record.rerun': '',
-    'physics.backend': 'numpy',
-}
+#: ScenarioError is the parameter table's error: a world is refused by naming a parameter.
+ScenarioError = ParameterError
 
-BALL_FIELDS = ('balls.x', 'balls.y', 'balls.vx', 'balls.vy', 'balls.radius', 'balls.mass')
+__all__ = ['BALL_FIELDS', 'build_world', 'DEFAULTS', 'describe', 'ScenarioError',
+           'step_duration_ns']
 
 #: Placement tries per random ball before giving up on fitting them all.
 PLACEMENT_TRIES = 2000
-
-
-class ScenarioError(ValueError):
-    """A parameter value that cannot make a valid world; `parameter` names it."""
-
-    def __init__(self, parameter, reason):
-        super().__init__(f"parameter '{parameter}': {reason}")
-        self.parameter = parameter
-        self.reason = reason
-
-
-def _floats(params, name):
-    values = params.get(name, DEFAULTS.get(name))
-    try:
-        array = np.array(list(values), dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ScenarioError(name, f'expected a list of numbers, got {values!r}') from None
-    bad = np.flatnonzero(~np.isfinite(array))
-    if len(bad):
-        raise ScenarioError(name, f'entry {bad[0]} is not finite ({array[bad[0]]})')
-    return array
-
-
-def _number(params, name, minimum=None, strictly_above=None):
-    value = params.get(name, DEFAULTS.get(name))
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ScenarioError(name, f'expected a number, got {value!r}')
-    if not math.isfinite(value):
-        raise ScenarioError(name, f'must be finite, got {value}')
-    if minimum is not None and value < minimum:
-        raise ScenarioError(name, f'must be >= {minimum}, got {value}')
-    if strictly_above is not None and value <= strictly_above:
-        raise ScenarioError(name, f'must be > {strictly_above}, got {value}')
-    return value
+#: Tries for all random balls together, per ball: a nearly full arena fails in bounded time.
+PLACEMENT_TRIES_PER_BALL = 100
+#: Random balls are refused at once when their expected area would exceed this fraction of
+#: the arena: random sequential placement jams near 0.547, so the tries would only fail.
+MAX_RANDOM_AREA_FRACTION = 0.5
+#: Random numbers drawn per block while placing balls.
+_DRAW_BLOCK = 8192
 
 
 def step_duration_ns(params):
-    """Simulated nanoseconds per step from `dt` (or 1 / `rate_hz` when dt is 0)."""
-    rate = _number(params, 'rate_hz', minimum=0.0)
-    dt = _number(params, 'dt', minimum=0.0)
+    """Simulated nanoseconds per step from `dt` (or 1 / `rate_hz` when dt is 0).
+
+    dt is kept in whole nanoseconds, rounded to the nearest and at least 1 ns, so every value
+    in dt's range runs; step k ends at exactly k * dt_ns.
+    """
+    params = checked(params)
+    rate = params['rate_hz']
+    dt = params['dt']
     if dt == 0.0:
         if rate == 0.0:
             raise ScenarioError('dt', 'dt is 0 (meaning 1 / rate_hz) but rate_hz is 0 too; '
                                 'set dt > 0 to run as fast as possible')
         dt = 1.0 / rate
-    dt_ns = round(dt * 1e9)
-    if dt_ns < 1:
-        raise ScenarioError('dt', f'must be at least 1 ns, got {dt}')
-    return dt_ns
+        if dt > limits.MAX_DT:
+            raise ScenarioError('rate_hz', f'{number_text(rate)} Hz with dt 0 means steps of '
+                                           f'{dt:.3g} s, longer than the {limits.MAX_DT:g} s '
+                                           'a step may last; set dt or raise rate_hz')
+    return max(1, round(dt * 1e9))
 
 
 def arena_walls(params):
     """The four walls of the `arena` box (bottom, right, top, left), or none."""
-    arena = _floats(params, 'arena')
-    if len(arena) == 0:
+    return _arena_walls(checked(params))
+
+
+def _arena_walls(params):
+    arena = params['arena']
+    if not arena:
         return np.empty((0, 4)), None
-    if len(arena) != 4:
-        raise ScenarioError('arena', f'expected [xmin, ymin, xmax, ymax] or [], got {len(arena)} '
-                                     'numbers')
-    xmin, ymin, xmax, ymax = arena
-    if not (xmin < xmax and ymin < ymax):
-        raise ScenarioError('arena', f'needs xmin < xmax and ymin < ymax, got {list(arena)}')
+    xmin, ymin, xmax, ymax = arena  # ordered: the parameter table checks it
     walls = np.array([
         [xmin, ymin, xmax, ymin],
         [xmax, ymin, xmax, ymax],
@@ -111,67 +81,72 @@ def arena_walls(params):
     return walls, arena
 
 
-def extra_walls(params):
-    """The `walls` parameter as (M, 4) segments of non-zero length."""
-    flat = _floats(params, 'walls')
-    if len(flat) % 4:
-        raise ScenarioError('walls', f'expected x1, y1, x2, y2 per wall: {len(flat)} numbers is '
-                                     'not a multiple of 4')
-    walls = flat.reshape(-1, 4)
-    for k, (x1, y1, x2, y2) in enumerate(walls):
-        if x1 == x2 and y1 == y2:
-            raise ScenarioError('walls', f'wall {k} has zero length')
+def _extra_walls(params):
+    """The `walls` parameter as (M, 4) segments, each at least MIN_WALL_LENGTH long."""
+    walls = np.array(params['walls'], dtype=np.float64).reshape(-1, 4)
+    lengths = np.hypot(walls[:, 2] - walls[:, 0], walls[:, 3] - walls[:, 1])
+    short = np.flatnonzero(~(lengths >= limits.MIN_WALL_LENGTH))
+    if len(short):
+        k = int(short[0])
+        raise ScenarioError('walls', f'wall {k} {list_text(walls[k])} is '
+                                     f'{number_text(lengths[k])} m long; walls must be at least '
+                                     f'{number_text(limits.MIN_WALL_LENGTH)} m')
     return walls
 
 
-def _distance_to_segments(point, walls):
-    start = walls[:, 0:2]
-    edge = walls[:, 2:4] - start
-    t = np.clip(((point - start) * edge).sum(axis=1) / (edge * edge).sum(axis=1), 0.0, 1.0)
-    nearest = start + t[:, None] * edge
-    return np.sqrt(((point - nearest) ** 2).sum(axis=1))
+def _first_wall_overlap(positions, radii, walls):
+    """(ball, wall) of the first ball closer to a wall than its radius, or None."""
+    if len(positions) == 0 or len(walls) == 0:
+        return None
+    balls, indices = wall_pairs(positions, radii, Walls(walls), 0.0)
+    if len(balls) == 0:
+        return None
+    first = int(np.argmin(balls))
+    return int(balls[first]), int(indices[first])
 
 
-def explicit_balls(params, arena, walls):
-    """The `balls.*` parameters, checked: equal lengths, positive, inside, not overlapping."""
-    columns = {name: _floats(params, name) for name in BALL_FIELDS}
+def _first_ball_overlap(positions, radii):
+    """(i, j) of the first pair of overlapping balls (i < j, lowest i then j), or None."""
+    a, b, _ = grid_pairs(positions, radii, 0.0)
+    if len(a) == 0:
+        return None
+    first = int(np.lexsort((b, a))[0])
+    return int(a[first]), int(b[first])
+
+
+def _explicit_balls(params, arena, walls):
+    """The `balls.*` parameters, checked: equal lengths, inside, not overlapping."""
+    columns = {name: np.array(params[name], dtype=np.float64) for name in BALL_FIELDS}
     n = len(columns['balls.x'])
     for name in BALL_FIELDS:
         if len(columns[name]) != n:
             raise ScenarioError(name, f'has {len(columns[name])} entries but balls.x has {n}; '
-                                      'all six balls.* lists need one entry per ball')
-    radius = columns['balls.radius']
-    mass = columns['balls.mass']
-    for name, values in (('balls.radius', radius), ('balls.mass', mass)):
-        bad = np.flatnonzero(values <= 0.0)
-        if len(bad):
-            raise ScenarioError(name, f'ball {bad[0]} has {values[bad[0]]}; must be > 0')
+                                      'all six balls.* lists need one entry per ball (set them '
+                                      'one by one: the world is checked at ~/reset)')
     x = columns['balls.x']
     y = columns['balls.y']
-    for i in range(n):
-        if arena is not None:
-            xmin, ymin, xmax, ymax = arena
-            if not (xmin + radius[i] <= x[i] <= xmax - radius[i]
-                    and ymin + radius[i] <= y[i] <= ymax - radius[i]):
-                raise ScenarioError('balls.x', f'ball {i} at ({x[i]}, {y[i]}) with radius '
-                                               f'{radius[i]} is not inside the arena '
-                                               f'{list(arena)}')
-        if len(walls):
-            distance = _distance_to_segments(np.array([x[i], y[i]]), walls)
-            k = int(np.argmin(distance))
-            if distance[k] < radius[i]:
-                raise ScenarioError('walls', f'wall {k} overlaps ball {i} at ({x[i]}, {y[i]})')
-    if n > 1:
-        delta = np.stack((x, y), axis=1)
-        d2 = ((delta[:, None, :] - delta[None, :, :]) ** 2).sum(axis=2)
-        reach = radius[:, None] + radius[None, :]
-        overlap = np.argwhere(np.triu(d2 < reach * reach, k=1))
-        if len(overlap):
-            i, j = overlap[0]
-            raise ScenarioError('balls.x', f'ball {i} overlaps ball {j}')
+    radius = columns['balls.radius']
+    if arena is not None and n:
+        xmin, ymin, xmax, ymax = arena
+        outside = np.flatnonzero(~((xmin + radius <= x) & (x <= xmax - radius)
+                                   & (ymin + radius <= y) & (y <= ymax - radius)))
+        if len(outside):
+            i = int(outside[0])
+            raise ScenarioError('balls.x', f'ball {i} at ({number_text(x[i])}, '
+                                           f'{number_text(y[i])}) with radius '
+                                           f'{number_text(radius[i])} is not inside the arena '
+                                           f'{list_text(arena)}')
     positions = np.stack((x, y), axis=1)
+    overlap = _first_wall_overlap(positions, radius, walls)
+    if overlap is not None:
+        i, k = overlap
+        raise ScenarioError('walls', f'wall {k} overlaps ball {i} at ({number_text(x[i])}, '
+                                     f'{number_text(y[i])})')
+    overlap = _first_ball_overlap(positions, radius)
+    if overlap is not None:
+        raise ScenarioError('balls.x', f'ball {overlap[0]} overlaps ball {overlap[1]}')
     velocities = np.stack((columns['balls.vx'], columns['balls.vy']), axis=1)
-    return positions, velocities, radius, mass
+    return positions, velocities, radius, columns['balls.mass']
 
 
 class _Occupancy:
@@ -198,45 +173,89 @@ class _Occupancy:
         return False
 
 
-def random_balls(params, arena, walls, placed):
+class _Uniform:
+    """rng.uniform(low, high) one number at a time, drawn from the generator in blocks.
+
+    numpy computes uniform(low, high) as low + (high - low) * u with u the next double of
+    the generator; doing the same with u taken from rng.random(block) gives the same
+    numbers, without a numpy call per number.
+    """
+
+    def __init__(self, rng):
+        self._rng = rng
+        self._block = []
+        self._next = 0
+
+    def __call__(self, low, high):
+        if self._next == len(self._block):
+            self._block = self._rng.random(_DRAW_BLOCK).tolist()
+            self._next = 0
+        u = self._block[self._next]
+        self._next += 1
+        return low + (high - low) * u
+
+
+def _clear_of_walls(x, y, r, walls):
+    """Whether a ball at (x, y) of radius r keeps at least r from every wall segment."""
+    start = walls[:, 0:2]
+    edge = walls[:, 2:4] - start
+    t = np.clip(((x - start[:, 0]) * edge[:, 0] + (y - start[:, 1]) * edge[:, 1])
+                / (edge[:, 0] ** 2 + edge[:, 1] ** 2), 0.0, 1.0)
+    dx = x - (start[:, 0] + t * edge[:, 0])
+    dy = y - (start[:, 1] + t * edge[:, 1])
+    return bool(np.all(dx * dx + dy * dy >= r * r))
+
+
+def _random_balls(params, arena, walls, placed):
     """`random.count` balls placed uniformly in the arena, overlapping nothing."""
-    count = params.get('random.count', DEFAULTS['random.count'])
-    if isinstance(count, bool) or not isinstance(count, int) or count < 0:
-        raise ScenarioError('random.count', f'must be a whole number >= 0, got {count!r}')
-    seed = params.get('random.seed', DEFAULTS['random.seed'])
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ScenarioError('random.seed', f'must be a whole number >= 0, got {seed!r}')
-    radius_range = _floats(params, 'random.radius')
-    if len(radius_range) != 2 or not (0.0 < radius_range[0] <= radius_range[1]):
-        raise ScenarioError('random.radius', f'expected [min, max] with 0 < min <= max, got '
-                                             f'{list(radius_range)}')
-    speed = _number(params, 'random.speed', minimum=0.0)
-    density = _number(params, 'random.density', strictly_above=0.0)
+    count = params['random.count']
+    rmin, rmax = params['random.radius']
+    speed = params['random.speed']
+    density = params['random.density']
     empty = (np.empty((0, 2)), np.empty((0, 2)), np.empty(0), np.empty(0))
     if count == 0:
         return empty
     if arena is None:
         raise ScenarioError('random.count', f'{count} random balls need an arena to be placed '
                                             'in; set arena or random.count: 0')
+    for r in (rmin, rmax):
+        mass = density * math.pi * r * r
+        if not limits.MIN_MASS <= mass <= limits.MAX_MASS:
+            raise ScenarioError('random.density', f'gives a ball of radius {number_text(r)} m '
+                                                  f'a mass of {mass:.3g} kg, outside '
+                                                  f'{number_text(limits.MIN_MASS)} to '
+                                                  f'{number_text(limits.MAX_MASS)} kg')
     xmin, ymin, xmax, ymax = arena
-    rmin, rmax = radius_range
     if 2 * rmin > min(xmax - xmin, ymax - ymin):
-        raise ScenarioError('random.radius', f'balls of radius {rmin} do not fit in the arena')
-    positions, velocities, radii, masses = placed
+        raise ScenarioError('random.radius', f'balls of radius {number_text(rmin)} do not fit '
+                                             'in the arena')
+    mean_area = math.pi * (rmax ** 3 - rmin ** 3) / (3 * (rmax - rmin)) if rmax > rmin \
+        else math.pi * rmin * rmin
+    fraction = count * mean_area / ((xmax - xmin) * (ymax - ymin))
+    if fraction > MAX_RANDOM_AREA_FRACTION:
+        raise ScenarioError('random.count', f'{count:,} random balls would cover about '
+                                            f'{fraction:.0%} of the arena; random placement '
+                                            f'cannot fit more than '
+                                            f'{MAX_RANDOM_AREA_FRACTION:.0%}: lower '
+                                            'random.count or random.radius, or enlarge the '
+                                            'arena')
+    positions, _, radii, _ = placed
     occupancy = _Occupancy(2.0 * max(rmax, float(radii.max()) if len(radii) else rmax))
-    for (x, y), r in zip(positions, radii):
-        occupancy.add(float(x), float(y), float(r))
+    for (x, y), r in zip(positions.tolist(), radii.tolist()):
+        occupancy.add(x, y, r)
 
-    rng = np.random.default_rng(seed)
+    uniform = _Uniform(np.random.default_rng(params['random.seed']))
+    budget = PLACEMENT_TRIES_PER_BALL * count + PLACEMENT_TRIES
     out = np.empty((count, 6))
     for i in range(count):
-        r = float(rng.uniform(rmin, rmax))
-        for _ in range(PLACEMENT_TRIES):
-            x = float(rng.uniform(xmin + r, max(xmin + r, xmax - r)))
-            y = float(rng.uniform(ymin + r, max(ymin + r, ymax - r)))
+        r = uniform(rmin, rmax)
+        for _ in range(min(PLACEMENT_TRIES, budget)):
+            budget -= 1
+            x = uniform(xmin + r, max(xmin + r, xmax - r))
+            y = uniform(ymin + r, max(ymin + r, ymax - r))
             if occupancy.overlaps(x, y, r):
                 continue
-            if len(walls) and _distance_to_segments(np.array([x, y]), walls).min() < r:
+            if len(walls) and not _clear_of_walls(x, y, r, walls):
                 continue
             break
         else:
@@ -244,34 +263,93 @@ def random_balls(params, arena, walls, placed):
                                                 'without overlap; lower random.count or '
                                                 'random.radius, or enlarge the arena')
         occupancy.add(x, y, r)
-        heading = float(rng.uniform(0.0, 2.0 * math.pi))
-        magnitude = float(rng.uniform(0.0, speed))
+        heading = uniform(0.0, 2.0 * math.pi)
+        magnitude = uniform(0.0, speed)
         out[i] = (x, y, magnitude * math.cos(heading), magnitude * math.sin(heading), r,
                   density * math.pi * r * r)
     return out[:, 0:2], out[:, 2:4], out[:, 4], out[:, 5]
 
 
+def _check_world_limits(params, box, walls, explicit_count, radii):
+    """Counts and radius spread of the whole world against core.limits."""
+    total = explicit_count + params['random.count']
+    if total > limits.MAX_BALLS:
+        name = 'random.count' if params['random.count'] else 'balls.x'
+        raise ScenarioError(name, f'{explicit_count:,} explicit and '
+                                  f'{params["random.count"]:,} random balls make '
+                                  f'{total:,}; a world holds at most {limits.MAX_BALLS:,}')
+    if len(box) + len(walls) > limits.MAX_WALLS:
+        raise ScenarioError('walls', f'{len(walls)} walls and the arena make '
+                                     f'{len(box) + len(walls)}; a world holds at most '
+                                     f'{limits.MAX_WALLS}')
+    if len(radii) and radii.max() > limits.MAX_RADIUS_RATIO * radii.min():
+        name = 'random.radius' if params['random.count'] else 'balls.radius'
+        raise ScenarioError(name, f'radii from {number_text(radii.min())} to '
+                                  f'{number_text(radii.max())} m differ by more than '
+                                  f'{limits.MAX_RADIUS_RATIO:g} times, the most one world '
+                                  'can hold')
+
+
+def _reachable_speed(world):
+    """The fastest any ball can ever go by collisions alone: all the energy in the lightest.
+
+    Energy is conserved and only shared out, so no sequence of collisions can exceed it.
+    """
+    if len(world) == 0:
+        return 0.0
+    return math.sqrt(2.0 * world.kinetic_energy() / float(world.masses.min()))
+
+
+def _check_speeds(world, params, dt_ns):
+    """No ball may ever be faster than the world can step (limits.MAX_SUBSTEPS)."""
+    limit = world.speed_limit(dt_ns * 1e-9)
+    reachable = _reachable_speed(world)
+    if reachable <= limit:
+        return
+    name = 'balls.vx' if len(params['balls.x']) else 'random.speed'
+    raise ScenarioError(name, f'the balls carry enough energy for one of them to reach '
+                              f'{reachable:.3g} m/s, faster than the {limit:.3g} m/s this '
+                              f'world can step ({limits.MAX_SUBSTEPS:,} substeps of half the '
+                              'smallest radius per step); lower the speeds or dt, or raise '
+                              'the smallest radius or mass')
+
+
 def build_world(params):
     """Build the World the parameters describe, or raise ScenarioError naming the culprit."""
-    box, arena = arena_walls(params)
-    walls = extra_walls(params)
-    explicit = explicit_balls(params, arena, walls)
-    extra = random_balls(params, arena, walls, explicit)
+    params = checked(params)
+    dt_ns = step_duration_ns(params)
+    box, arena = _arena_walls(params)
+    walls = _extra_walls(params)
+    explicit_count = len(params['balls.x'])
+    rmin, rmax = params['random.radius']
+    radii_bound = np.array(params['balls.radius']
+                           + ([rmin, rmax] if params['random.count'] else []))
+    _check_world_limits(params, box, walls, explicit_count, radii_bound)
+    explicit = _explicit_balls(params, arena, walls)
+    extra = _random_balls(params, arena, walls, explicit)
     positions, velocities, radii, masses = (
         np.concatenate((a, b)) for a, b in zip(explicit, extra))
-    return World(positions, velocities, radii, masses, walls=np.concatenate((box, walls)),
-                 backend=physics_backend(params))
+    world = World(positions, velocities, radii, masses, walls=np.concatenate((box, walls)),
+                  backend=_physics_backend(params))
+    _check_speeds(world, params, dt_ns)
+    return world
 
 
 def physics_backend(params):
     """The `physics.backend` parameter, checked: 'numpy', or 'numba' where it is installed."""
-    backend = params.get('physics.backend', DEFAULTS['physics.backend'])
+    return _physics_backend(checked(params))
+
+
+def _physics_backend(params):
+    backend = params['physics.backend']
+    if backend == 'auto':
+        return 'numba' if numba_installed() else 'numpy'
     if backend not in BACKENDS:
         raise ScenarioError('physics.backend', f'expected one of {", ".join(BACKENDS)}, got '
                                                f'{backend!r}')
     if backend == 'numba' and not numba_installed():
         raise ScenarioError('physics.backend', "'numba' needs the numba package (pip install "
-                                               'numba); use numpy')
+                                               "numba); use 'numpy' or 'auto'")
     return backend
 
 
@@ -283,4 +361,4 @@ def describe(world, dt_ns):
     else:
         radii = ''
     return (f'{n} balls ({radii}kinetic energy {world.kinetic_energy():.6g} J), '
-            f'{len(world.walls)} walls, dt {dt_ns / 1e9:.6g} s')
+            f'{len(world.walls)} walls, dt {dt_ns / 1e9:.6g} s, {world.backend} backend')

@@ -1,12 +1,14 @@
 """The ball_world node: a thin ROS 2 shell around a Simulation.
 
 It owns no physics and no file format. It declares the parameters, steps the Simulation
-on a steady-clock timer, publishes each step's ready-made CDR bytes, turns impulse
+on a steady-clock schedule, publishes each step's ready-made CDR bytes, turns impulse
 messages into queued impulses (or counted rejections), serves ~/reset, ~/pause and
 ~/step, and hands every step to the recording sinks.
 """
+import difflib
 import signal
 import sys
+import threading
 import time
 
 from geometry_msgs.msg import PoseArray, Vector3Stamped
@@ -17,21 +19,23 @@ from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
+from ball_world.core import parameters as table
 from ball_world.core.alloc import tune_allocator
 from ball_world.core.impulses import check_impulse, ImpulseRejected
-from ball_world.core.scenario import build_world, describe, ScenarioError, step_duration_ns
+from ball_world.core.scenario import describe, ScenarioError, step_duration_ns
 from ball_world.msgs.cdr import decode_vector3_stamped, encode_clock
 from ball_world.msgs.markers import MarkerBuilder
 from ball_world.recording.writer_thread import BackgroundSink
-from ball_world.ros.parameters import current_values, declare_all, ParameterError, SPEC_BY_NAME
-from ball_world.simulation import Simulation
+from ball_world.ros.parameters import converted, current_values, declare_all, ParameterError
+from ball_world.simulation import build, Simulation
 
-#: Seconds between the node's progress lines (achieved rate, real-time factor, rejections).
+#: Seconds between the node's progress lines (achieved rate, real-time factor, impulses).
 REPORT_PERIOD = 10.0
 #: Seconds between flushes of the recordings: what a SIGKILL can lose at most.
 FLUSH_PERIOD = 1.0
@@ -39,6 +43,9 @@ FLUSH_PERIOD = 1.0
 MARKERS_SHARE = 0.05
 #: Impulses buffered by the subscription before DDS would have to drop any.
 IMPULSE_QUEUE_DEPTH = 100_000
+#: Longest wait of the stepping timer, s: slower rates are kept by a due time, so any rate
+#: down to 1e-300 Hz is a valid timer (rcl timers hold at most 2^63 ns).
+MAX_TIMER_PERIOD = 0.1
 
 STEP_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
@@ -47,6 +54,18 @@ MARKER_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 IMPULSE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=IMPULSE_QUEUE_DEPTH,
                          reliability=ReliabilityPolicy.RELIABLE)
+
+#: The node's own topics and services (relative names, resolved in the start-up line).
+TOPICS_OUT = ('balls', 'state', 'stats', 'markers')
+TOPICS_IN = ('impulse',)
+SERVICES = ('~/reset', '~/pause', '~/step')
+
+USAGE = """usage: ball_world [--ros-args -p NAME:=VALUE ... --params-file FILE -r __ns:=/NS]
+
+An exact 2D elastic-collision world as a ROS 2 node. Publishes balls (PoseArray), state,
+stats and markers; takes impulses (Vector3Stamped, header.frame_id = ball name) on impulse;
+services ~/reset, ~/pause, ~/step. Parameters (ros2 param describe shows each in full):
+"""
 
 
 class StartupError(Exception):
@@ -77,9 +96,15 @@ class BallWorld(Node):
     def __init__(self, **kwargs):
         super().__init__('ball_world', **kwargs)
         try:
-            declare_all(self)
+            # rclpy keeps the command line's and files' values here; they are converted and
+            # checked against the parameter table before anything is declared.
+            unknown = declare_all(self, self._parameter_overrides)
         except ParameterError as error:
             raise StartupError(str(error)) from None
+        for name in unknown:
+            close = difflib.get_close_matches(name, table.BY_NAME, n=1)
+            self.get_logger().warning(f"ignoring unknown parameter '{name}'" + (
+                f"; did you mean '{close[0]}'?" if close else ''))
         values = current_values(self)
         failures = []
         topics = {name: self.resolve_topic_name(name)
@@ -111,17 +136,19 @@ class BallWorld(Node):
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.create_service(SetBool, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/step', self._on_step)
+        self.add_pre_set_parameters_callback(converted)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
-        self.paused = False
+        self.paused = values['start_paused']
         self.finished = False
         self.steps_done = 0
+        self._resetting = False
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._markers = MarkerBuilder()
         self._markers_next = 0.0
         self._rebuild_markers()
-        self._timer = self.create_timer(self._period(values['rate_hz']), self._on_timer,
-                                        clock=self._steady)
+        self._timer = None
+        self._schedule(values['rate_hz'])
         self._markers_timer = None
         self._set_markers_rate(values['markers.rate_hz'])
         self.create_timer(FLUSH_PERIOD, self.simulation.flush, clock=self._steady)
@@ -129,19 +156,52 @@ class BallWorld(Node):
         self._window = (time.monotonic(), 0)
         self._start_wall = time.monotonic()
         self._publish(self.simulation.last_record)
-        self.get_logger().info(
-            f'world: {describe(self.simulation.world, self.simulation.dt_ns)}, rate '
-            f"{values['rate_hz']:g} Hz; publishing {topics['balls']}, {topics['state']}, "
-            f"{topics['stats']}")
+        self.get_logger().info(self._startup_line(values))
+
+    def _startup_line(self, values):
+        """One line: the world, the rate, and every name the node speaks on."""
+        simulation = self.simulation
+        published = [self.resolve_topic_name(name) for name in TOPICS_OUT]
+        if values['publish_clock']:
+            published.append('/clock')
+        services = [self.resolve_service_name(name) for name in SERVICES]
+        return (f'world: {describe(simulation.world, simulation.dt_ns)}; rate '
+                f"{values['rate_hz']:g} Hz{' (paused at step 0)' if self.paused else ''}; "
+                f"publishing {', '.join(published)}; subscribed to "
+                f"{', '.join(self.resolve_topic_name(name) for name in TOPICS_IN)}; services "
+                f"{', '.join(services)}")
 
     # Stepping ---------------------------------------------------------------------------
 
-    @staticmethod
-    def _period(rate_hz):
-        return 0.0 if rate_hz == 0.0 else 1.0 / rate_hz
+    def _schedule(self, rate_hz):
+        """Step every 1 / rate_hz s of wall time (0: as fast as possible).
+
+        Periods up to MAX_TIMER_PERIOD are the timer's own; longer ones are kept by a due
+        time checked at that period, so a rate of 1e-300 Hz waits rather than crashing.
+        Ticks missed while the machine was busy are skipped, never bunched into a burst.
+        """
+        period = 0.0 if rate_hz == 0.0 else 1.0 / rate_hz
+        self._step_period = period
+        self._next_due = time.monotonic() + period
+        tick_ns = int(min(period, MAX_TIMER_PERIOD) * 1e9)
+        if self._timer is None:
+            self._timer = self.create_timer(tick_ns * 1e-9, self._on_timer, clock=self._steady)
+        else:
+            self._timer.timer_period_ns = tick_ns
+
+    def _due(self):
+        if self._step_period <= MAX_TIMER_PERIOD:
+            return True
+        now = time.monotonic()
+        if now < self._next_due:
+            return False
+        self._next_due += self._step_period
+        if self._next_due < now:
+            self._next_due = now + self._step_period
+        return True
 
     def _on_timer(self):
-        if not self.paused and not self.finished:
+        if not self.paused and not self.finished and self._due():
             self._drain_impulses()
             self.step_once()
 
@@ -162,8 +222,14 @@ class BallWorld(Node):
                 self._on_impulse(taken[0])
 
     def step_once(self):
-        """Advance one step, publish it, stop at max_steps."""
+        """Advance one step, publish it, stop at max_steps or at the end of ROS time."""
         simulation = self.simulation
+        if simulation.out_of_time:
+            self.get_logger().info(
+                f'simulation time {simulation.stamp_ns / 1e9:.6g} s: one more step would pass '
+                'the last time a ROS stamp can carry (2^31 s); stopping')
+            self.finished = True
+            return simulation.last_record
         elapsed = time.monotonic() - self._start_wall
         simulated = (simulation.step_index + 1) * simulation.dt_ns * 1e-9
         rtf = simulated / elapsed if elapsed > 0 else None
@@ -226,7 +292,7 @@ class BallWorld(Node):
             except ValueError as error:
                 raise ImpulseRejected('malformed_message', f'undecodable impulse: {error}')
             ball, jx, jy = check_impulse(
-                frame_id, x, y, z, len(simulation.world), stamp_ns, simulation.stamp_ns,
+                frame_id, x, y, z, simulation.index_of, stamp_ns, simulation.stamp_ns,
                 time.time_ns())
         except ImpulseRejected as rejection:
             simulation.count_rejection(rejection.reason)
@@ -242,14 +308,34 @@ class BallWorld(Node):
 
     # Services ---------------------------------------------------------------------------
 
-    def _on_reset(self, request, response):
-        values = current_values(self)
+    async def _on_reset(self, request, response):
+        """Rebuild the world from the current parameters, back to step 0.
+
+        The world is built on a worker thread (the largest takes about a second), so the
+        node keeps stepping the old world and answering until the new one is ready; it is
+        swapped in between two steps. Impulses queued for the old world are discarded and
+        counted.
+        """
+        if self._resetting:
+            response.success = False
+            response.message = 'a reset is already in progress'
+            return response
+        self._resetting = True
         try:
-            record = self.simulation.reset(values)
+            built = await self._build_in_background(current_values(self))
         except ScenarioError as error:
             response.success = False
             response.message = f'reset refused, world unchanged: {error}'
             return response
+        except Exception as error:  # noqa: B902 - a fault of the build must not kill the node
+            response.success = False
+            response.message = f'reset failed, world unchanged: {error!r}'
+            self.get_logger().error(response.message)
+            return response
+        finally:
+            self._resetting = False
+        record = self.simulation.reset(None, built=built)
+        discarded = self.simulation.last_discarded
         self._start_wall = time.monotonic()
         self._rebuild_markers()
         self._publish(record)
@@ -258,17 +344,33 @@ class BallWorld(Node):
             self._publish_markers()
         response.success = True
         response.message = (f'reset to step 0: '
-                            f'{describe(self.simulation.world, self.simulation.dt_ns)}')
+                            f'{describe(self.simulation.world, self.simulation.dt_ns)}; '
+                            f"discarded {discarded} queued impulse{'' if discarded == 1 else 's'}")
         self.get_logger().info(response.message)
         return response
+
+    @staticmethod
+    def _build_in_background(values):
+        """An rclpy Future of build(values), computed on a worker thread."""
+        future = Future()
+
+        def work():
+            try:
+                future.set_result(build(values))
+            except Exception as error:  # noqa: B902 - every outcome must reach the service
+                future.set_exception(error)
+
+        threading.Thread(target=work, name='ball_world-reset', daemon=True).start()
+        return future
 
     def _on_pause(self, request, response):
         was = self.paused
         self.paused = bool(request.data)
         if not self.paused and was:
-            # Resume the real-time factor from now, not from before the pause.
+            # Resume the real-time factor and the schedule from now, not from before.
             simulated = self.simulation.step_index * self.simulation.dt_ns * 1e-9
             self._start_wall = time.monotonic() - simulated
+            self._next_due = time.monotonic()
         state = 'paused' if self.paused else 'running'
         response.success = True
         response.message = (f'already {state}' if was == self.paused else state) + \
@@ -282,7 +384,7 @@ class BallWorld(Node):
             return response
         if self.finished:
             response.success = False
-            response.message = 'max_steps reached; nothing more to step'
+            response.message = 'the run has finished (max_steps or the end of ROS time)'
             return response
         self._drain_impulses()
         record = self.step_once()
@@ -293,29 +395,35 @@ class BallWorld(Node):
     # Parameters -------------------------------------------------------------------------
 
     def _on_set_parameters(self, parameters):
-        """Refuse values that could not make a valid world, with the reason; apply the rest.
+        """Refuse values outside the table's ranges, with the reason; apply the rest.
 
-        World parameters are checked by building the world they describe (it is built again
-        on ~/reset), so a bad value is refused now, not discovered at the next reset.
+        Each value is checked on its own here. How world parameters fit together (six
+        balls.* lists of one length, balls inside the arena...) is checked when ~/reset
+        builds the world, so they can be changed one at a time from the command line.
         """
-        changes = {p.name: p.value for p in parameters if p.name in SPEC_BY_NAME}
-        candidate = {**current_values(self), **{
-            name: [float(x) for x in value] if hasattr(value, '__len__')
-            and not isinstance(value, str) else value for name, value in changes.items()}}
-        try:
-            step_duration_ns(candidate)
-            if any(SPEC_BY_NAME[name].applies == 'reset' for name in changes):
-                build_world(candidate)
-        except ScenarioError as error:
-            return SetParametersResult(successful=False, reason=str(error))
+        changes = {}
+        for item in parameters:
+            parameter = table.BY_NAME.get(item.name)
+            if parameter is None:
+                continue
+            try:
+                changes[item.name] = parameter.check(item.value)
+            except table.ParameterError as error:
+                return SetParametersResult(successful=False, reason=str(error))
+        candidate = {**current_values(self), **changes}
+        if 'rate_hz' in changes or 'dt' in changes:
+            try:
+                step_duration_ns(candidate)
+            except ScenarioError as error:
+                return SetParametersResult(successful=False, reason=str(error))
         if 'rate_hz' in changes:
-            self._timer.timer_period_ns = int(self._period(candidate['rate_hz']) * 1e9)
+            self._schedule(changes['rate_hz'])
             self._window = (time.monotonic(), self.steps_done)
         if 'frame_id' in changes:
-            self.simulation.frame_id = candidate['frame_id']
+            self.simulation.frame_id = changes['frame_id']
             self._rebuild_markers()
         if 'markers.rate_hz' in changes:
-            self._set_markers_rate(candidate['markers.rate_hz'])
+            self._set_markers_rate(changes['markers.rate_hz'])
         return SetParametersResult(successful=True)
 
     # Reporting and recording ------------------------------------------------------------
@@ -329,8 +437,10 @@ class BallWorld(Node):
         rejected = sum(simulation.rejected.values())
         detail = ', '.join(f'{k} {v}' for k, v in sorted(simulation.rejected.items()))
         self.get_logger().info(
-            f'step {simulation.step_index}: {rate:.1f} steps/s, real-time factor {rtf:.3f}, '
-            f'rejected impulses {rejected}' + (f' ({detail})' if detail else '')
+            f'step {simulation.step_index}: {rate:.1f} steps/s, real-time factor {rtf:.3f}; '
+            f'impulses applied {simulation.applied}, rejected {rejected}'
+            + (f' ({detail})' if detail else '')
+            + f', discarded by reset {simulation.discarded}'
             + (' [paused]' if self.paused else ''))
         self._window = (now, self.steps_done)
 
@@ -345,12 +455,28 @@ class BallWorld(Node):
         self.simulation.close()
 
 
+def usage():
+    """--help: what the node does and every parameter with its default and range."""
+    lines = [USAGE]
+    for parameter in table.PARAMETERS:
+        default = parameter.default if parameter.default != '' else '""'
+        lines.append(f'  {parameter.name} ({parameter.kind}, default {default}'
+                     + (f'; {parameter.range_text()}' if parameter.range_text() else '')
+                     + f'): {parameter.description}')
+    return '\n'.join(lines)
+
+
 def run(args=None):
     """Start the node and spin until shutdown or max_steps; return the exit code.
 
     Recordings are closed with SIGINT and SIGTERM blocked, so a second Ctrl-C cannot cut a
     file short while its summary is being written.
     """
+    argv = sys.argv if args is None else args
+    own = argv[1:argv.index('--ros-args')] if '--ros-args' in argv else argv[1:]
+    if '-h' in own or '--help' in own:
+        print(usage())
+        return 0
     tune_allocator()
     try:
         rclpy.init(args=args)

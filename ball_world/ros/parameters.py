@@ -1,149 +1,137 @@
-"""The node's ROS parameters: names, types, defaults, descriptions and ranges, in one table.
+"""The node's ROS parameters, declared from the one table in core.parameters.
 
-Declaring them from one table keeps `ros2 param describe`, the defaults in
-config/ball_world.yaml and the README in step. Parameters that describe the world take
-effect on ~/reset; the others take effect at once; file paths are read-only.
+What this adds to the table is ROS: descriptors (type, range, read-only, description with
+when the value takes effect), and the conversions users expect of a ROS node but rclpy does
+not make: integers given for doubles (`-p rate_hz:=60`, `arena:=[0, 0, 10, 10]`,
+`ros2 param set /ball_world rate_hz 30`) are converted, and an empty list (`-p arena:=[]`,
+`arena: []` in a file, which rcl hands over untyped) means an empty double array.
 """
-from dataclasses import dataclass
-from typing import Any, Optional
-
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 ParameterType)
-from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
-                              ParameterUninitializedException)
 from rclpy.parameter import Parameter
 
-from ball_world.core.scenario import DEFAULTS
+from ball_world.core import parameters as table
 
-_TYPES = {
-    float: ParameterType.PARAMETER_DOUBLE,
-    int: ParameterType.PARAMETER_INTEGER,
-    str: ParameterType.PARAMETER_STRING,
-    bool: ParameterType.PARAMETER_BOOL,
-    list: ParameterType.PARAMETER_DOUBLE_ARRAY,
+_ROS_TYPES = {
+    table.DOUBLE: Parameter.Type.DOUBLE,
+    table.INTEGER: Parameter.Type.INTEGER,
+    table.STRING: Parameter.Type.STRING,
+    table.BOOL: Parameter.Type.BOOL,
+    table.DOUBLE_ARRAY: Parameter.Type.DOUBLE_ARRAY,
 }
-
-
-@dataclass(frozen=True)
-class Spec:
-    """One parameter: its default, what it means, when it applies, and its range."""
-
-    name: str
-    default: Any
-    description: str
-    applies: str = 'reset'  # 'reset': on ~/reset; 'now': at once; 'start': read-only
-    low: Optional[float] = None
-    high: Optional[float] = None
-
-    @property
-    def kind(self):
-        return _TYPES[type(self.default)]
-
-    def descriptor(self):
-        when = {'reset': 'Takes effect on ~/reset.', 'now': 'Takes effect at once.',
-                'start': 'Read-only: set it at start.'}[self.applies]
-        descriptor = ParameterDescriptor(
-            name=self.name, type=self.kind, description=f'{self.description} {when}',
-            read_only=self.applies == 'start')
-        if self.low is not None and self.kind == ParameterType.PARAMETER_DOUBLE:
-            descriptor.floating_point_range = [FloatingPointRange(
-                from_value=float(self.low), to_value=float(self.high), step=0.0)]
-        elif self.low is not None and self.kind == ParameterType.PARAMETER_INTEGER:
-            descriptor.integer_range = [IntegerRange(
-                from_value=int(self.low), to_value=int(self.high), step=0)]
-        return descriptor
-
-
-_INT_MAX = 2**63 - 1
-
-SPECS = (
-    Spec('rate_hz', DEFAULTS['rate_hz'], 'Steps per second of wall time; 0 runs as fast as '
-         'possible (then dt must be > 0).', 'now', 0.0, 1e6),
-    Spec('dt', DEFAULTS['dt'], 'Simulated seconds per step; 0 means 1 / rate_hz.', 'reset',
-         0.0, 3600.0),
-    Spec('max_steps', DEFAULTS['max_steps'], 'Stop after this many steps, close the '
-         'recordings and exit 0; 0 runs until shutdown.', 'now', 0, _INT_MAX),
-    Spec('frame_id', DEFAULTS['frame_id'], 'Frame of balls and markers.', 'now'),
-    Spec('arena', DEFAULTS['arena'], 'xmin, ymin, xmax, ymax of a box of four walls, in m; '
-         'empty: no box.'),
-    Spec('walls', DEFAULTS['walls'], 'More wall segments, flat x1, y1, x2, y2, ... in m.'),
-    Spec('balls.x', DEFAULTS['balls.x'], 'Explicit balls: x of each centre, m.'),
-    Spec('balls.y', DEFAULTS['balls.y'], 'Explicit balls: y of each centre, m.'),
-    Spec('balls.vx', DEFAULTS['balls.vx'], 'Explicit balls: x velocity, m/s.'),
-    Spec('balls.vy', DEFAULTS['balls.vy'], 'Explicit balls: y velocity, m/s.'),
-    Spec('balls.radius', DEFAULTS['balls.radius'], 'Explicit balls: radius, m (> 0).'),
-    Spec('balls.mass', DEFAULTS['balls.mass'], 'Explicit balls: mass, kg (> 0).'),
-    Spec('random.count', DEFAULTS['random.count'], 'Balls added at random after the explicit '
-         'ones, never overlapping anything.', 'reset', 0, 10_000_000),
-    Spec('random.seed', DEFAULTS['random.seed'], 'Seed of the random balls.', 'reset',
-         0, _INT_MAX),
-    Spec('random.radius', DEFAULTS['random.radius'], 'min, max radius of random balls, m.'),
-    Spec('random.speed', DEFAULTS['random.speed'], 'Max initial speed of random balls, m/s.',
-         'reset', 0.0, 1e9),
-    Spec('random.density', DEFAULTS['random.density'], 'Mass of a random ball = density x '
-         'area, kg/m^2.', 'reset', 1e-12, 1e12),
-    Spec('physics.backend', DEFAULTS['physics.backend'], "How the world steps: 'numpy' (pure "
-         "numpy) or 'numba' (compiled kernels, several times faster; a "
-         'different but equally exact resolution order, so trajectories differ).'),
-    Spec('publish_clock', DEFAULTS['publish_clock'], 'Publish /clock after each step.', 'now'),
-    Spec('markers.rate_hz', 10.0, 'Wall-clock rate of the RViz markers; 0 turns them off. '
-         'Lower it for large worlds: a marker per ball is costly.', 'now', 0.0, 1000.0),
-    Spec('record.mcap', DEFAULTS['record.mcap'], 'MCAP file to record to; empty records '
-         'nothing.', 'start'),
-    Spec('record.rerun', DEFAULTS['record.rerun'], 'Rerun .rrd file to log to; empty logs '
-         'nothing.', 'start'),
-    Spec('record.rerun_every', 1, 'Log every k-th step to the .rrd (steps with impulses are '
-         'always logged).', 'start', 1, 1_000_000),
-)
-
-SPEC_BY_NAME = {spec.name: spec for spec in SPECS}
-
-
-_TYPE_NAMES = {
-    ParameterType.PARAMETER_DOUBLE: 'a double (write 1.0, not 1)',
-    ParameterType.PARAMETER_INTEGER: 'an integer',
-    ParameterType.PARAMETER_STRING: 'a string',
-    ParameterType.PARAMETER_BOOL: 'true or false',
-    ParameterType.PARAMETER_DOUBLE_ARRAY: 'a list of doubles (write [0.0, 10.0], not [0, 10])',
-}
+_WHEN = {table.ON_RESET: 'Takes effect on ~/reset.', table.AT_ONCE: 'Takes effect at once.',
+         table.AT_START: 'Read-only: set it at start.'}
+#: Names rclpy and rcl declare or read themselves: never reported as misspelled.
+_ROS_OWN = ('use_sim_time', 'start_type_description_service')
+_ROS_OWN_PREFIXES = ('qos_overrides.',)
 
 
 class ParameterError(ValueError):
     """A parameter override the node cannot take; the message names the parameter."""
 
 
-def declare_all(node):
-    """Declare every parameter on the node (with its override from the command line/file).
+def descriptor(parameter):
+    """The ParameterDescriptor `ros2 param describe` shows for a table entry."""
+    text = f'{parameter.description} {_WHEN[parameter.applies]}'
+    if parameter.range_text():
+        text += f' Range: {parameter.range_text()}.'
+    result = ParameterDescriptor(name=parameter.name, type=_ROS_TYPES[parameter.kind].value,
+                                 description=text, read_only=parameter.read_only)
+    if parameter.low is not None and parameter.kind == table.DOUBLE:
+        result.floating_point_range = [FloatingPointRange(
+            from_value=float(parameter.low), to_value=float(parameter.high), step=0.0)]
+    elif parameter.low is not None and parameter.kind == table.INTEGER:
+        result.integer_range = [IntegerRange(
+            from_value=int(parameter.low), to_value=int(parameter.high), step=0)]
+    return result
 
-    rclpy's own errors name the parameter at the end of a long sentence; these say what
-    was expected in the form users write in a parameters file.
+
+def as_ros_value(parameter, value):
+    """A value for `parameter` in the type rclpy wants, converting where users expect it.
+
+    Integers become doubles for double parameters, any empty or integer list becomes a
+    double array, and an untyped empty value (None) an empty array. Anything else is left
+    as it is, for the checks to refuse with a clear reason.
     """
-    for spec in SPECS:
+    if parameter.kind == table.DOUBLE and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if parameter.kind == table.DOUBLE_ARRAY:
+        if value is None:
+            return []
+        if hasattr(value, '__len__') and not isinstance(value, (str, bytes)) and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+            return [float(v) for v in value]
+    return value
+
+
+def converted(parameters):
+    """A pre-set-parameters callback: `ros2 param set` values converted as at start."""
+    result = []
+    for item in parameters:
+        parameter = table.BY_NAME.get(item.name)
+        if parameter is None or item.type_ == Parameter.Type.NOT_SET:
+            result.append(item)
+            continue
+        value = as_ros_value(parameter, item.value)
         try:
-            if spec.kind == ParameterType.PARAMETER_DOUBLE_ARRAY and not spec.default:
-                # rclpy cannot infer a type from [], so declare it typed and unset.
-                node.declare_parameter(spec.name, Parameter.Type.DOUBLE_ARRAY,
-                                       spec.descriptor())
-            else:
-                node.declare_parameter(spec.name, spec.default, spec.descriptor())
-        except InvalidParameterTypeException:
-            raise ParameterError(f"parameter '{spec.name}': expected {_TYPE_NAMES[spec.kind]}")
-        except InvalidParameterValueException:
-            raise ParameterError(f"parameter '{spec.name}': must be between {spec.low} and "
-                                 f'{spec.high}')
+            result.append(Parameter(item.name, _ROS_TYPES[parameter.kind], value))
+        except (TypeError, ValueError):
+            result.append(item)  # a type that cannot convert: refused with the reason
+    return result
+
+
+def declare_all(node, overrides):
+    """Declare every parameter of the table on the node, with the user's overrides.
+
+    overrides: name -> rclpy Parameter given on the command line or in a parameters file
+    (rclpy's Node._parameter_overrides). Each is converted as users expect, then checked
+    against the table, so a bad value stops the start with one line naming it. Returns the
+    names given that the node does not have (probably misspelled).
+    """
+    for parameter in table.PARAMETERS:
+        value = parameter.default
+        if parameter.name in overrides:
+            value = as_ros_value(parameter, overrides[parameter.name].value)
+            try:
+                value = parameter.check(value)
+            except table.ParameterError as error:
+                raise ParameterError(str(error)) from None
+        ros_type = _ROS_TYPES[parameter.kind]
+        try:
+            ros_value = Parameter(parameter.name, ros_type, value).value
+        except (TypeError, ValueError):
+            raise ParameterError(f"parameter '{parameter.name}': expected {parameter.kind}, "
+                                 f'got {value!r}') from None
+        if parameter.kind == table.DOUBLE_ARRAY and not ros_value:
+            # rclpy infers an empty list's type as a byte array: declare the type, then set
+            # the empty double array, so `ros2 param get` and `dump` show it rather than
+            # "not set" (and GetParameters for all names does not come back empty).
+            node.declare_parameter(parameter.name, ros_type, descriptor(parameter),
+                                   ignore_override=True)
+            node.set_parameters([Parameter(parameter.name, ros_type, [])])
+        else:
+            node.declare_parameter(parameter.name, ros_value, descriptor(parameter),
+                                   ignore_override=True)
+    return sorted(name for name in overrides
+                  if name not in table.BY_NAME and name not in _ROS_OWN
+                  and not name.startswith(_ROS_OWN_PREFIXES))
 
 
 def current_values(node):
-    """All parameters as plain Python values (unset arrays as [])."""
+    """All parameters as plain Python values, in their canonical form."""
     values = {}
-    for spec in SPECS:
-        try:
-            value = node.get_parameter(spec.name).value
-        except ParameterUninitializedException:
-            value = None
-        if value is None:
-            value = list(spec.default)
-        elif spec.kind == ParameterType.PARAMETER_DOUBLE_ARRAY:
+    for parameter in table.PARAMETERS:
+        value = node.get_parameter(parameter.name).value
+        if parameter.kind == table.DOUBLE_ARRAY:
             value = [float(v) for v in value]
-        values[spec.name] = value
+        values[parameter.name] = value
     return values
+
+
+def is_parameter_type(item, parameter):
+    """Whether an rclpy Parameter has the ROS type the table declares."""
+    return item.type_ == _ROS_TYPES[parameter.kind]
+
+
+__all__ = ['ParameterType', 'as_ros_value', 'converted', 'current_values', 'declare_all',
+           'descriptor', 'is_parameter_type', 'ParameterError']

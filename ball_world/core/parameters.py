@@ -1,0 +1,301 @@
+"""Every parameter of a ball world in one table: name, type, default, range, meaning, when.
+
+Why one table: the node's ROS descriptors, the scenario's defaults, the checks a value must
+pass (at start, on `ros2 param set`, and when a recording is read back), the shipped
+config/ball_world.yaml and the README's table must never disagree. They are all derived
+from, or tested against, PARAMETERS. No ROS here: the offline tools use the same checks.
+
+A parameter's range is the range the node really runs: `check` refuses anything outside it
+with a ParameterError naming the parameter, and every value inside it gives a world that
+steps in bounded time and memory (see core.limits), or a refusal at world-building time
+that names the parameter (for combinations, such as balls that overlap).
+"""
+from dataclasses import dataclass
+import math
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+from ball_world.core import limits
+
+#: How a value is typed in a parameters file or on the command line.
+DOUBLE = 'double'
+INTEGER = 'integer'
+BOOL = 'bool'
+STRING = 'string'
+DOUBLE_ARRAY = 'double[]'
+
+#: When a change takes effect: on the next ~/reset, at once, or never (read-only, set at start).
+ON_RESET = 'reset'
+AT_ONCE = 'now'
+AT_START = 'start'
+
+_INT64_MAX = 2**63 - 1
+#: Longest accepted file path.
+MAX_PATH_LENGTH = 4096
+#: Largest |v| of an explicit ball or of random.speed, m/s (the world's own speed limit, which
+#: depends on dt and the radii, is checked when it is built).
+MAX_SPEED = 1e6
+
+
+class ParameterError(ValueError):
+    """A value that cannot make a valid world; `parameter` names the culprit."""
+
+    def __init__(self, parameter, reason):
+        super().__init__(f"parameter '{parameter}': {reason}")
+        self.parameter = parameter
+        self.reason = reason
+
+
+def number_text(value):
+    """A number as users write it: 0.5, 10, 1e-06; never np.float64(0.5)."""
+    value = float(value)
+    return str(int(value)) if value.is_integer() and abs(value) < 1e15 else repr(value)
+
+
+def list_text(values, limit=6):
+    """[0.5, 0.1] (shortened past `limit` entries), for refusal messages."""
+    shown = ', '.join(number_text(v) for v in list(values)[:limit])
+    more = len(values) - limit
+    return f'[{shown}{", ..." if more > 0 else ""}]' + (f' ({len(values)} entries)'
+                                                        if more > 0 else '')
+
+
+def _is_number(value):
+    return isinstance(value, (int, float)) and not isinstance(value, bool) or (
+        hasattr(value, 'dtype') and getattr(value, 'shape', None) == ()
+        and value.dtype.kind in 'iuf')
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One parameter: its type, default, range, meaning and when it takes effect."""
+
+    name: str
+    kind: str
+    default: Any
+    description: str
+    applies: str = ON_RESET
+    low: Optional[float] = None  # inclusive bound of the value, or of every array entry
+    high: Optional[float] = None
+    choices: tuple = ()  # allowed strings
+    sizes: Optional[tuple] = None  # allowed array lengths
+    multiple_of: int = 1  # array length must be a multiple of this
+    max_size: Optional[int] = None  # most array entries
+    max_length: Optional[int] = None  # longest string
+    rule: Optional[Callable] = None  # more checks of the one value: returns a reason or None
+
+    @property
+    def read_only(self):
+        return self.applies == AT_START
+
+    def range_text(self):
+        """The range as the README and the descriptors state it."""
+        if self.choices:
+            return ', '.join(self.choices)
+        parts = []
+        if self.low is not None:
+            parts.append(f'{number_text(self.low)} to {number_text(self.high)}')
+        if self.sizes is not None:
+            parts.append(' or '.join(str(s) for s in self.sizes) + ' entries')
+        elif self.max_size is not None:
+            parts.append(f'at most {self.max_size:,} entries'
+                         + (f', a multiple of {self.multiple_of}' if self.multiple_of > 1
+                            else ''))
+        if self.max_length is not None:
+            parts.append(f'at most {self.max_length} characters')
+        return '; '.join(parts)
+
+    def check(self, value):
+        """The value in its canonical Python form, or ParameterError saying what is wrong.
+
+        Integers are accepted for doubles (`-p rate_hz:=60`, `arena:=[0, 0, 10, 10]`) and
+        converted; anything else of the wrong type is refused.
+        """
+        if self.kind == DOUBLE:
+            if not _is_number(value):
+                raise ParameterError(self.name, f'expected a number, got {value!r}')
+            return self._check_range(float(value))
+        if self.kind == INTEGER:
+            if isinstance(value, bool) or not isinstance(value, int):
+                if isinstance(value, float) and value.is_integer():
+                    value = int(value)
+                else:
+                    raise ParameterError(self.name, f'expected a whole number, got {value!r}')
+            return self._check_range(int(value))
+        if self.kind == BOOL:
+            if not isinstance(value, bool):
+                raise ParameterError(self.name, f'expected true or false, got {value!r}')
+            return value
+        if self.kind == STRING:
+            value = self._check_string(value)
+        else:
+            value = self._check_array(value)
+        reason = self.rule(value) if self.rule is not None else None
+        if reason:
+            raise ParameterError(self.name, reason)
+        return value
+
+    def _check_range(self, value):
+        if not math.isfinite(value):
+            raise ParameterError(self.name, f'must be finite, got {value}')
+        if self.low is not None and not self.low <= value <= self.high:
+            raise ParameterError(self.name, f'must be between {number_text(self.low)} and '
+                                            f'{number_text(self.high)}, got '
+                                            f'{number_text(value)}')
+        return value
+
+    def _check_string(self, value):
+        if not isinstance(value, str):
+            raise ParameterError(self.name, f'expected a string, got {value!r}')
+        if self.max_length is not None and len(value) > self.max_length:
+            raise ParameterError(self.name, f'is {len(value):,} characters long; at most '
+                                            f'{self.max_length} are accepted')
+        if any(not character.isprintable() for character in value):
+            raise ParameterError(self.name, 'contains control characters')
+        if self.choices and value not in self.choices:
+            raise ParameterError(self.name, f'expected one of {", ".join(self.choices)}, got '
+                                            f'{value[:64]!r}')
+        return value
+
+    def _check_array(self, value):
+        if isinstance(value, (str, bytes)) or not hasattr(value, '__len__'):
+            raise ParameterError(self.name, f'expected a list of numbers, got {value!r}')
+        count = len(value)
+        if self.max_size is not None and count > self.max_size:
+            raise ParameterError(self.name, f'has {count:,} entries; at most '
+                                            f'{self.max_size:,} are accepted')
+        if self.sizes is not None and count not in self.sizes:
+            expected = ' or '.join(str(s) for s in self.sizes)
+            raise ParameterError(self.name, f'expected {expected} numbers, got {count}')
+        if count % self.multiple_of:
+            raise ParameterError(self.name, f'{count} numbers is not a multiple of '
+                                            f'{self.multiple_of}')
+        # Vectorised: arrays of 100,000 entries are checked several times per world build.
+        if isinstance(value, (list, tuple)) and any(type(entry) is bool for entry in value):
+            index = next(i for i, entry in enumerate(value) if type(entry) is bool)
+            raise ParameterError(self.name, f'entry {index} is not a number: {value[index]!r}')
+        try:
+            numbers = np.asarray(value)
+        except (TypeError, ValueError):
+            numbers = np.asarray(value, dtype=object)
+        if numbers.ndim != 1 and count:
+            raise ParameterError(self.name, 'expected a flat list of numbers')
+        if count and numbers.dtype.kind not in 'iuf':
+            index = next((i for i, entry in enumerate(value) if not _is_number(entry)), 0)
+            raise ParameterError(self.name, f'entry {index} is not a number: {value[index]!r}')
+        numbers = numbers.astype(np.float64).reshape(-1)
+        bad = np.flatnonzero(~np.isfinite(numbers))
+        if len(bad):
+            raise ParameterError(self.name, f'entry {bad[0]} is not finite ({numbers[bad[0]]})')
+        if self.low is not None:
+            bad = np.flatnonzero(~((self.low <= numbers) & (numbers <= self.high)))
+            if len(bad):
+                raise ParameterError(self.name, f'entry {bad[0]} is '
+                                                f'{number_text(numbers[bad[0]])}; entries must '
+                                                f'be between {number_text(self.low)} and '
+                                                f'{number_text(self.high)}')
+        return numbers.tolist()
+
+
+def _box(arena):
+    if arena and not (arena[0] < arena[2] and arena[1] < arena[3]):
+        return f'needs xmin < xmax and ymin < ymax, got {list_text(arena)}'
+    return None
+
+
+def _frame(frame_id):
+    if not frame_id.strip():
+        return 'must name a frame (tf2 has no empty frame id)'
+    return None
+
+
+def _min_max(pair):
+    if pair[0] > pair[1]:
+        return f'expected [min, max] with min <= max, got {list_text(pair)}'
+    return None
+
+
+_XY = dict(low=-limits.COORDINATE_LIMIT, high=limits.COORDINATE_LIMIT)
+_BALLS = dict(max_size=limits.MAX_BALLS)
+
+PARAMETERS = (
+    Parameter('rate_hz', DOUBLE, 60.0, 'Steps per second of wall time; 0 runs as fast as '
+              'possible (then dt must be > 0).', AT_ONCE, 0.0, 1e6),
+    Parameter('dt', DOUBLE, 0.0, 'Simulated seconds per step, kept in whole nanoseconds (at '
+              'least 1 ns); 0 means 1 / rate_hz.', ON_RESET, 0.0, limits.MAX_DT),
+    Parameter('max_steps', INTEGER, 0, 'Stop after this many steps, close the recordings and '
+              'exit 0; 0 runs until shutdown.', AT_ONCE, 0, _INT64_MAX),
+    Parameter('frame_id', STRING, 'world', 'Frame of balls and markers.', AT_ONCE,
+              max_length=limits.MAX_NAME_LENGTH, rule=_frame),
+    Parameter('start_paused', BOOL, False, 'Start paused at step 0 (resume with ~/pause '
+              'false), so clients can connect before anything moves.', AT_START),
+    Parameter('arena', DOUBLE_ARRAY, [0.0, 0.0, 10.0, 10.0], 'xmin, ymin, xmax, ymax of a box '
+              'of four walls, m; empty: no box.', sizes=(0, 4), rule=_box, **_XY),
+    Parameter('walls', DOUBLE_ARRAY, [], 'More wall segments, flat x1, y1, x2, y2, ... in m.',
+              multiple_of=4, max_size=4 * limits.MAX_WALLS, **_XY),
+    Parameter('balls.x', DOUBLE_ARRAY, [], 'Explicit balls: x of each centre, m.', **_BALLS,
+              **_XY),
+    Parameter('balls.y', DOUBLE_ARRAY, [], 'Explicit balls: y of each centre, m.', **_BALLS,
+              **_XY),
+    Parameter('balls.vx', DOUBLE_ARRAY, [], 'Explicit balls: x velocity, m/s.', **_BALLS,
+              low=-MAX_SPEED, high=MAX_SPEED),
+    Parameter('balls.vy', DOUBLE_ARRAY, [], 'Explicit balls: y velocity, m/s.', **_BALLS,
+              low=-MAX_SPEED, high=MAX_SPEED),
+    Parameter('balls.radius', DOUBLE_ARRAY, [], 'Explicit balls: radius, m.', **_BALLS,
+              low=limits.MIN_RADIUS, high=limits.MAX_RADIUS),
+    Parameter('balls.mass', DOUBLE_ARRAY, [], 'Explicit balls: mass, kg.', **_BALLS,
+              low=limits.MIN_MASS, high=limits.MAX_MASS),
+    Parameter('random.count', INTEGER, 20, 'Balls added at random after the explicit ones, '
+              'never overlapping anything.', ON_RESET, 0, limits.MAX_BALLS),
+    Parameter('random.seed', INTEGER, 0, 'Seed of the random balls (numpy PCG64).', ON_RESET,
+              0, _INT64_MAX),
+    Parameter('random.radius', DOUBLE_ARRAY, [0.1, 0.3], 'min, max radius of random balls, m.',
+              sizes=(2,), low=limits.MIN_RADIUS, high=limits.MAX_RADIUS, rule=_min_max),
+    Parameter('random.speed', DOUBLE, 2.0, 'Max initial speed of random balls, m/s.',
+              ON_RESET, 0.0, MAX_SPEED),
+    Parameter('random.density', DOUBLE, 1.0, 'Mass of a random ball = density x area, kg/m^2.',
+              ON_RESET, 1e-6, 1e6),
+    Parameter('physics.backend', STRING, 'auto', "How the world steps: 'numpy' (the "
+              "reference), 'numba' (compiled, bit-identical) or 'auto' (numba when "
+              'installed).', choices=('auto', 'numpy', 'numba')),
+    Parameter('publish_clock', BOOL, False, 'Publish /clock after each step.', AT_ONCE),
+    Parameter('markers.rate_hz', DOUBLE, 10.0, 'Wall-clock rate of the RViz markers; 0 turns '
+              'them off. The node lowers it when markers would take over 5% of its time.',
+              AT_ONCE, 0.0, 1000.0),
+    Parameter('record.mcap', STRING, '', 'MCAP file to record to; empty records nothing.',
+              AT_START, max_length=MAX_PATH_LENGTH),
+    Parameter('record.rerun', STRING, '', 'Rerun .rrd file to log to; empty logs nothing.',
+              AT_START, max_length=MAX_PATH_LENGTH),
+    Parameter('record.rerun_every', INTEGER, 1, 'Log every k-th step to the .rrd (steps with '
+              'impulses are always logged).', AT_START, 1, 1_000_000),
+)
+
+BY_NAME = {parameter.name: parameter for parameter in PARAMETERS}
+
+#: The defaults, as plain Python values.
+DEFAULTS = {parameter.name: parameter.default for parameter in PARAMETERS}
+
+#: The six lists that describe explicit balls, one entry per ball in each.
+BALL_FIELDS = ('balls.x', 'balls.y', 'balls.vx', 'balls.vy', 'balls.radius', 'balls.mass')
+
+
+def check(name, value):
+    """The canonical value of one parameter, or ParameterError (unknown names included)."""
+    parameter = BY_NAME.get(name)
+    if parameter is None:
+        raise ParameterError(name, 'no such parameter')
+    return parameter.check(value)
+
+
+def checked(values):
+    """Every parameter of `values` over the defaults, each checked; unknown names ignored.
+
+    Ignoring unknown names lets a recording made by a newer version with extra parameters be
+    read by this one; the node warns about unknown names itself.
+    """
+    merged = dict(DEFAULTS)
+    for name, value in values.items():
+        if name in BY_NAME:
+            merged[name] = BY_NAME[name].check(value)
+    return merged
