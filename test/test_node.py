@@ -7,12 +7,16 @@ import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
+from ball_world.core import parameters as table
+from ball_world.core.limits import MAX_SIM_TIME_NS
 from ball_world.ros.node import BallWorld, StartupError
+from ball_world.ros.parameters import descriptor
 
 ONE_BALL = {'random.count': 0, 'balls.x': [5.0], 'balls.y': [5.0], 'balls.vx': [0.5],
             'balls.vy': [0.0], 'balls.radius': [0.5], 'balls.mass': [0.5]}
@@ -255,3 +259,106 @@ def test_garbage_bytes_and_stale_stamps_are_rejected_and_stepping_goes_on(harnes
     assert h.node.simulation.step_index == step + 1
     # Only the step itself moved the ball: its velocity is untouched.
     assert h.node.simulation.world.velocities.tolist() == before.tolist()
+
+
+def test_reset_discards_queued_impulses_and_says_how_many(harness_factory):
+    h = harness_factory(**ONE_BALL)
+    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
+    for _ in range(100):
+        h.impulse('ball_0', 0.01, 0.0)
+    h.spin_until(lambda: h.node.simulation.queued == 100)
+    response = h.call(Trigger, '/ball_world/reset', Trigger.Request())
+    assert response.success
+    assert response.message.endswith('discarded 100 queued impulses')
+    assert h.node.simulation.discarded == 100 and h.node.simulation.applied == 0
+    assert h.node.simulation.queued == 0
+    assert h.node.simulation.world.velocities.tolist() == [[0.5, 0.0]]
+
+
+def test_world_parameters_can_be_set_one_by_one_and_are_checked_at_reset(harness_factory):
+    h = harness_factory(**{'random.count': 0})
+    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
+    for name, value in (('balls.x', [2.0, 4.0]), ('balls.y', [5.0, 5.0])):
+        assert h.node.set_parameters([Parameter(name, value=value)])[0].successful
+    refused = h.call(Trigger, '/ball_world/reset', Trigger.Request())
+    assert not refused.success and "'balls.vx': has 0 entries but balls.x has 2" in \
+        refused.message and 'world unchanged' in refused.message
+    assert len(h.node.simulation.world) == 0
+    for name, value in (('balls.vx', [1.0, -1.0]), ('balls.vy', [0.0, 0.0]),
+                        ('balls.radius', [0.5, 0.5]), ('balls.mass', [1, 2])):
+        assert h.node.set_parameters([Parameter(name, value=value)])[0].successful, name
+    assert h.call(Trigger, '/ball_world/reset', Trigger.Request()).success
+    assert h.node.simulation.world.masses.tolist() == [1.0, 2.0]
+
+
+def test_every_parameter_reads_back_typed_and_integers_convert(harness_factory):
+    h = harness_factory()
+    client = AsyncParameterClient(h.probe, 'ball_world')
+    h.spin_until(client.services_are_ready)
+    names = [parameter.name for parameter in table.PARAMETERS]
+    future = client.get_parameters(names)
+    h.spin_until(future.done)
+    values = future.result().values
+    assert [v.type for v in values] == [descriptor(p).type for p in table.PARAMETERS]
+    assert list(values[names.index('walls')].double_array_value) == []
+    future = client.set_parameters([Parameter('markers.rate_hz', value=2),
+                                    Parameter('arena', value=[0, 0, 20, 20])])
+    h.spin_until(future.done)
+    assert all(result.successful for result in future.result().results)
+    assert h.node.get_parameter('markers.rate_hz').value == 2.0
+    assert list(h.node.get_parameter('arena').value) == [0.0, 0.0, 20.0, 20.0]
+
+
+def test_rates_across_the_whole_range_keep_the_node_answering(harness_factory):
+    h = harness_factory(dt=0.01, **ONE_BALL)
+    for rate in (1e-300, 1e-10, 0.5, 1e6, 0.0):
+        assert h.node.set_parameters([Parameter('rate_hz', value=rate)])[0].successful, rate
+        h.spin_until(lambda: h.call(SetBool, '/ball_world/pause',
+                                    SetBool.Request(data=False)).success)
+    step = h.node.simulation.step_index
+    h.spin_until(lambda: h.node.simulation.step_index > step + 50)  # rate 0: full speed
+    assert h.node.set_parameters([Parameter('rate_hz', value=1e-300)])[0].successful
+    step = h.node.simulation.step_index
+    for _ in range(20):
+        h.executor.spin_once(timeout_sec=0.01)
+    assert h.node.simulation.step_index <= step + 1
+
+
+def test_the_run_stops_before_ros_time_runs_out(harness_factory):
+    h = harness_factory(dt=3600.0, rate_hz=0.0, **{**ONE_BALL, 'balls.vx': [0.0]})
+    simulation = h.node.simulation
+    last = MAX_SIM_TIME_NS // simulation.dt_ns
+    simulation.step_index = last - 2  # as if the run had gone on for 68 years
+    h.spin_until(lambda: h.node.finished)
+    assert simulation.step_index == last
+    assert simulation.stamp_ns // 10**9 < 2**31
+
+
+def test_start_paused_holds_step_zero_until_resumed(harness_factory):
+    h = harness_factory(start_paused=True, rate_hz=100.0)
+    for _ in range(10):
+        h.executor.spin_once(timeout_sec=0.02)
+    assert h.node.simulation.step_index == 0
+    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=False))
+    h.spin_until(lambda: h.node.simulation.step_index > 2)
+
+
+def test_a_large_reset_builds_while_the_old_world_keeps_publishing(harness_factory):
+    h = harness_factory(rate_hz=100.0, **{'random.count': 5})
+    h.node.set_parameters([Parameter('random.count', value=60_000),
+                           Parameter('arena', value=[0.0, 0.0, 500.0, 500.0])])
+    client = h.probe.create_client(Trigger, '/ball_world/reset')
+    h.spin_until(client.service_is_ready)
+    steps_while_building = []
+    step_once = h.node.step_once
+
+    def watched_step():
+        steps_while_building.append(h.node._resetting)
+        return step_once()
+
+    h.node.step_once = watched_step
+    future = client.call_async(Trigger.Request())
+    h.spin_until(future.done, timeout=120.0)
+    assert future.result().success, future.result().message
+    assert any(steps_while_building), 'the old world stopped while the new one was built'
+    h.spin_until(lambda: len(h.balls[-1].poses) == 60_000)

@@ -68,6 +68,13 @@ services ~/reset, ~/pause, ~/step. Parameters (ros2 param describe shows each in
 """
 
 
+class _NextSpin:
+    """Awaiting it hands control back to the executor once (an rclpy coroutine's yield)."""
+
+    def __await__(self):
+        yield
+
+
 class StartupError(Exception):
     """The node cannot start; the message is the one line to print."""
 
@@ -142,6 +149,7 @@ class BallWorld(Node):
         self.paused = values['start_paused']
         self.finished = False
         self.steps_done = 0
+        self._last_step_wall = time.monotonic()
         self._resetting = False
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._markers = MarkerBuilder()
@@ -233,6 +241,7 @@ class BallWorld(Node):
         elapsed = time.monotonic() - self._start_wall
         simulated = (simulation.step_index + 1) * simulation.dt_ns * 1e-9
         rtf = simulated / elapsed if elapsed > 0 else None
+        self._last_step_wall = time.monotonic()
         record, rejected = simulation.step(real_time_factor=rtf)
         for rejection in rejected:
             self._warn_rejection(rejection)
@@ -322,7 +331,7 @@ class BallWorld(Node):
             return response
         self._resetting = True
         try:
-            built = await self._build_in_background(current_values(self))
+            built = await self._stepping_until(self._build_in_background(current_values(self)))
         except ScenarioError as error:
             response.success = False
             response.message = f'reset refused, world unchanged: {error}'
@@ -348,6 +357,22 @@ class BallWorld(Node):
                             f"discarded {discarded} queued impulse{'' if discarded == 1 else 's'}")
         self.get_logger().info(response.message)
         return response
+
+    async def _stepping_until(self, future):
+        """Await a Future while going on stepping the world on schedule.
+
+        rclpy Jazzy's executor runs a pending coroutine before anything else on every spin,
+        so while this one waits, timers would starve: it steps the world itself when a step
+        is due (and sleeps a millisecond between checks, leaving the GIL to the builder).
+        """
+        while not future.done():
+            if not self.paused and not self.finished and (
+                    time.monotonic() - self._last_step_wall >= self._step_period):
+                self._drain_impulses()
+                self.step_once()
+            time.sleep(0.001)
+            await _NextSpin()
+        return future.result()
 
     @staticmethod
     def _build_in_background(values):
