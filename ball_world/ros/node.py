@@ -15,6 +15,7 @@ from geometry_msgs.msg import PoseArray, Vector3Stamped
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -66,13 +67,6 @@ An exact 2D elastic-collision world as a ROS 2 node. Publishes balls (PoseArray)
 stats and markers; takes impulses (Vector3Stamped, header.frame_id = ball name) on impulse;
 services ~/reset, ~/pause, ~/step. Parameters (ros2 param describe shows each in full):
 """
-
-
-class _NextSpin:
-    """Awaiting it hands control back to the executor once (an rclpy coroutine's yield)."""
-
-    def __await__(self):
-        yield
 
 
 class StartupError(Exception):
@@ -140,7 +134,14 @@ class BallWorld(Node):
         self.clock_pub = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
         self._impulse_sub = self.create_subscription(
             Vector3Stamped, 'impulse', self._on_impulse, IMPULSE_QOS, raw=True)
-        self.create_service(Trigger, '~/reset', self._on_reset)
+        # Calls that take long (a reset builds its world on a thread) run as coroutines in
+        # their own group: while one waits, the default group's timers, subscription and
+        # services go on (rclpy holds a whole mutually exclusive group while a coroutine of
+        # it is pending). _wake resumes a waiting coroutine without waiting for a timer.
+        self._long_calls = MutuallyExclusiveCallbackGroup()
+        self._wake = self.create_guard_condition(lambda: None)
+        self.create_service(Trigger, '~/reset', self._on_reset,
+                            callback_group=self._long_calls)
         self.create_service(SetBool, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/step', self._on_step)
         self.add_pre_set_parameters_callback(converted)
@@ -149,7 +150,6 @@ class BallWorld(Node):
         self.paused = values['start_paused']
         self.finished = False
         self.steps_done = 0
-        self._last_step_wall = time.monotonic()
         self._resetting = False
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._markers = MarkerBuilder()
@@ -241,7 +241,6 @@ class BallWorld(Node):
         elapsed = time.monotonic() - self._start_wall
         simulated = (simulation.step_index + 1) * simulation.dt_ns * 1e-9
         rtf = simulated / elapsed if elapsed > 0 else None
-        self._last_step_wall = time.monotonic()
         record, rejected = simulation.step(real_time_factor=rtf)
         for rejection in rejected:
             self._warn_rejection(rejection)
@@ -331,7 +330,7 @@ class BallWorld(Node):
             return response
         self._resetting = True
         try:
-            built = await self._stepping_until(self._build_in_background(current_values(self)))
+            built = await self._build_in_background(current_values(self))
         except ScenarioError as error:
             response.success = False
             response.message = f'reset refused, world unchanged: {error}'
@@ -358,25 +357,12 @@ class BallWorld(Node):
         self.get_logger().info(response.message)
         return response
 
-    async def _stepping_until(self, future):
-        """Await a Future while going on stepping the world on schedule.
+    def _build_in_background(self, values):
+        """An rclpy Future of build(values), computed on a worker thread.
 
-        rclpy Jazzy's executor runs a pending coroutine before anything else on every spin,
-        so while this one waits, timers would starve: it steps the world itself when a step
-        is due (and sleeps a millisecond between checks, leaving the GIL to the builder).
+        The thread wakes the executor when it is done, so the awaiting service resumes at
+        once rather than at the next timer tick.
         """
-        while not future.done():
-            if not self.paused and not self.finished and (
-                    time.monotonic() - self._last_step_wall >= self._step_period):
-                self._drain_impulses()
-                self.step_once()
-            time.sleep(0.001)
-            await _NextSpin()
-        return future.result()
-
-    @staticmethod
-    def _build_in_background(values):
-        """An rclpy Future of build(values), computed on a worker thread."""
         future = Future()
 
         def work():
@@ -384,6 +370,7 @@ class BallWorld(Node):
                 future.set_result(build(values))
             except Exception as error:  # noqa: B902 - every outcome must reach the service
                 future.set_exception(error)
+            self._wake.trigger()
 
         threading.Thread(target=work, name='ball_world-reset', daemon=True).start()
         return future
