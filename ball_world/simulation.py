@@ -15,7 +15,7 @@ from ball_world.core.parameters import checked
 from ball_world.core.scenario import build_world, step_duration_ns
 from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
                                  encode_vector3_stamped)
-from ball_world.step_record import AppliedImpulse, RunInfo, STATS_LABEL, StepRecord, WorldSnapshot
+from ball_world.step_record import AppliedImpulse, RunInfo, STATS_FIELDS, StepRecord, WorldSnapshot
 
 DEFAULT_TOPICS = {'balls': '/balls', 'state': '/state', 'stats': '/stats',
                   'impulse': '/impulse'}
@@ -194,7 +194,7 @@ class Simulation:
             balls_cdr=encode_pose_array(positions, stamp_ns, self.frame_id),
             state_cdr=encode_state(positions, velocities),
             stats_cdr=encode_float64_vector(
-                (energy, momentum[0], momentum[1], ball_ball, ball_wall, rtf), STATS_LABEL),
+                (energy, momentum[0], momentum[1], ball_ball, ball_wall, rtf), STATS_FIELDS),
             impulses=impulses, real_time_factor=real_time_factor)
         self.last_log_ns = record.log_time_ns
         self.last_record = record

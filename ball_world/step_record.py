@@ -11,11 +11,11 @@ import numpy as np
 
 PACKAGE_NAME = 'ball_world'
 
-#: The entries of the per-step `stats` topic, in order (its layout label joins them by '.').
-#: real_time_factor is NaN where unknown (offline runs, the first step).
+#: The entries of the per-step `stats` topic, in order; its layout has one dim per entry,
+#: labelled with these names. real_time_factor is NaN where unknown (offline runs, the
+#: first step).
 STATS_FIELDS = ('kinetic_energy', 'momentum_x', 'momentum_y', 'ball_ball', 'ball_wall',
                 'real_time_factor')
-STATS_LABEL = '.'.join(STATS_FIELDS)
 
 
 @dataclass(frozen=True)

@@ -32,6 +32,7 @@ from ball_world.msgs.definitions import message_definition, type_hash
 from ball_world.recording.mcap_reader import feed_sinks, Recording, Scan
 from ball_world.recording.mcap_writer import McapSink, NOT_REPEATED
 from ball_world.simulation import Simulation
+from ball_world.step_record import STATS_FIELDS
 from ball_world.tools import info, repair, resim
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -51,6 +52,10 @@ JAZZY_QOS = (
 TYPES = {'/balls': 'geometry_msgs/msg/PoseArray', '/state': 'std_msgs/msg/Float64MultiArray',
          '/stats': 'std_msgs/msg/Float64MultiArray',
          '/impulse': 'geometry_msgs/msg/Vector3Stamped'}
+MARKERS = {'/markers': 'visualization_msgs/msg/MarkerArray'}
+# What the node's markers publisher offers: reliable, transient local, keep_last 1.
+MARKERS_QOS = JAZZY_QOS.replace('depth: 10', 'depth: 1').replace(
+    'durability: volatile', 'durability: transient_local')
 
 
 class Collect:
@@ -132,7 +137,7 @@ def test_mcap_ros2_reads_back_exactly_what_the_simulation_produced(tmp_path, com
     path = tmp_path / 'run.mcap'
     truth = record(path, compression=compression)
     expected = expected_messages(truth)
-    decoded = read_ros2(path)
+    decoded = [item for item in read_ros2(path) if item[0].topic in TYPES]
     assert [(channel.topic, message.log_time) for channel, message, _ in decoded] == \
         [(topic, log_time) for topic, log_time, _, _ in expected]
     for (_, message, msg), (topic, log_time, impulse, item) in zip(decoded, expected):
@@ -149,6 +154,9 @@ def test_mcap_ros2_reads_back_exactly_what_the_simulation_produced(tmp_path, com
         elif topic == '/stats':
             assert msg.data[0] == item.kinetic_energy
             assert list(msg.data[3:5]) == [item.ball_ball, item.ball_wall]
+            # one labelled dim per value: dim i names data[i]
+            assert [(d.label, d.size, d.stride) for d in msg.layout.dim] == \
+                [(name, 1, 1) for name in STATS_FIELDS]
         else:
             assert (msg.header.frame_id, msg.vector.x, msg.vector.y, msg.vector.z) == \
                 (impulse.frame_id, impulse.jx, impulse.jy, 0.0)
@@ -160,15 +168,18 @@ def test_rosbags_reads_the_bare_mcap_with_rosbag2_qos_and_schemas(recorded):
     typestore = get_typestore(Stores.ROS2_JAZZY)
     with RosbagsReader(path) as reader:
         connections = {c.topic: c for c in reader.connections}
-        assert {t: c.msgtype for t, c in connections.items()} == TYPES
+        assert {t: c.msgtype for t, c in connections.items()} == {**TYPES, **MARKERS}
         for topic, connection in connections.items():
             qos = connection.ext.offered_qos_profiles[0]
             assert (qos.history.name, qos.depth, qos.reliability.name,
-                    qos.durability.name) == ('KEEP_LAST', 10, 'RELIABLE', 'VOLATILE')
-            assert connection.msgdef.data == message_definition(TYPES[topic])
+                    qos.durability.name) == (('KEEP_LAST', 1, 'RELIABLE', 'TRANSIENT_LOCAL')
+                                             if topic == '/markers' else
+                                             ('KEEP_LAST', 10, 'RELIABLE', 'VOLATILE'))
+            assert connection.msgdef.data == message_definition({**TYPES, **MARKERS}[topic])
         balls = [typestore.deserialize_cdr(raw, 'geometry_msgs/msg/PoseArray')
                  for _, _, raw in reader.messages([connections['/balls']])]
-        assert reader.message_count == len(expected_messages(truth))
+        markers = connections['/markers'].msgcount
+        assert reader.message_count == len(expected_messages(truth)) + markers
     assert len(balls) == len(truth.records)
     for msg, rec in zip(balls, truth.records):
         assert bits_equal([[p.position.x, p.position.y] for p in msg.poses], rec.positions)
@@ -187,7 +198,8 @@ def test_file_has_ros2_profile_channel_metadata_and_segment_records(recorded):
         schema = summary.schemas[channel.schema_id]
         assert (schema.encoding, channel.message_encoding) == ('ros2msg', 'cdr')
         assert schema.data.decode() == message_definition(schema.name)
-        assert channel.metadata == {'offered_qos_profiles': JAZZY_QOS,
+        qos = MARKERS_QOS if channel.topic == '/markers' else JAZZY_QOS
+        assert channel.metadata == {'offered_qos_profiles': qos,
                                     'topic_type_hash': type_hash(schema.name)}
         assert channel.metadata['topic_type_hash'].startswith('RIHS01_')
     # a reset makes a second segment, and log times never go back in file order
@@ -246,10 +258,9 @@ def test_recording_steps_and_feed_sinks_rebuild_every_record(recorded):
         assert (got_world.dt_ns, got_world.frame_id) == (world.dt_ns, world.frame_id)
         expected = {**run_info.parameters, 'record.mcap': '', 'record.rerun': ''}
         assert got_info.parameters == expected
-        assert (got_info.topics, got_info.segment, got_info.log_offset_ns,
-                got_info.package_version) == (run_info.topics, run_info.segment,
-                                              run_info.log_offset_ns,
-                                              run_info.package_version)
+        assert got_info.topics == {**run_info.topics, 'markers': '/markers'}
+        assert (got_info.segment, got_info.log_offset_ns, got_info.package_version) == \
+            (run_info.segment, run_info.log_offset_ns, run_info.package_version)
     assert len(fed.records) == len(truth.records)
     for got, want in zip(fed.records, truth.records):
         assert (got.step, got.stamp_ns, got.log_time_ns) == \
@@ -471,10 +482,11 @@ def test_unwritable_paths_fail_at_construction_naming_the_path(tmp_path):
     assert str(missing) in str(raised.value) and raised.value.errno == errno.ENOENT
     with pytest.raises(OSError) as raised:
         McapSink(tmp_path)
-    assert str(tmp_path) in str(raised.value)
+    assert str(raised.value) == f'{tmp_path}: is a directory, not a regular file'
     with pytest.raises(OSError) as raised:
-        McapSink('/dev/full')
-    assert raised.value.errno == errno.ENOSPC and '/dev/full' in str(raised.value)
+        McapSink('/dev/full', overwrite=True)
+    assert str(raised.value) == '/dev/full: is a character device, not a regular file'
+    assert not list(tmp_path.iterdir())
     with pytest.raises(ValueError):
         McapSink(tmp_path / 'x.mcap', compression='gzip')
 
@@ -515,12 +527,14 @@ def test_fsync_flush_and_scan_of_a_file_cut_in_a_record_header(tmp_path):
     run(simulation, 4)
     simulation.flush()
     size = os.path.getsize(path)
+    # steps 0-4 (dt 50 ms): 3 messages each, and markers: a DELETEALL, then at 0, 0.1, 0.2 s
+    messages = 5 * 3 + 4
     with open(path, 'rb') as stream:
         scan = Scan(io.BytesIO(stream.read(size)), size)
-        assert sum(type(r).__name__ == 'Message' for r in scan.records()) == 15
+        assert sum(type(r).__name__ == 'Message' for r in scan.records()) == messages
     assert scan.end == size and scan.problem.startswith('the file ends')
     torn = path.read_bytes()[:size] + b'\x06\x00'
     scan = Scan(io.BytesIO(torn), len(torn))
-    assert sum(type(r).__name__ == 'Message' for r in scan.records()) == 15
+    assert sum(type(r).__name__ == 'Message' for r in scan.records()) == messages
     assert scan.end == size and 'cut off in its header' in scan.problem
     simulation.close()

@@ -167,15 +167,21 @@ def encode_state(positions: np.ndarray, velocities: np.ndarray, stamp_ns=None) -
         return buf.tobytes()
 
 
-def encode_float64_vector(values, label: str) -> bytes:
-    """std_msgs/msg/Float64MultiArray with one labelled dimension: a short vector of numbers.
+def encode_float64_vector(values, labels) -> bytes:
+    """std_msgs/msg/Float64MultiArray of a few named numbers: one dim per value, in order.
 
-    Used for the per-step `stats` topic, whose label names the entries in order.
+    dim i is (labels[i], size 1, stride 1): it names data[i] where readers show the layout
+    (Foxglove's raw message view, `ros2 topic echo`), instead of one label joining all the
+    names. Used for the per-step `stats` topic.
     """
     values = np.ascontiguousarray(values, dtype=np.float64).reshape(-1)
     n = values.size
-    out = _U32.pack(1) + _string_bytes(label, 4)
-    out += b'\x00' * _pad(len(out), 4) + struct.pack('<II', n, n)
+    if len(labels) != n:
+        raise ValueError(f'{n} values but {len(labels)} labels')
+    out = _U32.pack(n)
+    for label in labels:
+        out += _string_bytes(label, len(out))
+        out += b'\x00' * _pad(len(out), 4) + struct.pack('<II', 1, 1)
     out += struct.pack('<II', 0, n)
     out += b'\x00' * (_pad(len(out), 8) if n else 0)
     return ENCAPSULATION + out + values.tobytes()

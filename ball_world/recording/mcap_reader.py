@@ -1,41 +1,72 @@
 """Read a ball_world MCAP recording: its segments, its messages, and its steps in order.
 
-A finished recording has a summary, and is read through mcap's indexed SeekingReader. A
-recording whose writer was killed has no summary and may end in a torn record; it is read
-front to back with mcap's record parsers, stopping at the first record that is not complete
-(every complete chunk is still read, and `problem` says where reading stopped).
+A recording is untrusted input: any tool may be handed a file that was cut off, bit-flipped
+or crafted. So every length is checked against the bytes that are really there before it is
+read, chunks are decompressed by this module with a bound on their output (a 98 kB file must
+not inflate to gigabytes), metadata is parsed without recursion or YAML aliases, and the
+recorded parameters are checked by the node's own rules (core.scenario) before any world is
+built from them. Anything wrong is a RecordingError with one line saying what and where.
+
+A finished recording has a summary and is read through its chunk indexes. A recording whose
+writer was killed has no summary and may end in a torn record; it is read front to back,
+stopping at the first record that is not complete (every complete chunk is still read, and
+`problem` says where reading stopped). A record that is complete but corrupt is an error,
+not an end: ball_world_repair keeps what comes before it.
 
 feed_sinks() turns a recording back into the WorldSnapshot / RunInfo / StepRecord stream the
 node produced, so any Sink (the Rerun logger, a second MCAP) can be fed from a file.
 """
 import bisect
 from dataclasses import dataclass
+import heapq
 import io
 import json
 import math
 import os
+import re
 import struct
 from typing import Optional
+import zlib
 
 from mcap.data_stream import ReadDataStream
-from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.reader import SeekingReader
-from mcap.records import (Attachment, Channel, Chunk, DataEnd, Footer, Header, Message,
-                          Metadata, Schema)
+from mcap.records import (Attachment, Channel, Chunk, ChunkIndex, DataEnd, Footer, Header,
+                          Message, Metadata, MetadataIndex, Schema, Statistics)
 from mcap.stream_reader import breakup_chunk
+from mcap.summary import Summary
 import numpy as np
 import yaml
 
+from ball_world.core import limits
 from ball_world.core.impulses import ImpulseRejected, parse_ball
-from ball_world.core.scenario import build_world, DEFAULTS
+from ball_world.core.scenario import build_world, DEFAULTS, ScenarioError, step_duration_ns
 from ball_world.msgs.cdr import (decode_pose_array, decode_state, decode_state_layout,
                                  decode_vector3_stamped)
-from ball_world.recording.mcap_writer import flatten_parameters, METADATA_NAME, TOPIC_TYPES
+from ball_world.recording.mcap_writer import (EVENT_ROLES, flatten_parameters, METADATA_NAME,
+                                              NODE_NAME, STEP_TOPICS)
 from ball_world.step_record import AppliedImpulse, RunInfo, STATS_FIELDS, StepRecord, WorldSnapshot
 
 MAGIC = b'\x89MCAP0\r\n'
 _RECORD_HEAD = struct.Struct('<BQ')
+#: A footer record: opcode, length 20, summary_start, summary_offset_start, summary_crc.
+_FOOTER = struct.Struct('<BQQQI')
+
+#: Largest uncompressed chunk accepted. The writer cuts chunks at 4 MiB between steps, so a
+#: chunk is at most 4 MiB plus one step; the largest world (limits.MAX_BALLS) makes a step
+#: of about 45 MB (poses, state, a burst of impulses and its markers). A chunk declaring more
+#: is refused before anything is decompressed, and no chunk inflates past what it declares.
+MAX_CHUNK_BYTES = 256 << 20
+#: Largest parameters document (JSON or YAML) in a metadata record: 100,000 explicit balls
+#: take about 15 MB.
+MAX_PARAMETERS_TEXT = 64 << 20
+#: Largest `topics` document and QoS text.
+MAX_SMALL_TEXT = 64 << 10
+#: Parameter names have at most two dots ('balls.x'): the parameters document nests at most
+#: this deep below ros__parameters.
+MAX_PARAMETER_NESTING = 3
+_WHOLE_NUMBER = re.compile(r'-?[0-9]{1,19}')
+_TOPIC_NAME = re.compile(r'/?[A-Za-z_~{][A-Za-z0-9_/{}~]{0,255}')
+
 _PARSERS = {
     Opcode.HEADER: Header.read,
     Opcode.SCHEMA: Schema.read,
@@ -46,22 +77,118 @@ _PARSERS = {
     Opcode.DATA_END: DataEnd.read,
     Opcode.FOOTER: Footer.read,
 }
+_SUMMARY_PARSERS = {
+    Opcode.SCHEMA: Schema.read,
+    Opcode.CHANNEL: Channel.read,
+    Opcode.CHUNK_INDEX: ChunkIndex.read,
+    Opcode.METADATA_INDEX: MetadataIndex.read,
+    Opcode.STATISTICS: Statistics.read,
+}
 
 
 class RecordingError(Exception):
     """A file that is not a readable ball_world recording; the message says why."""
 
 
-# Scanning a file that may be truncated --------------------------------------------------
+def _text(value, limit=60):
+    """A short, printable rendering of an untrusted value for an error message."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + '...'
+
+
+# Records and chunks, read with every length checked -------------------------------------
+
+def _decompress(compression, data, size):
+    """Decompress a chunk's data to at most `size` + 1 bytes (one more shows a lie)."""
+    if compression == '':
+        return data
+    if compression == 'zstd':
+        import zstandard
+        with zstandard.ZstdDecompressor().stream_reader(io.BytesIO(data)) as reader:
+            return reader.read(size + 1)
+    if compression == 'lz4':
+        import lz4.frame
+        return lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=size + 1)
+    raise RecordingError(f'a chunk uses the unknown compression {_text(compression)}')
+
+
+def chunk_records(chunk):
+    """The records inside a chunk, decompressed within MAX_CHUNK_BYTES and CRC-checked."""
+    size = chunk.uncompressed_size
+    if size > MAX_CHUNK_BYTES:
+        raise RecordingError(f'a chunk declares {size:,} bytes uncompressed, more than the '
+                             f'{MAX_CHUNK_BYTES:,} any ball_world recording needs')
+    try:
+        data = _decompress(chunk.compression, chunk.data, size)
+    except RecordingError:
+        raise
+    except Exception as error:  # noqa: B902 - each codec raises its own types on bad data
+        raise RecordingError(f'a {chunk.compression} chunk does not decompress: '
+                             f'{error or type(error).__name__}') from None
+    if len(data) != size:
+        more = 'more' if len(data) > size else f'only {len(data):,}'
+        raise RecordingError(f'a chunk declares {size:,} bytes uncompressed but inflates to '
+                             f'{more} bytes')
+    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise RecordingError('a chunk fails its CRC check: its bytes are corrupt')
+    plain = Chunk(message_start_time=chunk.message_start_time,
+                  message_end_time=chunk.message_end_time, uncompressed_size=size,
+                  uncompressed_crc=0, compression='', data=data)
+    try:
+        return breakup_chunk(plain)
+    except Exception as error:  # noqa: B902 - corrupt records raise anything
+        raise RecordingError(f'a chunk holds a corrupt record: '
+                             f'{error or type(error).__name__}') from None
+
+
+def _parse(opcode, body):
+    """The records of one complete record body: [record] or [chunk, *its records] or []."""
+    if opcode == Opcode.MESSAGE:
+        return [Message.read(ReadDataStream(io.BytesIO(body)), len(body))]
+    parser = _PARSERS.get(opcode)
+    if parser is None:
+        return []  # indexes and records this reader does not need
+    record = parser(ReadDataStream(io.BytesIO(body)))
+    if isinstance(record, Chunk):
+        # The fixed fields are 40 bytes; a shorter body means the data length field lies.
+        if len(body) != 40 + len(record.compression.encode()) + len(record.data):
+            raise ValueError('chunk data length does not match the record length')
+        return [record, *chunk_records(record)]
+    return [record]
+
+
+def _read_record(stream, offset, size, opcode):
+    """The parsed record of type `opcode` at `offset`, or RecordingError."""
+    stream.seek(offset)
+    head = stream.read(_RECORD_HEAD.size)
+    if len(head) < _RECORD_HEAD.size:
+        raise RecordingError(f'no record at byte {offset}: the file ends there')
+    found, length = _RECORD_HEAD.unpack(head)
+    if found != opcode:
+        raise RecordingError(f'the index points at byte {offset}, where no '
+                             f'{Opcode(opcode).name.lower()} record is')
+    if length > size - offset - _RECORD_HEAD.size:
+        raise RecordingError(f'the record at byte {offset} needs {length:,} bytes; the file '
+                             'ends before')
+    try:
+        return _parse(opcode, stream.read(length))
+    except RecordingError as error:
+        raise RecordingError(f'the record at byte {offset}: {error}') from None
+    except Exception as error:  # noqa: B902 - corrupt bytes raise anything
+        raise RecordingError(f'the record at byte {offset} is corrupt: '
+                             f'{error or type(error).__name__}') from None
+
 
 class Scan:
     """Reads an MCAP front to back, record by record, up to the first incomplete one.
 
     records() yields every complete top-level record of the data section in file order;
     a Chunk is yielded itself and then the records inside it, and only if it is whole
-    (its length fits in the file and its CRC matches). After iterating: `end` is the byte
-    offset after the last complete record, `finished` is True when the data section ended
-    properly (DataEnd or Footer), and `problem` otherwise says where and why reading stopped.
+    (its length fits in the file, it inflates to what it declares and its CRC matches).
+    After iterating: `end` is the byte offset after the last complete record, `finished`
+    is True when the data section ended properly (DataEnd or Footer), and `problem`
+    otherwise says where and why reading stopped; `corrupt` is True when that was a
+    complete record with bad content, rather than a file cut short.
     """
 
     def __init__(self, stream, size):
@@ -70,6 +197,7 @@ class Scan:
         self.end = 0
         self.finished = False
         self.problem = None
+        self.corrupt = False
 
     def records(self):
         stream = self.stream
@@ -96,7 +224,9 @@ class Scan:
             try:
                 parsed = _parse(opcode, stream.read(length))
             except Exception as error:  # noqa: B902 - corrupt bytes raise anything
-                self.problem = f'the record at byte {offset} is corrupt: {error}'
+                self.problem = (f'the record at byte {offset} is corrupt: '
+                                f'{error or type(error).__name__}')
+                self.corrupt = True
                 return
             offset = self.end = body_at + length
             yield from parsed
@@ -105,20 +235,127 @@ class Scan:
                 return
 
 
-def _parse(opcode, body):
-    """The records of one complete record body: [record] or [chunk, *its records] or []."""
-    parser = _PARSERS.get(opcode)
-    if opcode == Opcode.MESSAGE:
-        return [Message.read(ReadDataStream(io.BytesIO(body)), len(body))]
-    if parser is None:
-        return []  # indexes and records this reader does not need
-    record = parser(ReadDataStream(io.BytesIO(body)))
-    if isinstance(record, Chunk):
-        # The fixed fields are 40 bytes; a shorter body means the data length field lies.
-        if len(body) != 40 + len(record.compression.encode()) + len(record.data):
-            raise ValueError('chunk data length does not match the record length')
-        return [record, *breakup_chunk(record, validate_crc=True)]
-    return [record]
+def read_summary(stream, size):
+    """The summary of a finished MCAP, or None when there is none or it does not hold up.
+
+    Read by hand (footer, then the summary section as one bounded block, its CRC checked),
+    so that lengths in a damaged footer or index can never make a read past the file.
+    """
+    footer_at = size - len(MAGIC) - _FOOTER.size
+    if footer_at < len(MAGIC):
+        return None
+    stream.seek(footer_at)
+    tail = stream.read(_FOOTER.size + len(MAGIC))
+    if len(tail) != _FOOTER.size + len(MAGIC) or tail[_FOOTER.size:] != MAGIC:
+        return None
+    opcode, length, start, offsets_at, crc = _FOOTER.unpack(tail[:_FOOTER.size])
+    if opcode != Opcode.FOOTER or length != _FOOTER.size - _RECORD_HEAD.size \
+            or not len(MAGIC) <= start < footer_at:
+        return None
+    stream.seek(start)
+    section = stream.read(footer_at - start)
+    if crc and zlib.crc32(tail[:_FOOTER.size - 4], zlib.crc32(section)) != crc:
+        return None
+    summary = Summary()
+    try:
+        _fill_summary(summary, section)
+    except Exception:  # noqa: B902 - a corrupt summary is read as none: the file is scanned
+        return None
+    return summary if summary.statistics is not None else None
+
+
+def _fill_summary(summary, section):
+    position = 0
+    while position < len(section):
+        opcode, length = _RECORD_HEAD.unpack_from(section, position)
+        body_at = position + _RECORD_HEAD.size
+        if length > len(section) - body_at:
+            raise ValueError('a summary record runs past the summary section')
+        parser = _SUMMARY_PARSERS.get(opcode)
+        if parser is not None:
+            record = parser(ReadDataStream(io.BytesIO(section[body_at:body_at + length])))
+            if isinstance(record, Schema):
+                summary.schemas[record.id] = record
+            elif isinstance(record, Channel):
+                summary.channels[record.id] = record
+            elif isinstance(record, ChunkIndex):
+                summary.chunk_indexes.append(record)
+            elif isinstance(record, MetadataIndex):
+                summary.metadata_indexes.append(record)
+            else:
+                summary.statistics = record
+        position = body_at + length
+
+
+# Untrusted metadata --------------------------------------------------------------------
+
+class _NoAliasLoader(yaml.SafeLoader):
+    """YAML without aliases: a few hundred bytes of nested aliases expand to gigabytes."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            raise yaml.YAMLError('YAML aliases are not accepted in a recording')
+        return super().compose_node(parent, index)
+
+
+def load_untrusted(text, what, limit, json_text=True):
+    """Parse JSON (or YAML without aliases) from a recording, bounded in size and nesting."""
+    if not isinstance(text, str):
+        raise RecordingError(f'{what} is not text')
+    if len(text) > limit:
+        raise RecordingError(f'{what} is {len(text):,} characters long; at most {limit:,} '
+                             'are accepted')
+    try:
+        if json_text:
+            return json.loads(text)
+        return yaml.load(text, Loader=_NoAliasLoader)
+    except RecursionError:
+        raise RecordingError(f'{what} nests too deeply') from None
+    except (ValueError, yaml.YAMLError) as error:
+        reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise RecordingError(f'{what} does not parse: {reason}') from None
+
+
+def _whole_number(values, key, low, high):
+    text = values.get(key)
+    if not isinstance(text, str) or not _WHOLE_NUMBER.fullmatch(text):
+        raise RecordingError(f"'{key}' is {_text(text)}, not a whole number")
+    value = int(text)
+    if not low <= value <= high:
+        raise RecordingError(f"'{key}' is {value:,}; it must be between {low:,} and "
+                             f'{high:,}')
+    return value
+
+
+def _flat_parameters(document):
+    """The flat {name: value} of a params-file document, refusing any other shape."""
+    if not isinstance(document, dict) or not isinstance(document.get(NODE_NAME), dict) \
+            or not isinstance(document[NODE_NAME].get('ros__parameters'), dict):
+        raise RecordingError(f"the parameters are not a '{NODE_NAME}: ros__parameters:' "
+                             'document')
+
+    def depth(node, level):
+        if level > MAX_PARAMETER_NESTING:
+            raise RecordingError('the parameters nest deeper than any ball_world parameter')
+        for value in node.values():
+            if isinstance(value, dict):
+                depth(value, level + 1)
+
+    depth(document[NODE_NAME]['ros__parameters'], 1)
+    return flatten_parameters(document)
+
+
+def _topics(values):
+    if 'topics' not in values:
+        return {role: f'/{role}' for role in STEP_TOPICS}
+    topics = load_untrusted(values['topics'], "'topics'", MAX_SMALL_TEXT)
+    if not isinstance(topics, dict) or any(
+            role not in topics for role in STEP_TOPICS) or not all(
+            isinstance(topic, str) and _TOPIC_NAME.fullmatch(topic)
+            for topic in topics.values()):
+        raise RecordingError(f"'topics' is not a map of every role to a topic name: "
+                             f'{_text(topics)}')
+    return topics
 
 
 # What a recording holds ---------------------------------------------------------------
@@ -137,23 +374,64 @@ class Segment:
 
     @classmethod
     def from_metadata(cls, values):
+        """The segment a 'ball_world' metadata record describes, checked as the node would.
+
+        The parameters must pass the node's own checks (scenario.step_duration_ns checks
+        every value against the parameter table) and give the recorded dt, before any
+        world is built from them.
+        """
+        index = _whole_number(values, 'segment', 0, 2**63 - 1)
         try:
-            if 'parameters_json' in values:
-                document = json.loads(values['parameters_json'])
-            else:
-                document = yaml.safe_load(values['parameters'])
-            parameters = {**DEFAULTS, **flatten_parameters(document)}
-            return cls(index=int(values['segment']),
-                       log_offset_ns=int(values['log_offset_ns']),
-                       dt_ns=int(values['dt_ns']),
-                       frame_id=values.get('frame_id', parameters['frame_id']),
-                       package_version=values.get('package_version', ''),
-                       parameters=parameters,
-                       topics=json.loads(values.get('topics', 'null'))
-                       or {role: f'/{role}' for role in TOPIC_TYPES})
-        except (KeyError, TypeError, ValueError, yaml.YAMLError) as error:
-            raise RecordingError(f"unreadable '{METADATA_NAME}' metadata record: "
-                                 f'{error!r}') from None
+            segment = cls._checked(values, index)
+        except RecordingError as error:
+            raise RecordingError(f"segment {index}: '{METADATA_NAME}' metadata: "
+                                 f'{error}') from None
+        return segment
+
+    @classmethod
+    def _checked(cls, values, index):
+        log_offset_ns = _whole_number(values, 'log_offset_ns', 0, 2**63 - 1)
+        dt_ns = _whole_number(values, 'dt_ns', 1, round(limits.MAX_DT * 1e9))
+        if 'parameters_json' in values:
+            document = load_untrusted(values['parameters_json'], "'parameters_json'",
+                                      MAX_PARAMETERS_TEXT)
+        else:
+            document = load_untrusted(values.get('parameters'), "'parameters'",
+                                      MAX_PARAMETERS_TEXT, json_text=False)
+        parameters = {**DEFAULTS, **_flat_parameters(document)}
+        try:
+            expected_dt_ns = step_duration_ns(parameters)
+        except ScenarioError as error:
+            raise RecordingError(str(error)) from None
+        if expected_dt_ns != dt_ns:
+            raise RecordingError(f"'dt_ns' is {dt_ns} but the parameters give "
+                                 f'{expected_dt_ns}')
+        frame_id = values.get('frame_id', parameters['frame_id'])
+        version = values.get('package_version', '')
+        for key, text in (('frame_id', frame_id), ('package_version', version)):
+            if not isinstance(text, str) or len(text) > limits.MAX_NAME_LENGTH:
+                raise RecordingError(f"'{key}' is not a name: {_text(text)}")
+        return cls(index=index, log_offset_ns=log_offset_ns, dt_ns=dt_ns, frame_id=frame_id,
+                   package_version=version, parameters=parameters, topics=_topics(values))
+
+    def expected_balls(self):
+        """How many balls the parameters make (explicit and random), without building.
+
+        None when they are not even numbers: build_world then says what is wrong.
+        """
+        explicit = self.parameters['balls.x']
+        count = self.parameters['random.count']
+        if not isinstance(explicit, list) or isinstance(count, bool) \
+                or not isinstance(count, int):
+            return None
+        return len(explicit) + count
+
+    def check_ball_count(self, recorded):
+        """Refuse a step whose ball count the parameters cannot give, before any building."""
+        expected = self.expected_balls()
+        if expected is not None and recorded != expected:
+            raise RecordingError(f'segment {self.index}: its parameters make {expected:,} '
+                                 f'balls but the recording has {recorded:,}')
 
 
 @dataclass(frozen=True)
@@ -214,8 +492,24 @@ class RecordedStep:
         return (self.positions is not None and self.state is not None
                 and self.stats is not None)
 
+    @property
+    def ball_count(self):
+        """Balls in this step's messages (None when it has neither balls nor state)."""
+        for rows in (self.positions, self.state):
+            if rows is not None:
+                return len(rows)
+        return None
+
     def stat(self, name):
         return float(self.stats[STATS_FIELDS.index(name)])
+
+
+def decode_stats(data):
+    """The STATS_FIELDS values of a `stats` message (ValueError if it has another count)."""
+    values = decode_state_layout(data)[2]
+    if len(values) != len(STATS_FIELDS):
+        raise ValueError(f'stats has {len(values)} values, not {len(STATS_FIELDS)}')
+    return values
 
 
 class Recording:
@@ -225,6 +519,7 @@ class Recording:
     could not be read to its end, or None), complete_bytes, size, topics
     ({topic: TopicInfo}), segments ([Segment] in log-time order), compressions (set of
     chunk compressions), chunk_count, message_count, start_ns / end_ns (log times).
+    Raises RecordingError for a file that is not a readable ball_world recording.
     """
 
     def __init__(self, path):
@@ -237,11 +532,11 @@ class Recording:
             raise RecordingError(f'{self.path}: {error}') from None
 
     def _load(self):
-        self.size = os.path.getsize(self.path)
         with open(self.path, 'rb') as stream:
+            self.size = os.fstat(stream.fileno()).st_size
             if stream.read(len(MAGIC)) != MAGIC:
                 raise RecordingError('not an MCAP file (bad magic)')
-            summary = _summary(stream)
+            summary = read_summary(stream, self.size)
             if summary is not None:
                 self._read_indexed(stream, summary)
             else:
@@ -258,31 +553,35 @@ class Recording:
                 offered_qos_profiles=channel.metadata.get('offered_qos_profiles', ''),
                 type_hash=channel.metadata.get('topic_type_hash', ''))
         self.message_count = sum(counts.values())
-        segments = [Segment.from_metadata(m.metadata) for m in self.metadata
-                    if m.name == METADATA_NAME]
+        segments = [Segment.from_metadata(record.metadata) for record in self.metadata]
+        if not segments:
+            raise RecordingError(f"no '{METADATA_NAME}' metadata record: not a ball_world "
+                                 'recording')
         self.segments = sorted(segments, key=lambda s: s.log_offset_ns)
         self._offsets = [s.log_offset_ns for s in self.segments]
-        self.roles = {}
+        self.roles = {}  # recorded topic -> step role, for the topics steps() reads
         for segment in self.segments:
             for role, topic in segment.topics.items():
-                self.roles.setdefault(topic, role)
+                if role in STEP_TOPICS:
+                    self.roles.setdefault(topic, role)
 
     def _read_indexed(self, stream, summary):
-        stream.seek(0)
-        reader = SeekingReader(stream)
-        self.header = reader.get_header()
+        self.header = _read_record(stream, len(MAGIC), self.size, Opcode.HEADER)[0]
         self.has_summary = True
         self.problem = None
         self.complete_bytes = self.size
         self.schemas = dict(summary.schemas)
         self.channels = dict(summary.channels)
-        self.metadata = list(reader.iter_metadata())
+        self.metadata = [_read_record(stream, index.offset, self.size, Opcode.METADATA)[0]
+                         for index in summary.metadata_indexes
+                         if index.name == METADATA_NAME]
         self.compressions = {index.compression for index in summary.chunk_indexes}
         self.chunk_count = len(summary.chunk_indexes)
+        self._chunk_indexes = list(summary.chunk_indexes)
         stats = summary.statistics
-        self._counts = dict(stats.channel_message_counts) if stats else {}
-        self.start_ns = stats.message_start_time if stats else None
-        self.end_ns = stats.message_end_time if stats else None
+        self._counts = dict(stats.channel_message_counts)
+        self.start_ns = stats.message_start_time if stats.message_count else None
+        self.end_ns = stats.message_end_time if stats.message_count else None
 
     def _read_scanned(self, stream):
         scan = Scan(stream, self.size)
@@ -306,10 +605,13 @@ class Recording:
                 self.schemas[record.id] = record
             elif isinstance(record, Channel):
                 self.channels[record.id] = record
-            elif isinstance(record, Metadata):
+            elif isinstance(record, Metadata) and record.name == METADATA_NAME:
                 self.metadata.append(record)
             elif isinstance(record, Header):
                 self.header = record
+        if scan.corrupt:
+            raise RecordingError(f'{scan.problem} (ball_world_repair keeps the records '
+                                 'before it)')
         if self.header is None:
             raise RecordingError('no MCAP header record')
         self.problem = scan.problem
@@ -317,42 +619,85 @@ class Recording:
 
     # Messages -------------------------------------------------------------------------
 
+    def _channel_ids(self, topics):
+        if topics is None:
+            return None
+        return {channel_id for channel_id, channel in self.channels.items()
+                if channel.topic in topics}
+
     def messages(self, topics=None):
         """RecordedMessages in log-time order (file order for a file without summary)."""
-        topics = None if topics is None else set(topics)
+        wanted = self._channel_ids(None if topics is None else set(topics))
         with open(self.path, 'rb') as stream:
             if self.has_summary:
-                reader = SeekingReader(stream)
-                items = ((channel, message) for _, channel, message in
-                         reader.iter_messages(topics=topics, log_time_order=True))
+                records = self._indexed_messages(stream, wanted)
             else:
-                items = ((self.channels[record.channel_id], record)
-                         for record in Scan(stream, self.size).records()
-                         if isinstance(record, Message))
-            for channel, message in items:
-                if topics is not None and channel.topic not in topics:
-                    continue
-                yield self._message(channel, message)
+                records = (record for record in Scan(stream, self.size).records()
+                           if isinstance(record, Message))
+            for record in records:
+                if wanted is None or record.channel_id in wanted:
+                    yield self._message(record)
+
+    def _chunks(self, wanted):
+        """The chunk indexes that may hold messages of the wanted channels."""
+        return [index for index in self._chunk_indexes
+                if wanted is None or not index.message_index_offsets
+                or not wanted.isdisjoint(index.message_index_offsets)]
+
+    def _chunk_messages(self, stream, index, wanted):
+        records = _read_record(stream, index.chunk_start_offset, self.size, Opcode.CHUNK)
+        return [record for record in records[1:] if isinstance(record, Message)
+                and (wanted is None or record.channel_id in wanted)]
+
+    def _indexed_messages(self, stream, wanted):
+        """Messages of the chunks in log-time order (file order among equal times).
+
+        Chunks are opened in order of their first log time, and only once every message
+        already read is later than that time, so at most the overlapping chunks are held.
+        """
+        chunks = sorted(self._chunks(wanted),
+                        key=lambda index: (index.message_start_time, index.chunk_start_offset))
+        pending = []
+        order = 0
+        position = 0
+        while position < len(chunks) or pending:
+            while position < len(chunks) and (
+                    not pending or chunks[position].message_start_time <= pending[0][0]):
+                for record in self._chunk_messages(stream, chunks[position], wanted):
+                    heapq.heappush(pending, (record.log_time, order, record))
+                    order += 1
+                position += 1
+            yield heapq.heappop(pending)[2]
 
     def last_message(self, topic):
         """The last message on a topic, or None (reads only the last chunk when indexed)."""
-        if self.has_summary:
-            with open(self.path, 'rb') as stream:
-                for _, channel, message in SeekingReader(stream).iter_messages(
-                        topics=[topic], log_time_order=True, reverse=True):
-                    return self._message(channel, message)
-            return None
-        last = None
-        for last in self.messages([topic]):
-            pass
-        return last
+        if not self.has_summary:
+            last = None
+            for last in self.messages([topic]):
+                pass
+            return last
+        wanted = self._channel_ids({topic})
+        best = None
+        with open(self.path, 'rb') as stream:
+            for index in sorted(self._chunks(wanted), key=lambda i: i.message_end_time,
+                                reverse=True):
+                if best is not None and index.message_end_time < best.log_time:
+                    break
+                for record in self._chunk_messages(stream, index, wanted):
+                    if best is None or record.log_time >= best.log_time:
+                        best = record
+        return None if best is None else self._message(best)
 
-    def _message(self, channel, message):
+    def _message(self, record):
+        channel = self.channels.get(record.channel_id)
+        if channel is None:
+            raise RecordingError(f'{self.path}: a message on channel {record.channel_id}, '
+                                 'which the file never declares')
         schema = self.schemas.get(channel.schema_id)
         return RecordedMessage(topic=channel.topic, type=schema.name if schema else '',
-                               log_time_ns=message.log_time,
-                               publish_time_ns=message.publish_time,
-                               sequence=message.sequence, data=message.data)
+                               log_time_ns=record.log_time,
+                               publish_time_ns=record.publish_time,
+                               sequence=record.sequence, data=record.data)
 
     # Steps ----------------------------------------------------------------------------
 
@@ -385,32 +730,17 @@ class Recording:
             yield builder.build()
 
 
-def _summary(stream):
-    """The summary of a finished MCAP, or None for a file whose writer did not finish."""
-    try:
-        stream.seek(-len(MAGIC), io.SEEK_END)
-        if stream.read(len(MAGIC)) != MAGIC:
-            return None
-        stream.seek(0)
-        summary = SeekingReader(stream).get_summary()
-    except (McapError, ValueError, struct.error, OSError, UnicodeDecodeError):
-        return None
-    if summary is None or summary.statistics is None:
-        return None
-    return summary
-
-
 class _StepBuilder:
     def __init__(self, position, segment, log_time_ns):
         self.position = position
         self.segment = segment
         self.log_time_ns = log_time_ns
         self.data = {}
-        self.impulses = []
+        self.events = {role: [] for role in EVENT_ROLES}
 
     def add(self, role, data):
-        if role == 'impulse':
-            self.impulses.append(data)
+        if role in self.events:
+            self.events[role].append(data)
         else:
             self.data[role] = data
 
@@ -423,12 +753,15 @@ class _StepBuilder:
             if 'state' in self.data:
                 state = decode_state(self.data['state'])
             if 'stats' in self.data:
-                stats = decode_state_layout(self.data['stats'])[2]
+                stats = decode_stats(self.data['stats'])
             impulses = tuple(RecordedImpulse(*decode_vector3_stamped(cdr), cdr=cdr)
-                             for cdr in self.impulses)
+                             for cdr in self.events['impulse'])
         except ValueError as error:
             raise RecordingError(f'undecodable message at log time {self.log_time_ns} ns: '
                                  f'{error}') from None
+        if positions is not None and state is not None and len(positions) != len(state):
+            raise RecordingError(f'at log time {self.log_time_ns} ns balls has '
+                                 f'{len(positions)} poses but state {len(state)} rows')
         return RecordedStep(
             segment=self.position, step=stamp_ns // self.segment.dt_ns, stamp_ns=stamp_ns,
             log_time_ns=self.log_time_ns, positions=positions, state=state, stats=stats,
@@ -448,18 +781,17 @@ def snapshot_and_info(segment, first_step=None):
     """The WorldSnapshot and RunInfo the node gave its sinks when the segment began.
 
     Radii, masses and walls come from rebuilding the world; the step-0 positions and
-    velocities are the recorded ones when step 0 was recorded.
+    velocities are the recorded ones when step 0 was recorded. A first step whose ball
+    count the parameters cannot give is refused before the world is built.
     """
+    if first_step is not None and first_step.ball_count is not None:
+        segment.check_ball_count(first_step.ball_count)
     world = segment_world(segment)
     positions = world.positions.copy()
     velocities = world.velocities.copy()
     if first_step is not None and first_step.step == 0 and first_step.complete:
         positions = first_step.positions.copy()
         velocities = first_step.state[:, 2:4].copy()
-    if first_step is not None and first_step.positions is not None \
-            and len(first_step.positions) != len(world):
-        raise RecordingError(f'segment {segment.index}: its parameters build {len(world)} '
-                             f'balls but the recording has {len(first_step.positions)}')
     snapshot = WorldSnapshot(radii=world.radii.copy(), masses=world.masses.copy(),
                              walls=world.walls.segments.copy(), positions=positions,
                              velocities=velocities, dt_ns=segment.dt_ns,
@@ -468,6 +800,14 @@ def snapshot_and_info(segment, first_step=None):
                    segment=segment.index, log_offset_ns=segment.log_offset_ns,
                    package_version=segment.package_version)
     return snapshot, info
+
+
+def _count(step, name):
+    """A collision count from a step's stats: a whole number, or RecordingError."""
+    value = step.stat(name)
+    if not (math.isfinite(value) and value >= 0 and value.is_integer()):
+        raise RecordingError(f'step {step.step}: stats {name} is {value}, not a count')
+    return int(value)
 
 
 def step_record(step):
@@ -485,7 +825,7 @@ def step_record(step):
     return StepRecord(
         step=step.step, stamp_ns=step.stamp_ns, log_time_ns=step.log_time_ns,
         positions=step.positions.copy(), velocities=step.state[:, 2:4].copy(),
-        ball_ball=int(step.stat('ball_ball')), ball_wall=int(step.stat('ball_wall')),
+        ball_ball=_count(step, 'ball_ball'), ball_wall=_count(step, 'ball_wall'),
         kinetic_energy=step.stat('kinetic_energy'),
         momentum=np.array([step.stat('momentum_x'), step.stat('momentum_y')]),
         balls_cdr=step.balls_cdr, state_cdr=step.state_cdr, stats_cdr=step.stats_cdr,
@@ -501,6 +841,7 @@ def feed_sinks(path, sinks, close=True):
     """
     recording = path if isinstance(path, Recording) else Recording(path)
     current = None
+    balls = 0
     fed = 0
     for step in recording.steps():
         if not step.complete:
@@ -510,6 +851,11 @@ def feed_sinks(path, sinks, close=True):
             for sink in sinks:
                 sink.start_segment(snapshot, info)
             current = step.segment
+            balls = len(snapshot.radii)
+        if len(step.positions) != balls:
+            raise RecordingError(f'{recording.path}: step {step.step} of segment '
+                                 f'{recording.segments[current].index} has '
+                                 f'{len(step.positions)} balls, not {balls}')
         record = step_record(step)
         for sink in sinks:
             sink.write_step(record)

@@ -1,0 +1,231 @@
+"""Claiming a file to record into: never destroy a recording by accident, never hang on one.
+
+Why one module: the node's two recorders (MCAP and Rerun) and the tools that write files
+(ball_world_to_rrd, ball_world_repair) must follow the same rules, and each rule has a trap
+that is easy to get wrong in one of four places:
+
+- An existing path is refused unless the caller says to overwrite (rosbag2 likewise refuses
+  an existing output). A symlink counts as existing, whatever it points to: O_EXCL refuses it.
+- Only a regular file is ever written. A FIFO would block open() until a reader comes, and a
+  directory or device is no recording, so the file is opened with O_NONBLOCK and its type is
+  read from the open descriptor (fstat), never checked first and opened later.
+- The file is locked (flock, exclusive, non-blocking) for as long as it is recorded, so a
+  second recorder (another node, a tool) is refused at once instead of interleaving with the
+  first. An existing file is truncated only once the lock is held.
+- Two outputs of one run may not be one file: paths are compared resolved (symlinks and
+  relative parts), and the open files by device and inode (hard links).
+
+A claim that is given up before anything was recorded (the start failed) removes the file it
+created, so correcting a typo and starting again is not refused for a file that holds nothing.
+"""
+import errno
+import fcntl
+import io
+import os
+import stat
+
+#: What a non-regular file is, for the refusal message.
+_KINDS = (
+    (stat.S_ISDIR, 'a directory'),
+    (stat.S_ISFIFO, 'a FIFO'),
+    (stat.S_ISCHR, 'a character device'),
+    (stat.S_ISBLK, 'a block device'),
+    (stat.S_ISSOCK, 'a socket'),
+)
+
+_OPEN_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK | os.O_NOCTTY | os.O_CLOEXEC
+
+
+class OutputError(OSError):
+    """A file that may not or cannot be recorded into; str() is '<path>: <reason>'."""
+
+    def __str__(self):
+        return f'{self.filename}: {self.strerror}'
+
+
+def _kind(mode):
+    for test, name in _KINDS:
+        if test(mode):
+            return name
+    return 'not a regular file'
+
+
+def _not_regular(path, mode):
+    return OutputError(errno.EINVAL, f'is {_kind(mode)}, not a regular file', path)
+
+
+class OutputClaim:
+    """A regular file created or truncated for writing, locked until released.
+
+    writer() hands the descriptor over as a buffered binary file: closing that file releases
+    the lock. Otherwise release() does. discard() releases and removes a file this claim
+    created (nothing was recorded into it).
+    """
+
+    def __init__(self, path, fd, created):
+        self.path = path
+        self.created = created
+        self._fd = fd
+        status = os.fstat(fd)
+        self.identity = (status.st_dev, status.st_ino)
+        self._writer = None
+
+    def writer(self):
+        """The file as a buffered binary writer (the lock goes with it)."""
+        if self._writer is None:
+            self._writer = io.open(self._fd, 'wb', closefd=True)
+        return self._writer
+
+    def release(self):
+        """Close the file and so drop the lock; a second call does nothing."""
+        if self._writer is not None:
+            try:
+                self._writer.close()
+            except OSError:
+                pass  # the recorder reported its own write error already
+        elif self._fd is not None:
+            os.close(self._fd)
+        self._fd = None
+
+    def discard(self):
+        """Release, and remove the file if this claim created it and it is still there."""
+        self.release()
+        if self.created:
+            try:
+                status = os.lstat(self.path)
+                if (status.st_dev, status.st_ino) == self.identity:
+                    os.unlink(self.path)
+            except OSError:
+                pass  # already gone or replaced: nothing of ours to remove
+
+
+def same_path(first, second):
+    """Whether two paths name one file once symlinks and relative parts are resolved."""
+    return os.path.realpath(first) == os.path.realpath(second)
+
+
+def claim_output(path, overwrite=False, hint='', others=()):
+    """Create (or, with overwrite, truncate) `path` for recording, locked: an OutputClaim.
+
+    hint completes the refusal of an existing file ('set record.overwrite:=true', 'pass
+    --force'). others: (label, OutputClaim) pairs already held by the same run, which this
+    one must not share a file with. Raises OutputError, whose message names the path.
+    """
+    path = os.fspath(path)
+    for label, other in others:
+        if same_path(path, other.path):
+            raise OutputError(errno.EEXIST, f'is the same file as {label}', path)
+    created = True
+    try:
+        fd = os.open(path, _OPEN_FLAGS | os.O_EXCL, 0o666)
+    except FileExistsError:
+        if not overwrite:
+            raise _refuse_existing(path, hint) from None
+        created = False
+        fd = _open_existing(path)
+    except OSError as error:
+        raise OutputError(error.errno, error.strerror, path) from None
+    try:
+        return _lock(path, fd, created, others)
+    except OutputError as error:
+        os.close(fd)
+        # A file we created but another recorder locked first is that recorder's now.
+        if created and error.errno != errno.EBUSY:
+            os.unlink(path)
+        raise
+
+
+def _refuse_existing(path, hint):
+    try:
+        mode = os.stat(path).st_mode  # follows a symlink: say what it points to
+    except OSError:
+        mode = stat.S_IFLNK  # a dangling symlink
+    if not stat.S_ISREG(mode) and not stat.S_ISLNK(mode):
+        return _not_regular(path, mode)
+    advice = f'; {hint} to replace it' if hint else ''
+    return OutputError(errno.EEXIST, f'already exists{advice}', path)
+
+
+def _open_existing(path):
+    try:
+        return os.open(path, _OPEN_FLAGS)
+    except OSError as error:
+        # A FIFO without a reader answers ENXIO and a directory EISDIR: say what it is.
+        try:
+            mode = os.stat(path).st_mode
+        except OSError:
+            mode = stat.S_IFREG
+        if not stat.S_ISREG(mode):
+            raise _not_regular(path, mode) from None
+        raise OutputError(error.errno, error.strerror, path) from None
+
+
+def _lock(path, fd, created, others):
+    status = os.fstat(fd)
+    if not stat.S_ISREG(status.st_mode):
+        raise _not_regular(path, status.st_mode)
+    for label, other in others:
+        if (status.st_dev, status.st_ino) == other.identity:
+            raise OutputError(errno.EEXIST, f'is the same file as {label}', path)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        raise OutputError(errno.EBUSY, 'is being recorded by another process (it is locked)',
+                          path) from None
+    if not created:
+        os.ftruncate(fd, 0)
+    os.set_blocking(fd, True)
+    return OutputClaim(path, fd, created)
+
+
+def is_locked(path):
+    """Whether another open file holds the recording lock on `path` (False if none is there).
+
+    For tools that replace a file whole (repair in place): a file being recorded is refused.
+    """
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | os.O_CLOEXEC)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)
+    return False
+
+
+class ClaimedSink:
+    """A Sink whose output file is held by a claim, released when the sink is closed.
+
+    For recorders that open their file by path themselves (the Rerun SDK does): the claim
+    is taken first (refusing existing, shared, locked and non-regular files) and held, with
+    its lock, for the life of the recording. abandon() is for a start that failed.
+    """
+
+    def __init__(self, sink, claim):
+        self.sink = sink
+        self.claim = claim
+
+    def start_segment(self, world, info):
+        self.sink.start_segment(world, info)
+
+    def write_step(self, record):
+        self.sink.write_step(record)
+
+    def flush(self):
+        self.sink.flush()
+
+    def close(self):
+        try:
+            self.sink.close()
+        finally:
+            self.claim.release()
+
+    def abandon(self):
+        """Close the sink and remove the file if the claim created it."""
+        try:
+            self.sink.close()
+        finally:
+            self.claim.discard()
