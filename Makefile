@@ -13,7 +13,7 @@ setup:
 run: setup
 	mkdir -p runs
 	$(VENV)/bin/ball_world --ros-args --params-file config/ball_world.yaml -p max_steps:=$(STEPS) \
-	  -p record.mcap:=runs/ball_world.mcap -p record.rerun:=runs/ball_world.rrd
+	  -p record.overwrite:=true -p record.mcap:=runs/ball_world.mcap -p record.rerun:=runs/ball_world.rrd
 	$(VENV)/bin/ball_world_info runs/ball_world.mcap
 
 test: setup

@@ -263,6 +263,8 @@ PARAMETERS = (
     Parameter('markers.rate_hz', DOUBLE, 10.0, 'Wall-clock rate of the RViz markers; 0 turns '
               'them off. The node lowers it when markers would take over 5% of its time.',
               AT_ONCE, 0.0, 1000.0),
+    Parameter('record.overwrite', BOOL, False, 'Allow recording over an existing file '
+              '(otherwise it is refused at start).', AT_START),
     Parameter('record.mcap', STRING, '', 'MCAP file to record to; empty records nothing.',
               AT_START, max_length=MAX_PATH_LENGTH),
     Parameter('record.rerun', STRING, '', 'Rerun .rrd file to log to; empty logs nothing.',

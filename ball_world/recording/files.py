@@ -15,8 +15,9 @@ that is easy to get wrong in one of four places:
 - Two outputs of one run may not be one file: paths are compared resolved (symlinks and
   relative parts), and the open files by device and inode (hard links).
 
-A claim that is given up before anything was recorded (the start failed) removes the file it
-created, so correcting a typo and starting again is not refused for a file that holds nothing.
+A recording closed before anything was recorded into it (the start failed) removes the file
+its claim created, so correcting a typo and starting again is not refused for a file that
+holds nothing.
 """
 import errno
 import fcntl
@@ -201,14 +202,18 @@ class ClaimedSink:
 
     For recorders that open their file by path themselves (the Rerun SDK does): the claim
     is taken first (refusing existing, shared, locked and non-regular files) and held, with
-    its lock, for the life of the recording. abandon() is for a start that failed.
+    its lock, for the life of the recording. Closed before any segment began (the start
+    failed), the sink leaves no file behind if the claim created it, as rosbag2 removes an
+    output folder it created and recorded nothing into.
     """
 
     def __init__(self, sink, claim):
         self.sink = sink
         self.claim = claim
+        self._segments = 0
 
     def start_segment(self, world, info):
+        self._segments += 1
         self.sink.start_segment(world, info)
 
     def write_step(self, record):
@@ -221,11 +226,7 @@ class ClaimedSink:
         try:
             self.sink.close()
         finally:
-            self.claim.release()
-
-    def abandon(self):
-        """Close the sink and remove the file if the claim created it."""
-        try:
-            self.sink.close()
-        finally:
-            self.claim.discard()
+            if self._segments:
+                self.claim.release()
+            else:
+                self.claim.discard()

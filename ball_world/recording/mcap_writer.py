@@ -258,6 +258,8 @@ class McapSink:
             raise ValueError(f"compression must be one of {', '.join(COMPRESSIONS)}, got "
                              f'{compression!r}')
         claim = output if isinstance(output, OutputClaim) else claim_output(output, overwrite)
+        self._claim = claim
+        self._segments = 0
         self.path = claim.path
         self.compression = compression
         self.chunk_bytes = int(chunk_bytes)
@@ -278,8 +280,7 @@ class McapSink:
         try:
             self._guard(self._start)
         except McapRecordingError:
-            if output is not claim:
-                claim.discard()  # nothing was recorded: leave no empty file behind
+            claim.discard()  # nothing was recorded: leave no empty file behind
             raise
 
     def _start(self):
@@ -290,6 +291,7 @@ class McapSink:
 
     def start_segment(self, world, info):
         self._check_open()
+        self._segments += 1
         self._guard(self._start_segment, world, info)
 
     def write_step(self, record):
@@ -304,11 +306,17 @@ class McapSink:
         self._guard(self._flush)
 
     def close(self):
-        """Write the summary and footer and close the file; a second call does nothing."""
+        """Write the summary and footer and close the file; a second call does nothing.
+
+        A file closed before any segment began holds nothing: it is removed if this sink
+        created it (a start that failed leaves no file to refuse the next start).
+        """
         if self._closed:
             return
         self._guard(self._finish)
         self._closed = True
+        if not self._segments:
+            self._claim.discard()
 
     # Implementation ---------------------------------------------------------------------
 

@@ -74,19 +74,34 @@ class StartupError(Exception):
 
 
 def open_sinks(values):
-    """The recording sinks the parameters ask for, opened now so a bad path fails at start."""
+    """The recording sinks the parameters ask for, opened now so a bad path fails at start.
+
+    Each file is claimed first (recording.files): an existing one needs record.overwrite,
+    and one that is not a regular file, is being recorded by another process, or is the
+    other recording's file is refused.
+    """
+    from ball_world.recording.files import claim_output, ClaimedSink
+    claims = []
     sinks = []
+    name = None
     try:
-        if values['record.mcap']:
-            from ball_world.recording.mcap_writer import McapSink
-            sinks.append(BackgroundSink(McapSink(values['record.mcap'])))
-        if values['record.rerun']:
-            from ball_world.recording.rerun_log import RerunSink
-            sinks.append(RerunSink(values['record.rerun'], every=values['record.rerun_every']))
+        for name in ('record.mcap', 'record.rerun'):
+            if values[name]:
+                claims.append((name, claim_output(values[name], values['record.overwrite'],
+                                                  'set record.overwrite:=true', claims)))
+        for name, claim in claims:
+            if name == 'record.mcap':
+                from ball_world.recording.mcap_writer import McapSink
+                sinks.append(BackgroundSink(McapSink(claim)))
+            else:
+                from ball_world.recording.rerun_log import RerunSink
+                sinks.append(ClaimedSink(RerunSink(claim.path,
+                                                   every=values['record.rerun_every']), claim))
     except OSError as error:
         for sink in sinks:
-            sink.close()
-        name = 'record.mcap' if not sinks and values['record.mcap'] else 'record.rerun'
+            sink.close()  # nothing recorded yet: each removes the file it created
+        for _, claim in claims[len(sinks):]:
+            claim.discard()
         raise StartupError(f"parameter '{name}': cannot record to {error}") from None
     return sinks
 
