@@ -98,7 +98,7 @@ def test_replay_publishes_the_recording_in_order_with_its_timing_and_clock(
     node, executor = ros
     recording = Recording(recording_path)
     recorded = {topic: [] for topic in TOPICS}
-    for message in recording.messages():
+    for message in recording.messages(TOPICS):
         recorded[message.topic].append(message)
     assert [len(recorded[t]) for t in TOPICS] == [51, 51, 51, 2]
     received = subscribe(node, {**{t: recording.topics[t].type for t in TOPICS},

@@ -195,7 +195,7 @@ def test_mcap_converts_to_the_same_positions(tmp_path, capsys):
 def test_converter_reports_unreadable_input(tmp_path, capsys):
     bad = tmp_path / 'bad.mcap'
     bad.write_bytes(b'not an mcap file')
-    assert to_rrd.main([str(bad)]) == 1
+    assert to_rrd.main([str(bad)]) == 2
     assert 'error' in capsys.readouterr().err
 
 

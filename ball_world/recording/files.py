@@ -18,9 +18,15 @@ that is easy to get wrong in one of four places:
 A recording closed before anything was recorded into it (the start failed) removes the file
 its claim created, so correcting a typo and starting again is not refused for a file that
 holds nothing.
+
+Tools that write a whole file (ball_world_to_rrd, ball_world_repair) write it beside its
+target under a locked temporary name and move it into place only when it is complete
+(PartialOutput): a failed run leaves the target as it was, and the temporary file of a run
+that was killed is removed by the next run for the same target.
 """
 import errno
 import fcntl
+import glob
 import io
 import os
 import stat
@@ -179,6 +185,14 @@ def _lock(path, fd, created, others):
     return OutputClaim(path, fd, created)
 
 
+def _locked(fd):
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    return False
+
+
 def is_locked(path):
     """Whether another open file holds the recording lock on `path` (False if none is there).
 
@@ -189,12 +203,101 @@ def is_locked(path):
     except OSError:
         return False
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        return True
+        return _locked(fd)
     finally:
         os.close(fd)
-    return False
+
+
+def _pid_alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # someone else's process
+    return True
+
+
+class PartialOutput:
+    """A file written as `<target>.partial-<pid>` and moved onto `target` once complete.
+
+    The target is checked first: an existing one is refused unless overwrite (hint says how
+    to allow it), as are a non-regular one and one another process is recording (locked).
+    Temporary files of earlier runs for the same target whose process is gone (dead pid,
+    lock free) are removed. The temporary file is claimed (created, locked) like any
+    recording; commit() moves it into place, without replacing a target that appeared
+    meanwhile unless overwrite; discard() removes it.
+    """
+
+    def __init__(self, target, overwrite=False, hint=''):
+        self.target = os.fspath(target)
+        self.overwrite = overwrite
+        self.hint = hint
+        self._check_target()
+        remove_stale_partials(self.target)
+        self.claim = claim_output(f'{self.target}.partial-{os.getpid()}')
+        self.path = self.claim.path
+
+    def _check_target(self):
+        try:
+            mode = os.stat(self.target).st_mode
+        except FileNotFoundError:
+            if os.path.lexists(self.target) and not self.overwrite:
+                raise _refuse_existing(self.target, self.hint) from None
+            return
+        except OSError as error:
+            raise OutputError(error.errno, error.strerror, self.target) from None
+        if not stat.S_ISREG(mode):
+            raise _not_regular(self.target, mode)
+        if not self.overwrite:
+            raise _refuse_existing(self.target, self.hint)
+        if is_locked(self.target):
+            raise OutputError(errno.EBUSY, 'is being recorded by another process (it is '
+                                           'locked)', self.target)
+
+    def commit(self):
+        """Put the complete file in place of the target and release it."""
+        try:
+            if self.overwrite:
+                os.replace(self.path, self.target)
+            else:
+                try:
+                    os.link(self.path, self.target)
+                except FileExistsError:
+                    raise _refuse_existing(self.target, self.hint) from None
+                os.unlink(self.path)
+        except OSError:
+            self.claim.discard()
+            raise
+        self.claim.release()
+
+    def discard(self):
+        self.claim.discard()
+
+
+def remove_stale_partials(target):
+    """Remove `<target>.partial-<pid>` files left by runs that were killed; returns them.
+
+    One is stale when its process is gone and nothing holds its lock (a pid that was
+    reused by another process keeps its file until that process ends too).
+    """
+    removed = []
+    for path in glob.glob(glob.escape(target) + '.partial-*'):
+        pid = path.rpartition('.partial-')[2]
+        # One named with this process's pid is from a dead process that had the same pid.
+        if not pid.isdigit() or (int(pid) != os.getpid() and _pid_alive(int(pid))):
+            continue
+        try:
+            fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOFOLLOW | os.O_CLOEXEC)
+        except OSError:
+            continue
+        try:
+            if stat.S_ISREG(os.fstat(fd).st_mode) and not _locked(fd):
+                os.unlink(path)
+                removed.append(path)
+        finally:
+            os.close(fd)
+    return removed
 
 
 class ClaimedSink:

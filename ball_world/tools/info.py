@@ -1,13 +1,14 @@
 """ball_world_info: what a recording holds, at a glance, and whether it needs repair.
 
 Reads a finished file through its summary (only the first and last chunks of the stats
-topic are decoded), and a file without summary front to back.
+topic are decoded), and a file without summary front to back. Any file that is not a
+readable ball_world recording gets one line on stderr and exit status 2.
 """
 import argparse
 import sys
 
-from ball_world.msgs.cdr import decode_pose_array, decode_state_layout, decode_vector3_stamped
-from ball_world.recording.mcap_reader import Recording, RecordingError
+from ball_world.msgs.cdr import decode_pose_array, decode_vector3_stamped
+from ball_world.recording.mcap_reader import decode_stats, Recording, RecordingError
 from ball_world.step_record import STATS_FIELDS
 
 
@@ -18,7 +19,7 @@ def _seconds(ns):
 def _energy(message):
     if message is None:
         return None
-    return float(decode_state_layout(message.data)[2][STATS_FIELDS.index('kinetic_energy')])
+    return float(decode_stats(message.data)[STATS_FIELDS.index('kinetic_energy')])
 
 
 def _first(recording, topic):

@@ -4,8 +4,15 @@ A SIGKILLed or crashed recorder leaves an MCAP without summary and footer, possi
 a torn record. Most readers (rosbags, ros2 bag, Foxglove's indexed view) then refuse the
 file. This copies every complete record (header, schemas, channels, messages, metadata,
 attachments) into a new MCAP written with a summary, in the same order, and reports what it
-kept and what it had to drop. The output is written next to the target and renamed into
-place only when complete, so the input is never damaged, even with -o IN.
+kept and what it had to drop: a torn last record, or everything from the first corrupt
+record on. The source is untrusted: chunks are decompressed within the reader's bound, and
+every 'ball_world' metadata record is checked as the tools check it (a file that has none
+is not a ball_world recording, and nothing is written).
+
+The output is written next to the target under a locked temporary name and moved into
+place only when complete (recording.files.PartialOutput), so the input is never damaged,
+even with -o IN; an existing output is replaced only with --force (or -o IN); and the
+temporary file of a repair that was killed is removed by the next one.
 """
 import argparse
 from dataclasses import dataclass, field
@@ -15,7 +22,11 @@ import sys
 from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
-from ball_world.recording.mcap_reader import RecordingError, Scan
+from ball_world.recording.files import PartialOutput, same_path
+from ball_world.recording.mcap_reader import METADATA_NAME, RecordingError, Scan, Segment
+from ball_world.tools.progress import Progress
+
+PROG = 'ball_world_repair'
 
 _COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
                  '': CompressionType.NONE}
@@ -33,6 +44,7 @@ class RepairReport:
     schemas: int = 0
     channels: int = 0
     metadata: int = 0
+    segments: int = 0  # 'ball_world' metadata records
     attachments: int = 0
     dropped_messages: int = 0  # on channels never declared
     start_ns: int = None
@@ -48,32 +60,43 @@ def _first_compression(path, size):
     return 'zstd'
 
 
-def repair(source, target):
-    """Copy every complete record of `source` into a finished MCAP at `target`."""
+def repair(source, target, force=False, stream=None):
+    """Copy every complete record of `source` into a finished MCAP at `target`.
+
+    Raises RecordingError (not a ball_world MCAP) or OSError (files.OutputError included);
+    then nothing is written. Progress goes to `stream` (stderr).
+    """
     size = os.path.getsize(source)
     compression = _COMPRESSIONS.get(_first_compression(source, size), CompressionType.ZSTD)
     report = RepairReport(source_bytes=size)
-    temporary = f'{target}.partial-{os.getpid()}'
+    in_place = same_path(source, target)
+    output = PartialOutput(target, force or in_place, 'pass --force')
+    progress = Progress(size, 'bytes', PROG, stream)
     try:
-        with open(temporary, 'xb') as output, open(source, 'rb') as stream:
-            scan = Scan(stream, size)
-            _copy(scan, Writer(output, compression=compression), report)
+        with output.claim.writer() as written, open(source, 'rb') as stream_in:
+            scan = Scan(stream_in, size)
+            _copy(scan, Writer(written, compression=compression), report, progress)
             report.kept_bytes = scan.end
             report.problem = scan.problem
             report.had_summary = scan.finished
-        os.replace(temporary, target)
+        if not report.segments:
+            raise RecordingError(f"no '{METADATA_NAME}' metadata record: not a ball_world "
+                                 'recording')
+        output.commit()
     except BaseException:
-        if os.path.exists(temporary):
-            os.remove(temporary)
+        progress.abandon()
+        output.discard()
         raise
+    progress.finish()
     return report
 
 
-def _copy(scan, writer, report):
+def _copy(scan, writer, report, progress):
     schemas = {}  # source id -> target id
     channels = {}  # source id -> (target id, topic)
     started = False
     for record in scan.records():
+        progress.advance(scan.end - progress.done)
         if isinstance(record, Header):
             writer.start(profile=record.profile, library=record.library)
             started = True
@@ -92,6 +115,9 @@ def _copy(scan, writer, report):
         elif isinstance(record, Message):
             _copy_message(writer, record, channels, report)
         elif isinstance(record, Metadata):
+            if record.name == METADATA_NAME:
+                Segment.from_metadata(record.metadata)  # a crafted one stops the repair
+                report.segments += 1
             writer.flush()  # keep the metadata between the messages it separated
             writer.add_metadata(record.name, dict(record.metadata))
             report.metadata += 1
@@ -99,6 +125,7 @@ def _copy(scan, writer, report):
             writer.add_attachment(record.create_time, record.log_time, record.name,
                                   record.media_type, record.data)
             report.attachments += 1
+    progress.advance(scan.end - progress.done)
     if not started:
         raise RecordingError('no complete MCAP header record')
     writer.finish()
@@ -147,21 +174,23 @@ def describe(report, source, target):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(
-        prog='ball_world_repair',
+        prog=PROG,
         description='Recover a truncated MCAP recording (writer killed: no summary, torn '
                     'last record) into a complete file holding every complete record.')
     parser.add_argument('input', help='the damaged .mcap')
     parser.add_argument('-o', '--output', help='where to write (default: '
                                                'INPUT.repaired.mcap; may be INPUT itself)')
+    parser.add_argument('--force', action='store_true',
+                        help='replace the output file if it exists')
     args = parser.parse_args(argv)
     target = args.output or default_target(args.input)
     try:
-        report = repair(args.input, target)
+        report = repair(args.input, target, args.force)
     except RecordingError as error:
-        print(f'ball_world_repair: {args.input}: {error}', file=sys.stderr)
+        print(f'{PROG}: {args.input}: {error}', file=sys.stderr)
         return 2
     except OSError as error:
-        print(f'ball_world_repair: {error}', file=sys.stderr)
+        print(f'{PROG}: {error}', file=sys.stderr)
         return 2
     print(describe(report, args.input, target))
     return 0

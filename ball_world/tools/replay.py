@@ -9,6 +9,12 @@ log time before each step, so nodes with use_sim_time follow the replay.
 One thread: between messages the executor waits (spin_once with the time left as timeout),
 so services such as the parameter ones answer and Ctrl-C / SIGTERM end the replay at once,
 with exit status 0, as does the end of the recording unless --loop.
+
+The recording is untrusted: it is read with the reader's checks (bounded chunks, checked
+metadata, QoS text without YAML aliases), and a file found corrupt while playing stops the
+replay with one line and exit status 2. A recording that holds /clock (the node's, when
+publish_clock was on) plays it like any topic, unless --clock publishes the log time
+instead: then the recorded /clock is left out, so there is one clock.
 """
 import argparse
 import importlib
@@ -20,10 +26,12 @@ from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
-import yaml
 
 from ball_world.msgs.cdr import encode_clock
-from ball_world.recording.mcap_reader import Recording, RecordingError
+from ball_world.msgs.definitions import message_definition
+from ball_world.recording.mcap_reader import (load_untrusted, MAX_SMALL_TEXT, Recording,
+                                              RecordingError)
+from ball_world.recording.mcap_writer import CLOCK_TOPIC
 
 DEFAULT_DEPTH = 10
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
@@ -41,8 +49,18 @@ _DURABILITY = {'transient_local': DurabilityPolicy.TRANSIENT_LOCAL,
 
 
 def message_class(type_name):
-    """'geometry_msgs/msg/PoseArray' -> the generated Python class (ImportError if absent)."""
-    package, namespace, name = type_name.split('/')
+    """'geometry_msgs/msg/PoseArray' -> the generated Python class (ImportError if absent).
+
+    The name comes from the recording: only a message whose .msg definition is installed
+    is imported, so a crafted type name can never import an arbitrary Python module.
+    """
+    try:
+        message_definition(type_name)
+        package, namespace, name = type_name.split('/')
+    except (LookupError, ValueError):
+        raise ImportError(f'{type_name!r} is not an installed ROS message type') from None
+    if namespace != 'msg':
+        raise ImportError(f'{type_name!r} is not a message type')
     module = importlib.import_module(f'{package}.{namespace}')
     try:
         return getattr(module, name)
@@ -60,9 +78,10 @@ def qos_profile(offered_qos_profiles):
     profile = QoSProfile(depth=DEFAULT_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.VOLATILE)
     try:
-        offered = yaml.safe_load(offered_qos_profiles) or []
+        offered = load_untrusted(offered_qos_profiles, 'offered_qos_profiles',
+                                 MAX_SMALL_TEXT, json_text=False) or []
         first = dict(offered[0])
-    except (yaml.YAMLError, IndexError, KeyError, TypeError, ValueError):
+    except (RecordingError, IndexError, KeyError, TypeError, ValueError):
         return profile
     reliability = _RELIABILITY.get(first.get('reliability'))
     if reliability is not None:
@@ -176,12 +195,21 @@ def _check(args, recording):
     if unknown:
         return (f"no such topic in the recording: {', '.join(unknown)} (it has "
                 f"{', '.join(recording.topics)})")
-    for topic in args.topics or recording.topics:
+    if args.clock and CLOCK_TOPIC in (args.topics or ()):
+        return f'--clock publishes {CLOCK_TOPIC} itself: leave it out of --topics'
+    for topic in _topics(args, recording):
         try:
             message_class(recording.topics[topic].type)
         except (ImportError, ValueError) as error:
             return f'cannot publish {topic} ({recording.topics[topic].type}): {error}'
     return None
+
+
+def _topics(args, recording):
+    """The recorded topics to play: --topics, or all but a recorded /clock under --clock."""
+    if args.topics:
+        return list(args.topics)
+    return [topic for topic in recording.topics if not (args.clock and topic == CLOCK_TOPIC)]
 
 
 def main(argv=None):
@@ -203,7 +231,7 @@ def main(argv=None):
         node = rclpy.create_node('ball_world_replay')
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        player = Player(node, executor, recording, args.topics or list(recording.topics),
+        player = Player(node, executor, recording, _topics(args, recording),
                         rate=args.rate, start_offset=args.start_offset, clock=args.clock,
                         prefix=args.remap_prefix.rstrip('/'))
         if args.wait_for_subscribers:
@@ -215,6 +243,9 @@ def main(argv=None):
                 break
         player.wait_for_acks()
         finished = True
+    except RecordingError as error:
+        print(f'ball_world_replay: {error}', file=sys.stderr)
+        return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass  # Ctrl-C or SIGTERM: a normal way to stop a replay
     except Exception:  # noqa: B902 - any rcl call fails once a signal shut the context down

@@ -5,7 +5,11 @@ the parameters in its metadata record, every recorded impulse is queued just bef
 whose stamp it carries, and every recorded pose, state row and stats entry (except the
 real-time factor, which depends on the wall clock) must be bit-identical to the
 re-simulated one. Exit status: 0 all identical, 1 a difference, 2 an unreadable recording
-or parameters that no longer build a world.
+or parameters that no longer build a world (one line on stderr).
+
+The recording is untrusted: its parameters were checked by the reader as the node checks
+them, and a segment whose first recorded step has another ball count than its parameters
+make is refused before its world is built.
 """
 import argparse
 from dataclasses import dataclass
@@ -21,6 +25,9 @@ from ball_world.msgs.cdr import decode_state_layout
 from ball_world.recording.mcap_reader import Recording, RecordingError
 from ball_world.simulation import Simulation
 from ball_world.step_record import STATS_FIELDS
+from ball_world.tools.progress import Progress
+
+PROG = 'ball_world_resim'
 
 _POSITION_NAMES = ('x', 'y')
 _STATE_NAMES = ('x', 'y', 'vx', 'vy')
@@ -54,7 +61,6 @@ class SegmentResult:
     position: int  # in Recording.segments
     steps: int = 0
     impulses: int = 0
-    missing: int = 0  # steps absent from the recording (a repaired, truncated file)
     last_step: int = 0
     differing_steps: int = 0
 
@@ -107,18 +113,15 @@ class Comparison:
         return False
 
 
-def _rebuild(segment):
-    simulation = Simulation(segment.parameters, sinks=())
-    if simulation.dt_ns != segment.dt_ns:
-        raise ScenarioError('dt', f'rebuilds dt = {simulation.dt_ns} ns but the segment '
-                                  f'was recorded with {segment.dt_ns} ns')
-    return simulation
+def _rebuild(segment, first_step):
+    """The segment's Simulation at step 0 (the reader checked that its dt is the recorded one)."""
+    if first_step.ball_count is not None:
+        segment.check_ball_count(first_step.ball_count)
+    return Simulation(segment.parameters, sinks=())
 
 
 def _advance(simulation, step, comparison, segment_index):
-    """Step the simulation to `step`, queueing the recorded impulses for the last step."""
-    while simulation.step_index < step.step - 1:
-        simulation.step()
+    """Step the simulation once to `step` (the next one), with its recorded impulses queued."""
     if step.step == 0:
         return simulation.last_record
     ball_count = len(simulation.world)
@@ -163,26 +166,34 @@ def _compare_step(step, record, comparison, segment_index):
     return comparison.count == before
 
 
-def resimulate(recording):
+def resimulate(recording, progress=None):
     """Re-simulate every segment of a Recording; returns a Comparison.
 
-    Raises ScenarioError when a segment's parameters do not build a world.
+    Raises ScenarioError when a segment's parameters do not build a world, RecordingError
+    when the recording cannot be read. progress (tools.progress.Progress) counts steps.
     """
     comparison = Comparison()
     simulation = result = None
     for step in recording.steps():
+        if progress is not None:
+            progress.advance()
         segment = recording.segments[step.segment]
         if result is None or result.position != step.segment:
-            simulation = _rebuild(segment)
+            if step.step != 0:
+                raise RecordingError(f'{recording.path}: segment {segment.index} begins at '
+                                     f'step {step.step}: its first steps are not recorded')
+            simulation = _rebuild(segment, step)
             result = SegmentResult(segment.index, step.segment)
             comparison.segments.append(result)
-            result.missing = step.step
         elif step.step <= result.last_step:
             comparison.add(Difference(segment.index, step.step, 'step order', None,
                                       result.last_step, step.step, math.inf))
             continue
-        else:
-            result.missing += step.step - result.last_step - 1
+        elif step.step != result.last_step + 1:
+            # Never re-simulate a gap: a crafted log time could ask for years of steps.
+            raise RecordingError(f'{recording.path}: segment {segment.index} jumps from step '
+                                 f'{result.last_step} to step {step.step}: the steps between '
+                                 'are not recorded')
         record = _advance(simulation, step, comparison, segment.index)
         result.steps += 1
         result.impulses += len(step.impulses)
@@ -195,11 +206,10 @@ def resimulate(recording):
 def describe(comparison):
     lines = []
     for result in comparison.segments:
-        missing = f', {result.missing} missing from the recording' if result.missing else ''
         verdict = ('identical' if not result.differing_steps
                    else f'{result.differing_steps} steps differ')
         lines.append(f'segment {result.index}: {result.steps} steps compared (last step '
-                     f'{result.last_step}{missing}), {result.impulses} impulses: {verdict}')
+                     f'{result.last_step}), {result.impulses} impulses: {verdict}')
     total = sum(result.steps for result in comparison.segments)
     if comparison.identical:
         lines.append(f'all {total} recorded steps re-simulate bit-identically (largest '
@@ -213,32 +223,36 @@ def describe(comparison):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(
-        prog='ball_world_resim',
+        prog=PROG,
         description='Re-simulate a recording from its parameters and impulses and check that '
                     'every recorded pose and state row is bit-identical. Exit 0 if so, 1 if '
                     'not, 2 if the recording cannot be read or rebuilt.')
     parser.add_argument('file', help='the .mcap recording')
     args = parser.parse_args(argv)
+    progress = None
     try:
         recording = Recording(args.file)
-        if not recording.segments:
-            print(f'ball_world_resim: {args.file}: no ball_world metadata records: not a '
-                  'ball_world recording', file=sys.stderr)
-            return 2
-        comparison = resimulate(recording)
+        balls = recording.topics.get(recording.topic_of('balls'))
+        progress = Progress(balls.message_count if balls else 0, 'steps', PROG)
+        comparison = resimulate(recording, progress)
         if not comparison.segments:
-            print(f'ball_world_resim: {args.file}: no recorded steps to compare',
-                  file=sys.stderr)
-            return 2
+            raise RecordingError(f'{args.file}: no recorded steps to compare')
     except RecordingError as error:
-        print(f'ball_world_resim: {error}', file=sys.stderr)
+        _abandon(progress)
+        print(f'{PROG}: {error}', file=sys.stderr)
         return 2
     except ScenarioError as error:
-        print(f'ball_world_resim: {args.file}: cannot rebuild the world: {error}',
-              file=sys.stderr)
+        _abandon(progress)
+        print(f'{PROG}: {args.file}: cannot rebuild the world: {error}', file=sys.stderr)
         return 2
+    progress.finish()
     print('\n'.join(describe(comparison)))
     return 0 if comparison.identical else 1
+
+
+def _abandon(progress):
+    if progress is not None:
+        progress.abandon()
 
 
 if __name__ == '__main__':

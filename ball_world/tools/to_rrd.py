@@ -3,77 +3,19 @@
 The recording is replayed through the same RerunSink the node logs with (via
 recording.feed_sinks), so a converted file has the same layout, timelines and blueprint as
 one logged live. A recording cut off by a crash converts up to its last complete step.
+
+The .rrd is written beside its target under a temporary name and moved into place when
+complete: an existing file is never replaced without --force, and a conversion that fails
+(a corrupt recording) leaves no file behind.
 """
 import argparse
+import os
 from pathlib import Path
 import sys
-import time
+
+from ball_world.recording.files import same_path
 
 PROG = 'ball_world_to_rrd'
-
-
-class ProgressBar:
-    """A Sink that only counts steps and draws a text bar on a stream (stderr).
-
-    On a terminal the bar redraws in place at most every `interval` seconds; elsewhere (a
-    log file, CI) it prints one line per tenth so the output stays readable.
-    """
-
-    def __init__(self, total, stream=None, width=40, interval=0.1):
-        self.total = max(int(total), 0)
-        self.stream = sys.stderr if stream is None else stream
-        self.width = width
-        self.interval = interval
-        self.done = 0
-        self.tty = hasattr(stream, 'isatty') and stream.isatty()
-        self._drawn_at = None
-        self._tenths = -1
-        self._printed = None
-
-    def start_segment(self, world, info):
-        pass
-
-    def write_step(self, record):
-        self.done += 1
-        self._draw(final=False)
-
-    def flush(self):
-        pass
-
-    def close(self):
-        self._draw(final=True)
-
-    def line(self):
-        if self.total:
-            fraction = min(self.done / self.total, 1.0)
-            filled = round(fraction * self.width)
-            bar = '#' * filled + '.' * (self.width - filled)
-            return f'[{bar}] {fraction:4.0%} {self.done}/{self.total} steps'
-        return f'{self.done} steps'
-
-    def _draw(self, final):
-        if self.tty:
-            now = time.monotonic()
-            if not final and self._drawn_at is not None \
-                    and now - self._drawn_at < self.interval:
-                return
-            self._drawn_at = now
-            self.stream.write('\r' + self.line() + ('\n' if final else ''))
-        else:
-            tenths = 10 * self.done // self.total if self.total else 0
-            line = self.line()
-            if tenths == self._tenths and not (final and line != self._printed):
-                return
-            self._tenths = tenths
-            self._printed = line
-            self.stream.write(line + '\n')
-        self.stream.flush()
-
-    def abandon(self):
-        """End a bar drawn in place, so an error message starts on a line of its own."""
-        if self.tty and self._drawn_at is not None:
-            self.stream.write('\n')
-            self.stream.flush()
 
 
 def parse_args(argv):
@@ -81,6 +23,8 @@ def parse_args(argv):
     parser.add_argument('input', type=Path, help='ball_world MCAP recording (IN.mcap)')
     parser.add_argument('-o', '--output', type=Path,
                         help='Rerun file to write (default: IN with the suffix .rrd)')
+    parser.add_argument('--force', action='store_true',
+                        help='replace the output file if it exists')
     parser.add_argument('--every', type=int, default=1, metavar='K',
                         help='log every K-th step (steps with impulses and the first and '
                              'last step of each segment are always logged; default 1)')
@@ -89,34 +33,64 @@ def parse_args(argv):
         parser.error(f'--every must be >= 1, got {args.every}')
     if args.output is None:
         args.output = args.input.with_suffix('.rrd')
-    if args.output.resolve() == args.input.resolve():
+    if same_path(args.output, args.input) or (
+            args.output.exists() and args.input.exists()
+            and os.path.samefile(args.output, args.input)):
         parser.error(f'the output {str(args.output)!r} would overwrite the input')
     return args
 
 
-def main(argv=None):
-    args = parse_args(argv)
+def convert(args):
+    """Write the .rrd; returns (steps, recording). Raises RecordingError, ScenarioError,
+    OSError."""
     # Imported here: rerun takes a while to import, and --help should not wait for it.
+    from ball_world.recording.files import ClaimedSink, PartialOutput
     from ball_world.recording.mcap_reader import feed_sinks, Recording, RecordingError
     from ball_world.recording.rerun_log import RerunSink
-    from ball_world.core.scenario import ScenarioError
+    from ball_world.tools.progress import StepProgress
 
-    progress = sink = None
+    recording = Recording(args.input)
+    balls = recording.topics.get(recording.topic_of('balls'))
+    if balls is None or balls.message_count == 0:
+        raise RecordingError(f'{args.input}: holds no step to convert')
+    output = PartialOutput(args.output, args.force, 'pass --force')
+    progress = StepProgress(balls.message_count, PROG)
+    sink = None
     try:
-        recording = Recording(args.input)
-        balls = recording.topics.get(recording.topic_of('balls'))
-        progress = ProgressBar(balls.message_count if balls else 0)
-        sink = RerunSink(args.output, every=args.every)
-        steps = feed_sinks(recording, [sink, progress])
+        sink = ClaimedSink(RerunSink(output.path, every=args.every), output.claim)
+        steps = feed_sinks(recording, [sink, progress], close=False)
+        sink.close()
+        if steps == 0:
+            raise RecordingError(f'{args.input}: holds no complete step to convert')
+        output.commit()
+    except BaseException:
+        progress.abandon()
+        _close_quietly(sink)
+        output.discard()
+        raise
+    progress.finish()
+    return steps, recording
+
+
+def _close_quietly(sink):
+    """Close a sink after a failure: the failure is what gets reported, not this."""
+    if sink is None:
+        return
+    try:
+        sink.close()
+    except Exception:  # noqa: B902 - the conversion already failed; its error is reported
+        pass
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    from ball_world.core.scenario import ScenarioError
+    from ball_world.recording.mcap_reader import RecordingError
+    try:
+        steps, recording = convert(args)
     except (RecordingError, ScenarioError, OSError) as error:
-        if progress is not None:
-            progress.abandon()
         print(f'{PROG}: error: {error}', file=sys.stderr)
-        if sink is not None:
-            sink.close()  # a valid file with the steps before the error
-            print(f'{PROG}: {args.output} holds the {progress.done} steps read before it',
-                  file=sys.stderr)
-        return 1
+        return 2
     if recording.problem:
         print(f'{PROG}: warning: {args.input} is incomplete ({recording.problem}); '
               'converted up to its last complete step', file=sys.stderr)
