@@ -519,7 +519,8 @@ class Recording:
     could not be read to its end, or None), complete_bytes, size, topics
     ({topic: TopicInfo}), segments ([Segment] in log-time order), compressions (set of
     chunk compressions), chunk_count, message_count, start_ns / end_ns (log times).
-    Raises RecordingError for a file that is not a readable ball_world recording.
+    Raises RecordingError for a file that is not a readable ball_world recording; its
+    message does not repeat the path (the tools print it once, in front).
     """
 
     def __init__(self, path):
@@ -527,9 +528,7 @@ class Recording:
         try:
             self._load()
         except OSError as error:
-            raise RecordingError(f'{self.path}: {error.strerror or error}') from None
-        except RecordingError as error:
-            raise RecordingError(f'{self.path}: {error}') from None
+            raise RecordingError(error.strerror or str(error)) from None
 
     def _load(self):
         with open(self.path, 'rb') as stream:
@@ -691,7 +690,7 @@ class Recording:
     def _message(self, record):
         channel = self.channels.get(record.channel_id)
         if channel is None:
-            raise RecordingError(f'{self.path}: a message on channel {record.channel_id}, '
+            raise RecordingError(f'a message on channel {record.channel_id}, '
                                  'which the file never declares')
         schema = self.schemas.get(channel.schema_id)
         return RecordedMessage(topic=channel.topic, type=schema.name if schema else '',
@@ -712,7 +711,7 @@ class Recording:
         """Position in `segments` of the segment a log time belongs to."""
         position = bisect.bisect_right(self._offsets, log_time_ns) - 1
         if position < 0:
-            raise RecordingError(f'{self.path}: a message at log time {log_time_ns} ns comes '
+            raise RecordingError(f'a message at log time {log_time_ns} ns comes '
                                  'before the first segment')
         return position
 
@@ -853,7 +852,7 @@ def feed_sinks(path, sinks, close=True):
             current = step.segment
             balls = len(snapshot.radii)
         if len(step.positions) != balls:
-            raise RecordingError(f'{recording.path}: step {step.step} of segment '
+            raise RecordingError(f'step {step.step} of segment '
                                  f'{recording.segments[current].index} has '
                                  f'{len(step.positions)} balls, not {balls}')
         record = step_record(step)

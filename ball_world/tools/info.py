@@ -65,7 +65,11 @@ def describe(recording):
     lines.extend(_segment_lines(recording))
     first_balls = _first(recording, balls_topic)
     if first_balls is not None:
-        lines.append(f'balls:       {len(decode_pose_array(first_balls.data)[2])}')
+        count = len(decode_pose_array(first_balls.data)[2])
+        # the world the parameters describe must be the recorded one (not built: counted)
+        recording.segments[recording.segment_at(first_balls.log_time_ns)].check_ball_count(
+            count)
+        lines.append(f'balls:       {count}')
     lines.append(f'messages:    {recording.message_count}')
     for info in recording.topics.values():
         lines.append(f'  {info.topic}  {info.type}  {info.message_count}')
@@ -117,7 +121,7 @@ def main(argv=None):
         recording = Recording(args.file)
         lines = describe(recording)
     except RecordingError as error:
-        print(f'ball_world_info: {error}', file=sys.stderr)
+        print(f'ball_world_info: {args.file}: {error}', file=sys.stderr)
         return 2
     except ValueError as error:  # an undecodable message
         print(f'ball_world_info: {args.file}: {error}', file=sys.stderr)

@@ -218,7 +218,7 @@ def main(argv=None):
     try:
         recording = Recording(args.file)
     except RecordingError as error:
-        print(f'ball_world_replay: {error}', file=sys.stderr)
+        print(f'ball_world_replay: {args.file}: {error}', file=sys.stderr)
         return 2
     problem = _check(args, recording)
     if problem:
@@ -244,7 +244,7 @@ def main(argv=None):
         player.wait_for_acks()
         finished = True
     except RecordingError as error:
-        print(f'ball_world_replay: {error}', file=sys.stderr)
+        print(f'ball_world_replay: {args.file}: {error}', file=sys.stderr)
         return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass  # Ctrl-C or SIGTERM: a normal way to stop a replay

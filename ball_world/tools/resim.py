@@ -180,7 +180,7 @@ def resimulate(recording, progress=None):
         segment = recording.segments[step.segment]
         if result is None or result.position != step.segment:
             if step.step != 0:
-                raise RecordingError(f'{recording.path}: segment {segment.index} begins at '
+                raise RecordingError(f'segment {segment.index} begins at '
                                      f'step {step.step}: its first steps are not recorded')
             simulation = _rebuild(segment, step)
             result = SegmentResult(segment.index, step.segment)
@@ -191,7 +191,7 @@ def resimulate(recording, progress=None):
             continue
         elif step.step != result.last_step + 1:
             # Never re-simulate a gap: a crafted log time could ask for years of steps.
-            raise RecordingError(f'{recording.path}: segment {segment.index} jumps from step '
+            raise RecordingError(f'segment {segment.index} jumps from step '
                                  f'{result.last_step} to step {step.step}: the steps between '
                                  'are not recorded')
         record = _advance(simulation, step, comparison, segment.index)
@@ -236,10 +236,10 @@ def main(argv=None):
         progress = Progress(balls.message_count if balls else 0, 'steps', PROG)
         comparison = resimulate(recording, progress)
         if not comparison.segments:
-            raise RecordingError(f'{args.file}: no recorded steps to compare')
+            raise RecordingError('no recorded steps to compare')
     except RecordingError as error:
         _abandon(progress)
-        print(f'{PROG}: {error}', file=sys.stderr)
+        print(f'{PROG}: {args.file}: {error}', file=sys.stderr)
         return 2
     except ScenarioError as error:
         _abandon(progress)

@@ -41,8 +41,10 @@ def parse_args(argv):
 
 
 def convert(args):
-    """Write the .rrd; returns (steps, recording). Raises RecordingError, ScenarioError,
-    OSError."""
+    """Write the .rrd; returns (steps, recording).
+
+    Raises RecordingError or ScenarioError for the input, OSError for the output.
+    """
     # Imported here: rerun takes a while to import, and --help should not wait for it.
     from ball_world.recording.files import ClaimedSink, PartialOutput
     from ball_world.recording.mcap_reader import feed_sinks, Recording, RecordingError
@@ -52,7 +54,7 @@ def convert(args):
     recording = Recording(args.input)
     balls = recording.topics.get(recording.topic_of('balls'))
     if balls is None or balls.message_count == 0:
-        raise RecordingError(f'{args.input}: holds no step to convert')
+        raise RecordingError('holds no step to convert')
     output = PartialOutput(args.output, args.force, 'pass --force')
     progress = StepProgress(balls.message_count, PROG)
     sink = None
@@ -61,7 +63,7 @@ def convert(args):
         steps = feed_sinks(recording, [sink, progress], close=False)
         sink.close()
         if steps == 0:
-            raise RecordingError(f'{args.input}: holds no complete step to convert')
+            raise RecordingError('holds no complete step to convert')
         output.commit()
     except BaseException:
         progress.abandon()
@@ -88,7 +90,10 @@ def main(argv=None):
     from ball_world.recording.mcap_reader import RecordingError
     try:
         steps, recording = convert(args)
-    except (RecordingError, ScenarioError, OSError) as error:
+    except (RecordingError, ScenarioError) as error:
+        print(f'{PROG}: error: {args.input}: {error}', file=sys.stderr)
+        return 2
+    except OSError as error:  # the output: its message names it
         print(f'{PROG}: error: {error}', file=sys.stderr)
         return 2
     if recording.problem:
