@@ -39,7 +39,8 @@ import yaml
 
 from ball_world.core import limits
 from ball_world.core.impulses import ImpulseRejected, parse_ball
-from ball_world.core.scenario import build_world, DEFAULTS, ScenarioError, step_duration_ns
+from ball_world.core.parameters import checked, ParameterError
+from ball_world.core.scenario import build_world, step_duration_ns
 from ball_world.msgs.cdr import (decode_pose_array, decode_state, decode_state_layout,
                                  decode_vector3_stamped)
 from ball_world.recording.mcap_writer import (EVENT_ROLES, flatten_parameters, METADATA_NAME,
@@ -369,16 +370,16 @@ class Segment:
     dt_ns: int
     frame_id: str
     package_version: str
-    parameters: dict  # flat names ('balls.x'), merged over scenario.DEFAULTS
+    parameters: dict  # flat names ('balls.x'), checked and merged over the defaults
     topics: dict  # logical name -> recorded topic
 
     @classmethod
     def from_metadata(cls, values):
         """The segment a 'ball_world' metadata record describes, checked as the node would.
 
-        The parameters must pass the node's own checks (scenario.step_duration_ns checks
-        every value against the parameter table) and give the recorded dt, before any
-        world is built from them.
+        The parameters must pass the node's own checks (core.parameters: every value
+        against its type and range, so no count, size or radius past core.limits) and give
+        the recorded dt, before any world is built from them.
         """
         index = _whole_number(values, 'segment', 0, 2**63 - 1)
         try:
@@ -398,10 +399,10 @@ class Segment:
         else:
             document = load_untrusted(values.get('parameters'), "'parameters'",
                                       MAX_PARAMETERS_TEXT, json_text=False)
-        parameters = {**DEFAULTS, **_flat_parameters(document)}
         try:
+            parameters = checked(_flat_parameters(document))
             expected_dt_ns = step_duration_ns(parameters)
-        except ScenarioError as error:
+        except ParameterError as error:
             raise RecordingError(str(error)) from None
         if expected_dt_ns != dt_ns:
             raise RecordingError(f"'dt_ns' is {dt_ns} but the parameters give "
@@ -415,21 +416,13 @@ class Segment:
                    package_version=version, parameters=parameters, topics=_topics(values))
 
     def expected_balls(self):
-        """How many balls the parameters make (explicit and random), without building.
-
-        None when they are not even numbers: build_world then says what is wrong.
-        """
-        explicit = self.parameters['balls.x']
-        count = self.parameters['random.count']
-        if not isinstance(explicit, list) or isinstance(count, bool) \
-                or not isinstance(count, int):
-            return None
-        return len(explicit) + count
+        """How many balls the parameters make (explicit and random), without building."""
+        return len(self.parameters['balls.x']) + self.parameters['random.count']
 
     def check_ball_count(self, recorded):
         """Refuse a step whose ball count the parameters cannot give, before any building."""
         expected = self.expected_balls()
-        if expected is not None and recorded != expected:
+        if recorded != expected:
             raise RecordingError(f'segment {self.index}: its parameters make {expected:,} '
                                  f'balls but the recording has {recorded:,}')
 
