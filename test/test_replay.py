@@ -25,7 +25,7 @@ from ball_world.msgs.cdr import decode_pose_array
 from ball_world.recording.mcap_reader import Recording
 from ball_world.recording.mcap_writer import McapSink, OFFERED_QOS_PROFILES
 from ball_world.simulation import Simulation
-from ball_world.tools.replay import message_class, qos_profile
+from ball_world.tools.replay import argument_parser, message_class, played_topics, qos_profile
 
 ROOT = Path(__file__).resolve().parents[1]
 DOMAIN = random.randint(100, 200)
@@ -174,3 +174,21 @@ def test_qos_comes_from_the_recorded_offer_in_either_rosbag2_format():
         (ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.TRANSIENT_LOCAL, 5)
     unknown = qos_profile('')
     assert (unknown.reliability, unknown.depth) == (ReliabilityPolicy.RELIABLE, 10)
+
+
+def test_a_recorded_clock_plays_unless_clock_publishes_its_own(tmp_path):
+    path = tmp_path / 'clock.mcap'
+    simulation = Simulation({'rate_hz': 1 / DT, 'random.count': 3, 'publish_clock': True},
+                            sinks=[McapSink(path)])
+    simulation.step()
+    simulation.close()
+    recording = Recording(path)
+    parser = argument_parser()
+    assert '/clock' in played_topics(parser.parse_args([str(path)]), recording)
+    assert '/clock' not in played_topics(parser.parse_args([str(path), '--clock']), recording)
+    result = subprocess.run([sys.executable, '-m', 'ball_world.tools.replay', str(path),
+                             '--clock', '--topics', '/balls', '/clock'], cwd=ROOT,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert result.stderr.strip() == ('ball_world_replay: --clock publishes /clock itself: '
+                                     'leave it out of --topics')

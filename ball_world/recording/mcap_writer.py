@@ -329,9 +329,17 @@ class McapSink:
         self._writer.flush()
         self._pending = 0
         self._writer.add_metadata(METADATA_NAME, segment_metadata(world, info, topics))
+        self._restart_markers(world, info.log_offset_ns)
+
+    def _restart_markers(self, world, log_time_ns):
+        """Clear the old world in viewers and record the new one's markers at its next step.
+
+        Called at every segment start; any other change of the balls or walls (a recorded
+        world edit) needs the same.
+        """
         if self._markers is not None:
             self._markers.reset(world)
-            self._add('markers', info.log_offset_ns, self._markers.delete_all)
+            self._add('markers', log_time_ns, self._markers.delete_all)
 
     def _channel(self, topic, role):
         type_name = TOPIC_TYPES[role]

@@ -124,7 +124,7 @@ class BallWorld(Node):
         values = current_values(self)
         failures = []
         topics = {name: self.resolve_topic_name(name)
-                  for name in ('balls', 'state', 'stats', 'impulse')}
+                  for name in ('balls', 'state', 'stats', 'impulse', 'markers')}
         sinks = open_sinks(values)
         try:
             self.simulation = Simulation(values, sinks, topics=topics,

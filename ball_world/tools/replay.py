@@ -159,7 +159,7 @@ class Player:
                 publisher.wait_for_all_acked(Duration(nanoseconds=round(left * 1e9)))
 
 
-def _parser():
+def argument_parser():
     parser = argparse.ArgumentParser(
         prog='ball_world_replay',
         description='Publish a ball_world MCAP recording with its recorded timing and QoS, '
@@ -197,7 +197,7 @@ def _check(args, recording):
                 f"{', '.join(recording.topics)})")
     if args.clock and CLOCK_TOPIC in (args.topics or ()):
         return f'--clock publishes {CLOCK_TOPIC} itself: leave it out of --topics'
-    for topic in _topics(args, recording):
+    for topic in played_topics(args, recording):
         try:
             message_class(recording.topics[topic].type)
         except (ImportError, ValueError) as error:
@@ -205,7 +205,7 @@ def _check(args, recording):
     return None
 
 
-def _topics(args, recording):
+def played_topics(args, recording):
     """The recorded topics to play: --topics, or all but a recorded /clock under --clock."""
     if args.topics:
         return list(args.topics)
@@ -214,7 +214,7 @@ def _topics(args, recording):
 
 def main(argv=None):
     argv = list(sys.argv[1:] if argv is None else argv)
-    args = _parser().parse_args(remove_ros_args(['ball_world_replay', *argv])[1:])
+    args = argument_parser().parse_args(remove_ros_args(['ball_world_replay', *argv])[1:])
     try:
         recording = Recording(args.file)
     except RecordingError as error:
@@ -231,7 +231,7 @@ def main(argv=None):
         node = rclpy.create_node('ball_world_replay')
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        player = Player(node, executor, recording, _topics(args, recording),
+        player = Player(node, executor, recording, played_topics(args, recording),
                         rate=args.rate, start_offset=args.start_offset, clock=args.clock,
                         prefix=args.remap_prefix.rstrip('/'))
         if args.wait_for_subscribers:
