@@ -87,6 +87,7 @@ def repair(source, target, force=False, stream=None):
         progress.abandon()
         output.discard()
         raise
+    progress.advance(size - progress.done)  # what follows the data is not needed (an index)
     progress.finish()
     return report
 
