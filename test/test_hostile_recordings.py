@@ -447,8 +447,14 @@ def test_files_that_are_not_ball_world_recordings(source, tmp_path):
             "no 'ball_world' metadata record: not a ball_world recording")
         assert 'not an MCAP file (bad magic)' in refused(name, empty, tmp_path)
         assert 'not an MCAP file (bad magic)' in refused(name, text, tmp_path)
+    fifo = tmp_path / 'fifo.mcap'
+    os.mkfifo(fifo)  # with no writer: opening it to read would wait forever
+    for name in TOOLS:
+        assert refused(name, fifo, tmp_path).endswith(f'{fifo}: is a FIFO, not a regular file')
+        assert refused(name, Path('/dev/zero'), tmp_path).endswith(
+            '/dev/zero: is a character device, not a regular file')
+        assert 'is a directory, not a regular file' in refused(name, tmp_path, tmp_path)
     assert 'No such file' in refused('info', tmp_path / 'missing.mcap', tmp_path)
-    assert 'Is a directory' in refused('info', tmp_path, tmp_path)
 
 
 def fuzz_cases(data, seed=10, count=36):

@@ -14,7 +14,7 @@ import time
 from node_process import finish
 import pytest
 
-from ball_world.recording.files import (claim_output, ClaimedSink, OutputError,
+from ball_world.recording.files import (claim_output, ClaimedSink, FileRefused,
                                         PartialOutput, remove_stale_partials)
 from ball_world.recording.mcap_reader import Recording
 from ball_world.recording.mcap_writer import McapSink
@@ -47,7 +47,7 @@ def test_existing_files_and_symlinks_are_refused_unless_overwrite(tmp_path):
     dangling = tmp_path / 'dangling.mcap'
     dangling.symlink_to(tmp_path / 'nowhere.mcap')
     for path in (old, to_old, dangling):
-        with pytest.raises(OutputError) as raised:
+        with pytest.raises(FileRefused) as raised:
             claim_output(path, hint='set record.overwrite:=true')
         assert str(raised.value) == \
             f'{path}: already exists; set record.overwrite:=true to replace it'
@@ -66,7 +66,7 @@ def test_non_regular_files_are_refused_at_once_even_with_overwrite(tmp_path):
     for reader_open in (True, False):
         for overwrite in (False, True):
             for path, kind in kinds.items():
-                with pytest.raises(OutputError) as raised:
+                with pytest.raises(FileRefused) as raised:
                     claim_output(path, overwrite=overwrite)
                 assert str(raised.value) == f'{path}: is {kind}, not a regular file'
         if reader_open:
@@ -82,7 +82,7 @@ def test_one_file_cannot_be_claimed_twice_by_any_name(tmp_path, monkeypatch):
     for name in ('run.mcap', './sub/../run.mcap', 'alias.mcap', 'hard.mcap'):
         if name.startswith('./sub'):
             (tmp_path / 'sub').mkdir(exist_ok=True)
-        with pytest.raises(OutputError, match='is the same file as record.mcap'):
+        with pytest.raises(FileRefused, match='is the same file as record.mcap'):
             claim_output(name, overwrite=True, others=[('record.mcap', first)])
     first.release()
 
@@ -242,7 +242,7 @@ def test_partial_output_is_moved_into_place_only_when_complete(tmp_path):
     output = PartialOutput(target, hint='pass --force')
     output.claim.writer().write(b'complete')
     target.write_bytes(OLD)  # appeared meanwhile: not replaced without overwrite
-    with pytest.raises(OutputError, match='already exists; pass --force'):
+    with pytest.raises(FileRefused, match='already exists; pass --force'):
         output.commit()
     assert target.read_bytes() == OLD and sorted(tmp_path.iterdir()) == [target]
     output = PartialOutput(target, overwrite=True)

@@ -43,8 +43,8 @@ _KINDS = (
 _OPEN_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK | os.O_NOCTTY | os.O_CLOEXEC
 
 
-class OutputError(OSError):
-    """A file that may not or cannot be recorded into; str() is '<path>: <reason>'."""
+class FileRefused(OSError):
+    """A file that may not or cannot be written or read; str() is '<path>: <reason>'."""
 
     def __str__(self):
         return f'{self.filename}: {self.strerror}'
@@ -58,7 +58,7 @@ def _kind(mode):
 
 
 def _not_regular(path, mode):
-    return OutputError(errno.EINVAL, f'is {_kind(mode)}, not a regular file', path)
+    return FileRefused(errno.EINVAL, f'is {_kind(mode)}, not a regular file', path)
 
 
 class OutputClaim:
@@ -116,12 +116,12 @@ def claim_output(path, overwrite=False, hint='', others=()):
 
     hint completes the refusal of an existing file ('set record.overwrite:=true', 'pass
     --force'). others: (label, OutputClaim) pairs already held by the same run, which this
-    one must not share a file with. Raises OutputError, whose message names the path.
+    one must not share a file with. Raises FileRefused, whose message names the path.
     """
     path = os.fspath(path)
     for label, other in others:
         if same_path(path, other.path):
-            raise OutputError(errno.EEXIST, f'is the same file as {label}', path)
+            raise FileRefused(errno.EEXIST, f'is the same file as {label}', path)
     created = True
     try:
         fd = os.open(path, _OPEN_FLAGS | os.O_EXCL, 0o666)
@@ -131,10 +131,10 @@ def claim_output(path, overwrite=False, hint='', others=()):
         created = False
         fd = _open_existing(path)
     except OSError as error:
-        raise OutputError(error.errno, error.strerror, path) from None
+        raise FileRefused(error.errno, error.strerror, path) from None
     try:
         return _lock(path, fd, created, others)
-    except OutputError as error:
+    except FileRefused as error:
         os.close(fd)
         # A file we created but another recorder locked first is that recorder's now.
         if created and error.errno != errno.EBUSY:
@@ -150,7 +150,7 @@ def _refuse_existing(path, hint):
     if not stat.S_ISREG(mode) and not stat.S_ISLNK(mode):
         return _not_regular(path, mode)
     advice = f'; {hint} to replace it' if hint else ''
-    return OutputError(errno.EEXIST, f'already exists{advice}', path)
+    return FileRefused(errno.EEXIST, f'already exists{advice}', path)
 
 
 def _open_existing(path):
@@ -164,7 +164,7 @@ def _open_existing(path):
             mode = stat.S_IFREG
         if not stat.S_ISREG(mode):
             raise _not_regular(path, mode) from None
-        raise OutputError(error.errno, error.strerror, path) from None
+        raise FileRefused(error.errno, error.strerror, path) from None
 
 
 def _lock(path, fd, created, others):
@@ -173,16 +173,34 @@ def _lock(path, fd, created, others):
         raise _not_regular(path, status.st_mode)
     for label, other in others:
         if (status.st_dev, status.st_ino) == other.identity:
-            raise OutputError(errno.EEXIST, f'is the same file as {label}', path)
+            raise FileRefused(errno.EEXIST, f'is the same file as {label}', path)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
-        raise OutputError(errno.EBUSY, 'is being recorded by another process (it is locked)',
+        raise FileRefused(errno.EBUSY, 'is being recorded by another process (it is locked)',
                           path) from None
     if not created:
         os.ftruncate(fd, 0)
     os.set_blocking(fd, True)
     return OutputClaim(path, fd, created)
+
+
+def open_regular(path):
+    """Open a file to read it, refusing anything but a regular file without blocking.
+
+    A recording given to a tool may be a FIFO (open() would wait for a writer forever) or a
+    device (endless bytes): opened non-blocking, its type is read from the descriptor.
+    """
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | os.O_CLOEXEC)
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            raise _not_regular(path, mode)
+        os.set_blocking(fd, True)
+        return io.open(fd, 'rb', closefd=True)
+    except BaseException:
+        os.close(fd)
+        raise
 
 
 def _locked(fd):
@@ -246,13 +264,13 @@ class PartialOutput:
                 raise _refuse_existing(self.target, self.hint) from None
             return
         except OSError as error:
-            raise OutputError(error.errno, error.strerror, self.target) from None
+            raise FileRefused(error.errno, error.strerror, self.target) from None
         if not stat.S_ISREG(mode):
             raise _not_regular(self.target, mode)
         if not self.overwrite:
             raise _refuse_existing(self.target, self.hint)
         if is_locked(self.target):
-            raise OutputError(errno.EBUSY, 'is being recorded by another process (it is '
+            raise FileRefused(errno.EBUSY, 'is being recorded by another process (it is '
                                            'locked)', self.target)
 
     def commit(self):

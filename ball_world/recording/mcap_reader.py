@@ -43,6 +43,7 @@ from ball_world.core.parameters import checked, ParameterError
 from ball_world.core.scenario import build_world, step_duration_ns
 from ball_world.msgs.cdr import (decode_pose_array, decode_state, decode_state_layout,
                                  decode_vector3_stamped)
+from ball_world.recording.files import open_regular
 from ball_world.recording.mcap_writer import (EVENT_ROLES, flatten_parameters, METADATA_NAME,
                                               NODE_NAME, STEP_TOPICS)
 from ball_world.step_record import AppliedImpulse, RunInfo, STATS_FIELDS, StepRecord, WorldSnapshot
@@ -524,7 +525,7 @@ class Recording:
             raise RecordingError(error.strerror or str(error)) from None
 
     def _load(self):
-        with open(self.path, 'rb') as stream:
+        with open_regular(self.path) as stream:
             self.size = os.fstat(stream.fileno()).st_size
             if stream.read(len(MAGIC)) != MAGIC:
                 raise RecordingError('not an MCAP file (bad magic)')
@@ -620,7 +621,7 @@ class Recording:
     def messages(self, topics=None):
         """RecordedMessages in log-time order (file order for a file without summary)."""
         wanted = self._channel_ids(None if topics is None else set(topics))
-        with open(self.path, 'rb') as stream:
+        with open_regular(self.path) as stream:
             if self.has_summary:
                 records = self._indexed_messages(stream, wanted)
             else:
@@ -670,7 +671,7 @@ class Recording:
             return last
         wanted = self._channel_ids({topic})
         best = None
-        with open(self.path, 'rb') as stream:
+        with open_regular(self.path) as stream:
             for index in sorted(self._chunks(wanted), key=lambda i: i.message_end_time,
                                 reverse=True):
                 if best is not None and index.message_end_time < best.log_time:

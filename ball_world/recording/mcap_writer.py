@@ -245,7 +245,7 @@ class McapSink:
 
     output is a path, claimed here (an existing file is refused unless overwrite=True), or
     an OutputClaim the caller took. Opening fails at once (McapRecordingError or
-    files.OutputError, naming the path) when the file cannot be claimed, created or
+    files.FileRefused, naming the path) when the file cannot be claimed, created or
     written. Any later write error raises McapRecordingError from the call that hit it and
     closes the file; the sink is then finished and close() does nothing. fsync=True makes
     flush() also fsync, for power loss (SIGKILL does not need it). markers_period_ns=None

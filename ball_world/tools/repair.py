@@ -22,7 +22,7 @@ import sys
 from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
-from ball_world.recording.files import PartialOutput, same_path
+from ball_world.recording.files import open_regular, PartialOutput, same_path
 from ball_world.recording.mcap_reader import METADATA_NAME, RecordingError, Scan, Segment
 from ball_world.tools.progress import Progress
 
@@ -53,7 +53,7 @@ class RepairReport:
 
 def _first_compression(path, size):
     """The compression of the source's first chunk ('' when none), so the copy keeps it."""
-    with open(path, 'rb') as stream:
+    with open_regular(path) as stream:
         for record in Scan(stream, size).records():
             if isinstance(record, Chunk):
                 return record.compression
@@ -63,7 +63,7 @@ def _first_compression(path, size):
 def repair(source, target, force=False, stream=None):
     """Copy every complete record of `source` into a finished MCAP at `target`.
 
-    Raises RecordingError (not a ball_world MCAP) or OSError (files.OutputError included);
+    Raises RecordingError (not a ball_world MCAP) or OSError (files.FileRefused included);
     then nothing is written. Progress goes to `stream` (stderr).
     """
     size = os.path.getsize(source)
@@ -73,7 +73,7 @@ def repair(source, target, force=False, stream=None):
     output = PartialOutput(target, force or in_place, 'pass --force')
     progress = Progress(size, 'bytes', PROG, stream)
     try:
-        with output.claim.writer() as written, open(source, 'rb') as stream_in:
+        with output.claim.writer() as written, open_regular(source) as stream_in:
             scan = Scan(stream_in, size)
             _copy(scan, Writer(written, compression=compression), report, progress)
             report.kept_bytes = scan.end
