@@ -505,3 +505,39 @@ def test_fuzzed_recordings_get_an_answer_from_every_tool(source, tmp_path):
             assert 'Traceback' not in out + err, (label, name, err)
             if code == 2:
                 assert len(lines) == 1, (label, name, err)
+
+
+def test_info_escapes_control_characters_from_the_file(source, tmp_path, capsys):
+    path = tmp_path / 'escapes.mcap'
+    with open(source, 'rb') as stream, open(path, 'wb') as out:
+        writer = Writer(out)
+        for item in Scan(stream, os.path.getsize(source)).records():
+            kind = type(item).__name__
+            if kind == 'Header':
+                writer.start(item.profile, 'lib\x1b]0;title\x07')
+            elif kind == 'Schema':
+                writer.register_schema(item.name, item.encoding, item.data)
+            elif kind == 'Channel':
+                topic = '/imp\x1b[2J' if item.topic == '/impulse' else item.topic
+                writer.register_channel(topic, item.message_encoding, item.schema_id,
+                                        item.metadata)
+            elif kind == 'Metadata':
+                writer.add_metadata(item.name, item.metadata)
+        writer.finish()
+    assert info.main([str(path)]) == 0
+    out = capsys.readouterr().out
+    assert '\x1b' not in out and "'/imp\\x1b[2J'" in out and "'lib\\x1b]0;title\\x07'" in out
+
+
+def test_a_damaged_summary_is_read_around_and_reported(source, tmp_path, capsys):
+    data = bytearray(source.read_bytes())
+    footer = data[-8 - 29:-8]
+    summary_start = int.from_bytes(footer[9:17], 'little')
+    data[summary_start + 20] ^= 0x40  # inside the summary: its CRC no longer matches
+    path = tmp_path / 'summary.mcap'
+    path.write_bytes(bytes(data))
+    assert info.main([str(path)]) == 0
+    out = capsys.readouterr().out
+    assert 'summary:     NO (its data ends properly but its summary is missing or ' \
+        'damaged)' in out
+    assert resim.main([str(path)]) == 0  # every step is still there

@@ -411,7 +411,8 @@ class Segment:
         frame_id = values.get('frame_id', parameters['frame_id'])
         version = values.get('package_version', '')
         for key, text in (('frame_id', frame_id), ('package_version', version)):
-            if not isinstance(text, str) or len(text) > limits.MAX_NAME_LENGTH:
+            if not isinstance(text, str) or len(text) > limits.MAX_NAME_LENGTH \
+                    or not text.isprintable():
                 raise RecordingError(f"'{key}' is not a name: {_text(text)}")
         return cls(index=index, log_offset_ns=log_offset_ns, dt_ns=dt_ns, frame_id=frame_id,
                    package_version=version, parameters=parameters, topics=_topics(values))
@@ -607,7 +608,8 @@ class Recording:
                                  'before it)')
         if self.header is None:
             raise RecordingError('no MCAP header record')
-        self.problem = scan.problem
+        self.problem = scan.problem or ('its data ends properly but its summary is missing '
+                                        'or damaged')
         self.complete_bytes = scan.end
 
     # Messages -------------------------------------------------------------------------

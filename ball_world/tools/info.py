@@ -12,6 +12,16 @@ from ball_world.recording.mcap_reader import decode_stats, Recording, RecordingE
 from ball_world.step_record import STATS_FIELDS
 
 
+def _shown(text):
+    """A string from the recording as it may be printed: escaped unless plainly printable.
+
+    Topic and type names come from the file; control characters in them must not reach the
+    terminal (escape sequences can rewrite what it shows).
+    """
+    text = str(text)
+    return text if text.isprintable() else repr(text)
+
+
 def _seconds(ns):
     return f'{ns / 1e9:.9g} s'
 
@@ -45,15 +55,16 @@ def describe(recording):
     """The report as lines of text."""
     header = recording.header
     lines = [f'file:        {recording.path} ({recording.size} bytes)',
-             f'written by:  {header.library} (profile {header.profile!r})']
+             f'written by:  {_shown(header.library)} (profile {header.profile!r})']
     if recording.has_summary:
         lines.append('summary:     yes (the writer finished the file)')
     else:
-        lines.append(f'summary:     NO: the writer did not finish ({recording.problem}); '
+        lines.append(f'summary:     NO ({recording.problem}); '
                      f'{recording.complete_bytes} of {recording.size} bytes are complete '
                      'records.')
         lines.append(f'             Repair it: ball_world_repair {recording.path}')
-    compressions = ', '.join(sorted(c or 'none' for c in recording.compressions)) or 'none'
+    compressions = ', '.join(sorted(_shown(c or 'none') for c in recording.compressions)) \
+        or 'none'
     lines.append(f'compression: {compressions} ({recording.chunk_count} chunks)')
     if recording.start_ns is not None:
         lines.append(f'duration:    {_seconds(recording.end_ns - recording.start_ns)} (log time '
@@ -72,7 +83,7 @@ def describe(recording):
         lines.append(f'balls:       {count}')
     lines.append(f'messages:    {recording.message_count}')
     for info in recording.topics.values():
-        lines.append(f'  {info.topic}  {info.type}  {info.message_count}')
+        lines.append(f'  {_shown(info.topic)}  {_shown(info.type)}  {info.message_count}')
     lines.extend(_impulse_lines(recording))
     lines.extend(_energy_lines(recording))
     return lines
@@ -108,7 +119,8 @@ def _impulse_lines(recording, shown=10):
             stamp_ns, frame_id, x, y, _ = decode_vector3_stamped(message.data)
             segment = recording.segments[recording.segment_at(message.log_time_ns)]
             lines.append(f'  segment {segment.index} step {stamp_ns // segment.dt_ns} '
-                         f'({_seconds(stamp_ns)}): {frame_id} J = ({x:.6g}, {y:.6g}) N s')
+                         f'({_seconds(stamp_ns)}): {_shown(frame_id)} J = ({x:.6g}, {y:.6g}) '
+                         'N s')
     return lines
 
 
