@@ -23,6 +23,9 @@ Tools that write a whole file (ball_world_to_rrd, ball_world_repair) write it be
 target under a locked temporary name and move it into place only when it is complete
 (PartialOutput): a failed run leaves the target as it was, and the temporary file of a run
 that was killed is removed by the next run for the same target.
+
+Reading has the same trap: a recording handed to a tool is opened with open_regular, which
+refuses a FIFO or device instead of waiting on it.
 """
 import errno
 import fcntl
