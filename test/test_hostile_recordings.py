@@ -493,10 +493,20 @@ def _chunks(stream, size):
     return found
 
 
-def test_fuzzed_recordings_get_an_answer_from_every_tool(source, tmp_path):
-    data = source.read_bytes()
-    for label, mutated in fuzz_cases(data):
-        path = tmp_path / 'fuzzed.mcap'
+@pytest.mark.parametrize('compression', ['zstd', 'lz4', 'none'])
+def test_fuzzed_recordings_get_an_answer_from_every_tool(tmp_path, compression):
+    path = tmp_path / 'source.mcap'
+    simulation = Simulation(PARAMS, sinks=[McapSink(path, compression, chunk_bytes=4000)])
+    for step in range(20):
+        if step in (4, 9):
+            simulation.queue_impulse(2, 0.1, 0.2, 'ball_2')
+        simulation.step()
+    simulation.reset({**PARAMS, 'random.count': 5})
+    for _ in range(5):
+        simulation.step()
+    simulation.close()
+    data = path.read_bytes()
+    for label, mutated in fuzz_cases(data, seed=len(compression), count=24):
         path.write_bytes(mutated)
         for name in ('info', 'resim', 'to_rrd', 'repair'):
             code, out, err = run_tool(name, path, tmp_path)
