@@ -14,6 +14,7 @@ import time
 from geometry_msgs.msg import PoseArray, Vector3Stamped
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
+import rclpy.logging
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
@@ -80,9 +81,17 @@ def open_sinks(values):
         if values['record.mcap']:
             from ball_world.recording.mcap_writer import McapSink
             sinks.append(BackgroundSink(McapSink(values['record.mcap'])))
-        if values['record.rerun']:
+        if values['record.rerun'] or values['view.rerun']:
             from ball_world.recording.rerun_log import RerunSink
-            sinks.append(RerunSink(values['record.rerun'], every=values['record.rerun_every']))
+            sinks.append(RerunSink(
+                values['record.rerun'] or None, every=values['record.rerun_every'],
+                view=values['view.rerun'] or None, velocities=values['rerun.velocities'],
+                trail_seconds=values['rerun.trail_seconds'], clock=time.monotonic,
+                report=rclpy.logging.get_logger('ball_world').error))
+    except ValueError as error:  # the only value a RerunSink checks is the view
+        for sink in sinks:
+            sink.close()
+        raise StartupError(f"parameter 'view.rerun': {error}") from None
     except OSError as error:
         for sink in sinks:
             sink.close()
