@@ -329,8 +329,6 @@ class RerunSink:
         self._emit('log', WALLS, rr.LineStrips2D(
             strips, radii=rr.Radius.ui_points(1.5), colors=WALL_COLOR, draw_order=20.0))
         self._emit('log', IMPULSES, rr.Arrows2D.cleared())
-        if self.trail_seconds:
-            self._emit('log', TRAILS, rr.LineStrips2D.cleared())
 
     def write_step(self, record):
         """Buffer the step if it is one to log; send the buffer when it is full."""
@@ -416,7 +414,7 @@ class RerunSink:
                 if not self.outlets:
                     self._closed = True
                     raise
-                self.report(f'rerun {error}; going on without it')
+                self.report(f'{error}; going on without it')
 
     # Logging ----------------------------------------------------------------------------
 

@@ -116,12 +116,12 @@ class Outlet:
                 stream.spawn(port=SPAWN_PORT, default_blueprint=blueprint,
                              **({'executable_path': str(rerun_cli)}
                                 if rerun_cli.exists() else {}))
-            description = f'viewer spawned on port {SPAWN_PORT}'
+            description = f'live view in the viewer spawned on port {SPAWN_PORT}'
         else:
             def connect():
                 _probe(address, 'no viewer listens there')
                 stream.connect_grpc(target, default_blueprint=blueprint)
-            description = f'viewer at {target}'
+            description = f'live view at {target}'
         return cls(description, stream, connect,
                    probe=lambda: _probe(address, 'the viewer is gone'))
 
