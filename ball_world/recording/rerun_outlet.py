@@ -9,7 +9,8 @@ the stepping thread never waits on, and every wait on that thread is bounded:
 
 - a call that raises (a write error, a flush that times out) fails the outlet;
 - a call that has not returned after STALL_SECONDS, or a queue that fills up, fails it too;
-  the stuck thread is abandoned (a daemon) with its stream;
+  the stuck thread is abandoned (a daemon) with its stream, and the SDK's at-exit hook,
+  which would wait on that stream for good, is dropped;
 - a view is also failed when its viewer's port stops accepting connections: the SDK drops
   data silently once a viewer is gone, so only a probe can tell (a stalled viewer still
   accepts connections and is kept: the SDK drops what it cannot send, never blocking).
@@ -17,8 +18,10 @@ the stepping thread never waits on, and every wait on that thread is bounded:
 Each outlet has its own RecordingStream with the same application and recording id, so the
 file and the viewer hold one recording with the same content, and one can fail alone.
 """
+import os
 from pathlib import Path
 import queue
+import shutil
 import socket
 import sys
 import threading
@@ -86,11 +89,12 @@ class Outlet:
     holds the reason).
     """
 
-    def __init__(self, description, stream, connect, probe=None):
+    def __init__(self, description, stream, connect, probe=None, explain=None):
         self.description = description
         self.stream = stream
         self.failed = None
         self._probe = probe
+        self._explain = explain
         self._error = None
         self._reported = False
         self._busy_since = None
@@ -103,7 +107,8 @@ class Outlet:
     @classmethod
     def file(cls, path, stream, blueprint):
         return cls(f'file {str(path)!r}', stream,
-                   lambda: stream.save(Path(path), default_blueprint=blueprint))
+                   lambda: stream.save(Path(path), default_blueprint=blueprint),
+                   explain=lambda: _file_state(path))
 
     @classmethod
     def view(cls, target, stream, blueprint):
@@ -149,8 +154,8 @@ class Outlet:
         if self.failed is None and self._error is None:
             self._put(self._close, ())
             self._thread.join(timeout)
-            if self._thread.is_alive() and self._error is None:
-                self._error = f'did not finish within {timeout:g} s'
+            if self._thread.is_alive():
+                self._fail(f'did not finish within {timeout:g} s')
         self._check()
 
     def check(self):
@@ -158,7 +163,7 @@ class Outlet:
         busy_since = self._busy_since
         if self._error is None and busy_since is not None \
                 and time.monotonic() - busy_since > STALL_SECONDS:
-            self._error = f'no answer for {STALL_SECONDS:g} s'
+            self._fail(f'no answer for {STALL_SECONDS:g} s')
         self._check()
 
     def _check(self):
@@ -179,9 +184,17 @@ class Outlet:
     def _fail(self, error):
         if self._error is None:
             self._error = error
+            if self._explain is not None:
+                self._error += f' ({self._explain()})'
 
     def _abandon(self):
-        """Drop the queued calls and let the worker end the stream, if it still can."""
+        """Drop the queued calls and let the worker end the stream, if it still can.
+
+        The SDK's at-exit hook disconnects every stream, and on a stream whose file writer
+        died that waits forever (the process then never exits, whatever the signal). Every
+        outlet that still works is closed explicitly by its sink, so the hook is dropped.
+        """
+        rr.unregister_shutdown()
         while True:
             try:
                 self._queue.get_nowait()
@@ -234,6 +247,16 @@ def _probe(address, reason):
         socket.create_connection(address, timeout=PROBE_TIMEOUT).close()
     except OSError as error:
         raise OSError(f'{reason} ({error.strerror or error})') from None
+
+
+def _file_state(path):
+    """How far a file got and the room left beside it: what a write error usually means."""
+    try:
+        size = os.path.getsize(path)
+        free = shutil.disk_usage(os.path.dirname(os.path.abspath(path))).free
+    except OSError as error:
+        return error.strerror or str(error)
+    return f'{size:,} bytes written, {free:,} bytes free on its file system'
 
 
 def _one_line(error):
