@@ -630,3 +630,52 @@ def test_view_alone_without_a_file(listener):
     _, content, _, _ = read(received)
     positions = content[(f'/{BALLS}', 'Points2D:positions')]
     assert positions == {r.step: as_float32(r.positions) for r in collected.records}
+
+
+# The node ------------------------------------------------------------------------------------
+
+NODE = str(Path(sys.executable).parent / 'ball_world')
+
+
+def run_node(*parameters, timeout=LIVENESS_SECONDS * 3):
+    command = [NODE, '--ros-args']
+    for parameter in parameters:
+        command += ['-p', parameter]
+    return subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+
+
+def test_node_streams_to_a_viewer_and_records_one_recording(tmp_path, listener):
+    process, url, received = listener()
+    path = tmp_path / 'run.rrd'
+    result = run_node('max_steps:=120', 'rate_hz:=120.0', 'dt:=0.0166666667',
+                      f'view.rerun:={url}', f'record.rerun:={path}', 'rerun.velocities:=true',
+                      'rerun.trail_seconds:=0.5')
+    stop_listener(process)
+    assert result.returncode == 0, result.stderr
+    assert 'going on without it' not in result.stderr
+    store_file, content_file, _, _ = read(path)
+    store_view, content_view, _, _ = read(received)
+    assert store_view.recording_id == store_file.recording_id
+    assert content_view == content_file
+    assert sorted(content_file[(f'/{BALLS}', 'Points2D:positions')]) == list(range(121))
+    assert (f'/{VELOCITIES}', 'Arrows2D:vectors') in content_file
+    assert (f'/{TRAILS}', 'LineStrips2D:strips') in content_file
+    rtf = scalars(content_file, REAL_TIME_FACTOR)
+    assert len(rtf) == 120 and all(value > 0.0 for (value,) in rtf.values())
+
+
+def test_node_without_a_viewer_says_so_once_and_runs(tmp_path):
+    url = f'rerun+http://127.0.0.1:{free_port()}/proxy'
+    result = run_node('max_steps:=150', f'view.rerun:={url}')
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.count('no viewer listens there') == 1, result.stderr
+    assert 'max_steps 150 reached' in result.stderr
+
+
+@pytest.mark.parametrize('value', ['viewer', 'rerun+http://127.0.0.1:9876', 'http://h:1/proxy'])
+def test_node_refuses_a_bad_view_with_one_line(value):
+    result = run_node(f'view.rerun:={value}')
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        f"ball_world: parameter 'view.rerun': expected 'spawn' or a URL like "
+        f"rerun+http://127.0.0.1:9876/proxy, got '{value}'"]
