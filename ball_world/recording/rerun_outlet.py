@@ -7,7 +7,8 @@ comes (seen with rerun-sdk 0.41); a gRPC sink whose viewer never answers waits 5
 so every SDK call of a destination runs on a thread of its own, fed by a bounded queue that
 the stepping thread never waits on, and every wait on that thread is bounded:
 
-- a call that raises (a write error, a flush that times out) fails the outlet;
+- a call that raises (a write error, a flush of the file that times out) fails the outlet;
+  a view's flushes may time out for VIEW_PATIENCE s (a slow viewer) before it fails;
 - a call that has not returned after STALL_SECONDS, or a queue that fills up, fails it too;
   the stuck thread is abandoned (a daemon) with its stream, and the SDK's at-exit hook,
   which would wait on that stream for good, is dropped;
@@ -34,6 +35,9 @@ import rerun as rr
 STALL_SECONDS = 5.0
 #: Longest wait of a flush for the stream to write what was logged.
 FLUSH_TIMEOUT = 2.0
+#: A viewer may be too slow to take the data (its flushes time out) for this long before
+#: the view is dropped; meanwhile the SDK holds what it could not send.
+VIEW_PATIENCE = 10.0
 #: Longest wait of close() for an outlet to finish its file or connection.
 CLOSE_TIMEOUT = 10.0
 #: Calls that may wait for the worker (a logged step makes a few per 64 steps).
@@ -95,6 +99,7 @@ class Outlet:
         self.failed = None
         self._probe = probe
         self._explain = explain
+        self._late_since = None  # a view: when its flushes started timing out
         self._error = None
         self._reported = False
         self._busy_since = None
@@ -226,9 +231,22 @@ class Outlet:
                 return
 
     def _flush(self):
-        self.stream.flush(timeout_sec=FLUSH_TIMEOUT)
-        if self._probe is not None:
-            self._probe()
+        if self._probe is None:
+            self.stream.flush(timeout_sec=FLUSH_TIMEOUT)
+            return
+        # A view: a timed-out flush is a slow viewer, which may catch up; a broken
+        # connection, a closed port or VIEW_PATIENCE s of timeouts is a viewer gone.
+        try:
+            self.stream.flush(timeout_sec=FLUSH_TIMEOUT)
+            self._late_since = None
+        except RuntimeError as error:
+            if 'timed out' not in str(error):
+                raise
+            now = time.monotonic()
+            self._late_since = self._late_since or now
+            if now - self._late_since >= VIEW_PATIENCE:
+                raise RuntimeError(f'the viewer took no data for {VIEW_PATIENCE:g} s') from None
+        self._probe()
 
     def _close(self):
         self.stream.flush(timeout_sec=FLUSH_TIMEOUT)
