@@ -26,8 +26,8 @@ Layout of the recording (application id 'ball_world'):
   segment. Cumulative integers stay integers when the plot aggregates many steps per pixel
   (Max of a non-decreasing series), unlike per-step counts, which averaging turns into 0.5s.
 - `plots/real_time_factor` (Scalars): simulated over wall time over the last RTF_WINDOW s
-  of wall clock when the sink is given a clock (live), else the record's own value
-  (conversions of a recording show what was recorded).
+  of wall clock (from step 1 of a segment on) when the sink is given a clock (live), else
+  the record's own value (conversions of a recording show what was recorded).
 
 Momentum is not logged: in a walled box every wall bounce changes it, so its plot is noise
 to a reader; it stays in the `stats` topic and the MCAP.
@@ -342,7 +342,9 @@ class RerunSink:
             self._emit('log', ENERGY, rr.SeriesLines(names=energy_legend(self._energy0)))
         rtf = record.real_time_factor
         if self._rtf is not None:
-            rtf = self._rtf.add(record.log_time_ns)
+            # Step 0 is the initial state, written when the world is built, not a step: the
+            # pause before the first step (the node starting up) is no slowness.
+            rtf = self._rtf.add(record.log_time_ns) if record.step else None
         if record.step % self.every == 0 or record.impulses:
             self._log(record, rtf)
         else:
