@@ -99,7 +99,7 @@ IMPULSE_SECONDS = 0.5
 #: An impulse arrow is the velocity change it gives times this many seconds...
 ARROW_SECONDS = 0.25
 #: ...but at least / at most this fraction of the scene's larger side.
-ARROW_MIN_FRACTION = 0.06
+ARROW_MIN_FRACTION = 0.12
 ARROW_MAX_FRACTION = 0.3
 IMPULSE_COLOR = (255, 255, 255)
 
