@@ -1,9 +1,11 @@
 # The commands of the README. Each sets everything up first (scripts/setup.sh is fast when
 # nothing changed), so they work on a fresh clone.
-.PHONY: run test setup bench soak
+.PHONY: run view test setup bench soak
 VENV := .venv
 # Steps of the main job (60 Hz): 1800 is 30 s; 0 runs until Ctrl-C.
 STEPS ?= 1800
+# Steps of make view: 0 runs until Ctrl-C.
+VIEW_STEPS ?= 0
 # Arguments of the benchmark and of the soak runs, e.g. make soak ARGS='kill --times 10'.
 ARGS ?=
 
@@ -15,6 +17,10 @@ run: setup
 	$(VENV)/bin/ball_world --ros-args --params-file config/ball_world.yaml -p max_steps:=$(STEPS) \
 	  -p record.overwrite:=true -p record.mcap:=runs/ball_world.mcap -p record.rerun:=runs/ball_world.rrd
 	$(VENV)/bin/ball_world_info runs/ball_world.mcap
+
+# The default world live in a browser: prints the address; Ctrl-C stops the node and the server.
+view: setup
+	@STEPS=$(VIEW_STEPS) scripts/view.sh
 
 test: setup
 	$(VENV)/bin/python -m pytest -q test

@@ -1,24 +1,46 @@
 """The Rerun sink: files Rerun itself verifies and reads back to exactly what was simulated.
 
 Files are read with Rerun's own reader (rerun.chunk.RrdReader) and checked with its CLI
-(`rerun rrd verify`, `rerun rrd compare`), the programs users open them with.
+(`rerun rrd verify`, `rerun rrd compare`), the programs users open them with. What the
+viewer shows at a step is the latest value logged at or before it (Rerun's latest-at), so
+`shown_at` answers "what is on screen at step k" from the chunks.
 """
+from dataclasses import replace
 from pathlib import Path
+import signal
+import socket
 import subprocess
 import sys
+import threading
+import time
+from types import SimpleNamespace
+import warnings
 
 import numpy as np
 import pytest
 import rerun as rr
+import rerun_cli
 
+from ball_world.recording import rerun_outlet
 from ball_world.recording.mcap_writer import McapSink
-from ball_world.recording.rerun_log import (ARENA, ARROW_SECONDS, BALLS, COLLISIONS, ENERGY,
-                                            IMPULSES, MOMENTUM, RerunSink, SIM_TIME, STEP, WALLS)
+from ball_world.recording.rerun_log import (ARENA, ARROW_MAX_FRACTION, ARROW_MIN_FRACTION,
+                                            ARROW_SECONDS, BALLS, COLLISIONS, ENERGY,
+                                            IMPULSE_COLOR, IMPULSES, REAL_TIME_FACTOR,
+                                            RealTimeFactor, RerunSink, scene_bounds, SIM_TIME,
+                                            STEP, TRAILS, VELOCITIES, VELOCITY_SECONDS, WALLS)
+from ball_world.recording.rerun_outlet import Outlet, OutletFailed, parse_view
 from ball_world.simulation import Simulation
 from ball_world.tools import to_rrd
 
 RERUN_CLI = Path(sys.executable).parent / 'rerun'
+#: The viewer binary itself: the `rerun` script runs it as a child, so killing the script
+#: would leave the viewer running.
+RERUN_BINARY = Path(rerun_cli.__file__).parent / 'rerun'
 IMPULSES_AT = {1: (0, 0.1, 0.0), 10: (3, 0.0, -0.2)}  # before step k: ball, jx, jy
+STEPS_PER_SECOND = 60  # the default world: dt = 1/60 s
+HALF_SECOND = STEPS_PER_SECOND // 2
+#: Generous deadline for things that must happen (never a timing assertion).
+LIVENESS_SECONDS = 20.0
 
 
 class Collector:
@@ -41,13 +63,14 @@ class Collector:
         pass
 
 
-def run(sinks, steps=30, parameters=None, reset_at=None, reset_parameters=None):
+def run(sinks, steps=30, parameters=None, reset_at=None, reset_parameters=None,
+        impulses=IMPULSES_AT):
     """The default world with a couple of impulses; returns the Collector."""
     collector = Collector()
     simulation = Simulation(parameters or {}, sinks=[*sinks, collector])
     for k in range(1, steps + 1):
-        if k in IMPULSES_AT:
-            ball, jx, jy = IMPULSES_AT[k]
+        if k in impulses:
+            ball, jx, jy = impulses[k]
             simulation.queue_impulse(ball, jx, jy, f'ball_{ball}')
         if k == reset_at:
             simulation.reset(reset_parameters or {})
@@ -66,7 +89,10 @@ def read(path):
     Also returns the timelines seen and the sim_time of every step, from the chunks of
     the file's (only) recording store.
     """
-    reader = rr.chunk.RrdReader(path)
+    with warnings.catch_warnings():
+        # `rerun --save` (what a viewer received) writes no footer; the reader then scans.
+        warnings.filterwarnings('ignore', 'RRD file has no footer')
+        reader = rr.chunk.RrdReader(path)
     (store,) = reader.recordings()
     content = {}
     timelines = set()
@@ -89,9 +115,27 @@ def read(path):
     return store, content, timelines, sim_time
 
 
+def shown_at(column, step):
+    """What the viewer shows at `step`: the latest value logged at or before it."""
+    logged = [s for s in column if s is not None and s <= step]
+    return column[max(logged)] if logged else None
+
+
+def scalars(content, entity):
+    return content[(f'/{entity}', 'Scalars:scalars')]
+
+
 def as_float32(points):
     return np.asarray(points, dtype=np.float32).tolist()
 
+
+def percent_change(energy, energy0):
+    """The closed form the plot must hold: percent change, 0 below 1e-12 relative."""
+    relative = (energy - energy0) / energy0
+    return 0.0 if abs(relative) < 0.5e-12 else relative * 100.0
+
+
+# The file -----------------------------------------------------------------------------------
 
 def test_recording_verifies_and_reads_back_exactly(tmp_path):
     path = tmp_path / 'run.rrd'
@@ -113,12 +157,6 @@ def test_recording_verifies_and_reads_back_exactly(tmp_path):
         # Rerun stores positions as float32: the file holds exactly the float32 positions.
         assert positions[record.step] == as_float32(record.positions)
         assert sim_time[record.step] == record.log_time_ns
-    energy = content[(f'/{ENERGY}', 'Scalars:scalars')]
-    assert energy == {r.step: [r.kinetic_energy] for r in records}
-    momentum = content[(f'/{MOMENTUM}', 'Scalars:scalars')]
-    assert momentum == {r.step: list(r.momentum) for r in records}
-    collisions = content[(f'/{COLLISIONS}', 'Scalars:scalars')]
-    assert collisions == {r.step: [r.ball_ball, r.ball_wall] for r in records}
 
     walls = content[(f'/{WALLS}', 'LineStrips2D:strips')]
     assert walls == {0: world.walls.reshape(-1, 2, 2).tolist()}
@@ -126,30 +164,102 @@ def test_recording_verifies_and_reads_back_exactly(tmp_path):
     labels = content[(f'/{BALLS}', 'Points2D:labels')][0]
     assert labels == [f'ball_{i}' for i in range(len(world.radii))]
     assert (f'/{ARENA}', 'Transform3D:rotation_axis_angle') in content
+    assert not any(entity.startswith('/plots/momentum') for entity, _ in content)
+    assert not any(entity in (f'/{VELOCITIES}', f'/{TRAILS}') for entity, _ in content)
 
-    # Each impulse shows at its step, at its ball, and is gone at the next step.
+
+def test_energy_is_the_change_from_step_0_and_reads_zero_when_conserved(tmp_path):
+    path = tmp_path / 'run.rrd'
+    collected = run([RerunSink(path)], steps=300, impulses={200: (2, 0.3, 0.1)})
+    records = collected.records
+    energy0 = records[0].kinetic_energy
+    drift = [abs(r.kinetic_energy - energy0) / energy0 for r in records[:200]]
+    assert max(drift) < 1e-13  # the physics conserves energy to rounding...
+    _, content, _, _ = read(path)
+    energy = scalars(content, ENERGY)
+    # ...and the plot says so: exactly zero until the impulse, not rounding noise blown up.
+    assert all(energy[r.step] == [0.0] for r in records[:200])
+    for record in records[200:]:
+        assert energy[record.step] == [pytest.approx(
+            percent_change(record.kinetic_energy, energy0), rel=1e-9)]
+    assert energy[200][0] > 1.0  # the push added over 1% to this world's energy
+    legend = content[(f'/{ENERGY}', 'SeriesLines:names')]
+    assert legend[0] == [f'change from {energy0:.6g} J at step 0']
+
+
+def test_collisions_are_integer_totals_per_segment(tmp_path):
+    path = tmp_path / 'run.rrd'
+    collected = run([RerunSink(path)], steps=240, reset_at=200,
+                    reset_parameters={'random.count': 30, 'random.seed': 4})
+    records = collected.records
+    _, content, _, _ = read(path)
+    collisions = scalars(content, COLLISIONS)
+    start = 0
+    for index, record in enumerate(records):
+        if record.step == 0:
+            start = index
+        segment = records[start:index + 1]
+        expected = [sum(r.ball_ball for r in segment), sum(r.ball_wall for r in segment)]
+        assert collisions[index] == expected  # index = the step timeline across the reset
+    assert all(value == int(value) for row in collisions.values() for value in row)
+    assert collisions[199][0] + collisions[199][1] > 0, 'the run had collisions to count'
+    style = content[(f'/{COLLISIONS}', 'SeriesLines:aggregation_policy')][None]
+    assert style == [rr.components.AggregationPolicy.Max.value]  # integers at any zoom
+
+
+def test_impulse_stays_half_a_second_in_white_with_the_ball_name(tmp_path):
+    path = tmp_path / 'run.rrd'
+    collected = run([RerunSink(path)], steps=60)
+    records = collected.records
+    world = collected.worlds[0]
+    xmin, ymin, xmax, ymax = scene_bounds(world)
+    span = max(xmax - xmin, ymax - ymin)
+    _, content, _, _ = read(path)
     vectors = content[(f'/{IMPULSES}', 'Arrows2D:vectors')]
     origins = content[(f'/{IMPULSES}', 'Arrows2D:origins')]
-    for applied_at, (ball, jx, jy) in IMPULSES_AT.items():
-        (impulse,) = records[applied_at].impulses
-        assert (impulse.ball, impulse.jx, impulse.jy) == (ball, jx, jy)
-        assert origins[applied_at] == as_float32([records[applied_at].positions[ball]])
-        kick = np.array([[jx, jy]]) / world.masses[ball] * ARROW_SECONDS  # velocity change
-        assert vectors[applied_at] == as_float32(kick)
-        assert vectors[applied_at + 1] == []
+    labels = content[(f'/{IMPULSES}', 'Arrows2D:labels')]
+    colors = content[(f'/{IMPULSES}', 'Arrows2D:colors')]
+
+    def arrow(step, ball, jx, jy):
+        kick = np.array([jx, jy]) / world.masses[ball] * ARROW_SECONDS
+        length = np.hypot(*kick)
+        shown = min(max(length, ARROW_MIN_FRACTION * span), ARROW_MAX_FRACTION * span)
+        return as_float32([kick / length * shown])[0]
+
+    first, second = ((k, *IMPULSES_AT[k]) for k in sorted(IMPULSES_AT))
+    for step in range(61):
+        expected = [(k, ball, jx, jy) for k, ball, jx, jy in (first, second)
+                    if k <= step < k + HALF_SECOND]
+        assert shown_at(vectors, step) == [arrow(*e) for e in expected], step
+        assert shown_at(origins, step) == [as_float32(records[k].positions[ball])
+                                           for k, ball, _, _ in expected], step
+        if expected:
+            assert shown_at(labels, step) == [
+                f'ball_{ball}: J = ({jx:.3g}, {jy:.3g}) N s' for _, ball, jx, jy in expected]
+    white = int.from_bytes(bytes((*IMPULSE_COLOR, 255)), 'big')
+    assert {tuple(color) for color in colors.values()} == {(white,), ()}  # () = cleared
+    # 0.1 N s on a ball of ~0.1 kg is a small push: its arrow is lifted to the floor.
+    assert np.hypot(*arrow(*first)[0:2]) == pytest.approx(ARROW_MIN_FRACTION * span, rel=1e-6)
 
 
-def test_identical_runs_give_identical_content(tmp_path):
-    first, second = tmp_path / 'first.rrd', tmp_path / 'second.rrd'
-    run([RerunSink(first)])
-    run([RerunSink(second)])
-    store_a, content_a, _, _ = read(first)
-    store_b, content_b, _, _ = read(second)
-    assert store_a.recording_id == store_b.recording_id
-    assert content_a == content_b
-    # Chunk boundaries and row ids may differ between runs; the data may not.
-    result = rerun_cli('rrd', 'compare', '--unordered', str(first), str(second))
-    assert result.returncode == 0, result.stdout + result.stderr
+def test_optional_velocities_and_trails(tmp_path):
+    path = tmp_path / 'run.rrd'
+    collected = run([RerunSink(path, velocities=True, trail_seconds=0.1)], steps=20)
+    records = collected.records
+    _, content, _, _ = read(path)
+    vectors = content[(f'/{VELOCITIES}', 'Arrows2D:vectors')]
+    origins = content[(f'/{VELOCITIES}', 'Arrows2D:origins')]
+    trails = content[(f'/{TRAILS}', 'LineStrips2D:strips')]
+    for record in records:
+        assert vectors[record.step] == as_float32(
+            np.float32(record.velocities) * np.float32(VELOCITY_SECONDS))
+        assert origins[record.step] == as_float32(record.positions)
+        # The steps up to this one whose log times are within 0.1 s of it.
+        within = [r for r in records[:record.step + 1]
+                  if record.log_time_ns - r.log_time_ns <= 100_000_000]
+        assert len(within) == min(record.step + 1, 6)  # 6 steps of 16,666,667 ns > 0.1 s
+        expected = np.stack([np.float32(r.positions) for r in within], axis=1)
+        assert trails[record.step] == expected.tolist()
 
 
 def test_every_k_and_reset_keep_timelines_and_totals(tmp_path):
@@ -170,10 +280,60 @@ def test_every_k_and_reset_keep_timelines_and_totals(tmp_path):
         assert positions[global_step] == as_float32(record.positions)
         assert sim_time[global_step] == record.log_time_ns
     assert len(positions[22]) == 5 and len(positions[14]) == 20
-    # Collisions of skipped steps are added to the next logged one: the totals stay right.
-    collisions = content[(f'/{COLLISIONS}', 'Scalars:scalars')]
-    assert np.sum(list(collisions.values()), axis=0).tolist() == [
-        sum(r.ball_ball for r in records), sum(r.ball_wall for r in records)]
+    # Totals at the last logged step of each segment count the skipped steps too.
+    collisions = scalars(content, COLLISIONS)
+    for last, segment in ((14, records[:15]), (22, records[15:])):
+        assert collisions[last] == [sum(r.ball_ball for r in segment),
+                                    sum(r.ball_wall for r in segment)]
+
+
+def test_balls_named_by_the_record_may_come_and_go(tmp_path):
+    """Records naming their balls: labels, radii and colours follow the names."""
+    path = tmp_path / 'named.rrd'
+    sink = RerunSink(path)
+    collector = Collector()
+    simulation = Simulation({'random.count': 3}, sinks=[collector])
+    world = collector.worlds[0]
+    info = SimpleNamespace(parameters={}, log_offset_ns=0)
+    sink.start_segment(world, info)
+    initial = collector.records[0]
+    sink.write_step(initial)
+    simulation.step()
+    two = collector.records[1]
+    # Step 1: ball_1 is gone; step 2: a ball named 'red' arrives with its own radius.
+    gone = SimpleNamespace(**{**vars(replace(two)), 'positions': two.positions[[0, 2]],
+                              'velocities': two.velocities[[0, 2]],
+                              'names': ('ball_0', 'ball_2')})
+    sink.write_step(gone)
+    arrived = SimpleNamespace(**{**vars(gone), 'step': 2, 'log_time_ns': 2 * two.log_time_ns,
+                                 'positions': np.vstack([gone.positions, [[5.0, 5.0]]]),
+                                 'names': ('ball_0', 'ball_2', 'red'),
+                                 'radii': [*world.radii[[0, 2]], 0.5]})
+    sink.write_step(arrived)
+    sink.close()
+    _, content, _, _ = read(path)
+    labels = content[(f'/{BALLS}', 'Points2D:labels')]
+    radii = content[(f'/{BALLS}', 'Points2D:radii')]
+    colors = content[(f'/{BALLS}', 'Points2D:colors')]
+    assert labels == {0: ['ball_0', 'ball_1', 'ball_2'], 1: ['ball_0', 'ball_2'],
+                      2: ['ball_0', 'ball_2', 'red']}
+    assert radii[1] == as_float32(world.radii[[0, 2]])
+    assert radii[2] == as_float32([*world.radii[[0, 2]], 0.5])
+    assert colors[1] == [colors[0][0], colors[0][2]]  # a ball keeps its colour
+    assert len(content[(f'/{BALLS}', 'Points2D:positions')][2]) == 3
+
+
+def test_identical_runs_give_identical_content(tmp_path):
+    first, second = tmp_path / 'first.rrd', tmp_path / 'second.rrd'
+    run([RerunSink(first)])
+    run([RerunSink(second)])
+    store_a, content_a, _, _ = read(first)
+    store_b, content_b, _, _ = read(second)
+    assert store_a.recording_id == store_b.recording_id
+    assert content_a == content_b
+    # Chunk boundaries and row ids may differ between runs; the data may not.
+    result = rerun_cli('rrd', 'compare', '--unordered', str(first), str(second))
+    assert result.returncode == 0, result.stdout + result.stderr
 
 
 def test_mcap_converts_to_the_same_positions(tmp_path, capsys):
@@ -185,11 +345,11 @@ def test_mcap_converts_to_the_same_positions(tmp_path, capsys):
     assert result.returncode == 0, result.stdout + result.stderr
     _, live_content, _, live_times = read(live)
     _, converted_content, _, converted_times = read(converted)
-    key = (f'/{BALLS}', 'Points2D:positions')
-    assert converted_content[key] == live_content[key]
+    for key in ((f'/{BALLS}', 'Points2D:positions'), (f'/{IMPULSES}', 'Arrows2D:vectors'),
+                (f'/{ENERGY}', 'Scalars:scalars'), (f'/{COLLISIONS}', 'Scalars:scalars'),
+                (f'/{REAL_TIME_FACTOR}', 'Scalars:scalars')):
+        assert converted_content[key] == live_content[key], key
     assert converted_times == live_times
-    arrows = (f'/{IMPULSES}', 'Arrows2D:vectors')
-    assert converted_content[arrows] == live_content[arrows]
 
 
 def test_converter_reports_unreadable_input(tmp_path, capsys):
@@ -199,8 +359,329 @@ def test_converter_reports_unreadable_input(tmp_path, capsys):
     assert 'error' in capsys.readouterr().err
 
 
+# The real-time factor -----------------------------------------------------------------------
+
+class FakeClock:
+    def __init__(self):
+        self.now = 100.0
+
+    def __call__(self):
+        return self.now
+
+
+def test_real_time_factor_is_over_the_last_second_and_shows_a_stall(tmp_path):
+    """60 steps/s of wall time (RTF 1), one step that takes 3 s, then 60 steps/s again."""
+    clock = FakeClock()
+    path = tmp_path / 'rtf.rrd'
+    dt = 16_666_667e-9  # the default world's step, 1/60 s in whole nanoseconds
+    wall_per_step = {k: dt for k in range(1, 241)}
+    wall_per_step[100] = 3.0
+
+    class Ticking(Collector):
+        def write_step(self, record):
+            clock.now += wall_per_step.get(record.step, 0.0)
+
+    collector = Collector()
+    simulation = Simulation({}, sinks=[Ticking(), RerunSink(path, clock=clock), collector])
+    for _ in range(240):
+        simulation.step(real_time_factor=1.0)  # the node's value is ignored with a clock
+    simulation.close()
+    _, content, _, _ = read(path)
+    rtf = {step: value for step, (value,) in scalars(content, REAL_TIME_FACTOR).items()}
+    assert 0 not in rtf and 1 not in rtf  # the initial state and one step are no rate yet
+    for step in range(2, 100):
+        assert rtf[step] == pytest.approx(1.0, rel=1e-9)
+    # Right after the stall the last second holds the stalled step: 1/60 s in 3 s.
+    assert rtf[100] == pytest.approx(dt / 3.0, rel=1e-9)
+    # Steps 101..159: the window still reaches back to the stalled step...
+    assert rtf[130] == pytest.approx(31 * dt / (3.0 + 30 * dt), rel=1e-9)
+    # ...and once a full second has passed since it, the factor is 1 again.
+    assert rtf[161] == pytest.approx(1.0, rel=1e-9)
+    assert rtf[240] == pytest.approx(1.0, rel=1e-9)
+
+
+def test_real_time_factor_window_unit():
+    clock = FakeClock()
+    meter = RealTimeFactor(clock, window=1.0)
+    assert meter.add(0) is None
+    clock.now += 0.5
+    assert meter.add(1_000_000_000) == pytest.approx(2.0)  # 1 s simulated in 0.5 s
+
+
+# Destinations that fail --------------------------------------------------------------------
+
+@pytest.mark.parametrize('value', [
+    'rerun+http://127.0.0.1:9876', 'http://127.0.0.1:9876/proxy', 'rerun+http://:9876/proxy',
+    'rerun+http://127.0.0.1:99999/proxy', 'Spawn', 'rerun+http://h:1/proxy?x=1', ' '])
+def test_bad_view_values_are_refused(value):
+    with pytest.raises(ValueError, match='expected .spawn. or a URL like rerun'):
+        parse_view(value)
+    with pytest.raises(ValueError, match='expected'):
+        RerunSink(view=value)
+
+
+def test_good_view_values():
+    assert parse_view('spawn') == ('127.0.0.1', 9876)
+    assert parse_view('rerun+http://localhost:9090/proxy') == ('localhost', 9090)
+    assert parse_view('rerun+https://example.org/proxy') == ('example.org', 443)
+
+
 def test_sink_rejects_bad_arguments(tmp_path):
     with pytest.raises(ValueError):
         RerunSink(tmp_path / 'x.rrd', every=0)
+    with pytest.raises(ValueError):
+        RerunSink(tmp_path / 'x.rrd', trail_seconds=-1.0)
+    with pytest.raises(ValueError):
+        RerunSink()
     with pytest.raises(OSError):
         RerunSink(tmp_path / 'missing' / 'x.rrd')
+
+
+class HangingStream:
+    """A stream whose flush never returns, as RecordingStream.flush did on a full disk."""
+
+    def __init__(self):
+        self.release = threading.Event()
+        self.entered = threading.Event()
+        self.logged = []
+
+    def log(self, *args, **kwargs):
+        self.logged.append(args)
+
+    def flush(self, timeout_sec):
+        self.entered.set()
+        self.release.wait()
+
+    def disconnect(self):
+        pass
+
+
+def test_a_destination_that_hangs_is_dropped_without_blocking(monkeypatch):
+    monkeypatch.setattr(rerun_outlet, 'STALL_SECONDS', 0.2)
+    stream = HangingStream()
+    outlet = Outlet('file test.rrd', stream, connect=lambda: None)
+    try:
+        outlet.call('log', 'a')
+        outlet.flush()
+        assert stream.entered.wait(LIVENESS_SECONDS)  # the worker now hangs in flush
+        deadline = time.monotonic() + LIVENESS_SECONDS
+        with pytest.raises(OutletFailed, match=r'file test.rrd: no answer'):
+            while time.monotonic() < deadline:
+                for _ in range(1000):
+                    outlet.call('log', 'b')  # never blocks, even with the queue full
+                outlet.flush()
+                time.sleep(0.05)
+        assert outlet.failed
+        outlet.flush()  # reported once: later calls are dropped quietly
+        outlet.close(timeout=0.1)
+        assert stream.logged == [('a',)]
+    finally:
+        stream.release.set()
+
+
+FULL_DISK_SCRIPT = """
+import resource, signal, sys, time
+from ball_world.recording.rerun_log import RerunSink
+from ball_world.simulation import Simulation
+limit = int(sys.argv[2])
+resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # as Python does: the write fails with EFBIG
+failures = []
+simulation = Simulation({'random.count': 3000, 'arena': [0.0, 0.0, 120.0, 120.0]},
+                        sinks=[RerunSink(sys.argv[1])], on_sink_failure=failures.append)
+step = 0
+while step < 2000 and (not failures or step < failed_at + 300):
+    simulation.step()
+    step += 1
+    if step % 30 == 0:
+        simulation.flush()
+    if failures and 'failed_at' not in globals():
+        failed_at = step
+        print(f'failed at step {step}: {failures[0].error}', flush=True)
+simulation.close()
+print(f'stepped to {step}; failures {len(failures)}', flush=True)
+"""
+
+
+def test_full_disk_stops_the_rrd_once_and_stepping_goes_on(tmp_path):
+    """3,000 balls into an .rrd limited to 2 MB (RLIMIT_FSIZE): the write fails mid-run."""
+    path = tmp_path / 'full.rrd'
+    limit = 2_000_000
+    result = subprocess.run(
+        [sys.executable, '-c', FULL_DISK_SCRIPT, str(path), str(limit)],
+        capture_output=True, text=True, timeout=LIVENESS_SECONDS * 6)
+    assert result.returncode == 0, result.stderr[-3000:]
+    lines = result.stdout.splitlines()
+    assert len(lines) == 2, result.stdout
+    failed_at = int(lines[0].split()[3].rstrip(':'))
+    assert f'file {str(path)!r}' in lines[0]
+    assert lines[1] == f'stepped to {failed_at + 300}; failures 1'
+    assert path.stat().st_size <= limit
+
+
+# Live view ----------------------------------------------------------------------------------
+
+def free_port():
+    with socket.socket() as probe:
+        probe.bind(('127.0.0.1', 0))
+        return probe.getsockname()[1]
+
+
+@pytest.fixture
+def listener(tmp_path):
+    """A `rerun --save` gRPC server on a free port: what a viewer would receive."""
+    started = []
+
+    def start(name='received.rrd'):
+        port = free_port()
+        path = tmp_path / name
+        process = subprocess.Popen(
+            [str(RERUN_BINARY), '--bind', '127.0.0.1', '--port', str(port), '--save', str(path)],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        started.append(process)
+        deadline = time.monotonic() + LIVENESS_SECONDS
+        while True:
+            try:
+                socket.create_connection(('127.0.0.1', port), timeout=1.0).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline, 'rerun --save did not listen'
+                time.sleep(0.1)
+        return process, f'rerun+http://127.0.0.1:{port}/proxy', path
+
+    yield start
+    for process in started:
+        if process.poll() is None:
+            process.kill()
+        process.wait()
+
+
+def stop_listener(process):
+    """Ctrl-C: the listener finishes its file."""
+    process.send_signal(signal.SIGINT)
+    process.wait(timeout=LIVENESS_SECONDS)
+
+
+def test_live_view_receives_the_same_recording_as_the_file(tmp_path, listener):
+    process, url, received = listener()
+    path = tmp_path / 'run.rrd'
+    reports = []
+    run([RerunSink(path, view=url, report=reports.append)], steps=90)
+    stop_listener(process)
+    assert reports == []
+    # Compared value by value: the two streams batch rows into chunks at different moments.
+    store_file, content_file, _, _ = read(path)
+    store_view, content_view, _, _ = read(received)
+    assert store_view.recording_id == store_file.recording_id  # one recording
+    assert content_view == content_file
+    with warnings.catch_warnings():
+        warnings.filterwarnings('ignore', 'RRD file has no footer')
+        assert rr.chunk.RrdReader(received).blueprints(), 'the blueprint reached the viewer'
+
+
+def test_absent_viewer_is_reported_once_and_the_file_goes_on(tmp_path):
+    path = tmp_path / 'run.rrd'
+    reports = []
+    url = f'rerun+http://127.0.0.1:{free_port()}/proxy'
+    sink = RerunSink(path, view=url, report=reports.append)
+    simulation = Simulation({}, sinks=[sink])
+    deadline = time.monotonic() + LIVENESS_SECONDS
+    while not reports:
+        assert time.monotonic() < deadline, 'the absent viewer was never reported'
+        for _ in range(30):
+            simulation.step()
+        simulation.flush()
+        time.sleep(0.05)
+    for _ in range(60):
+        simulation.step()
+    simulation.flush()
+    simulation.close()
+    assert reports == [f'live view at {url}: no viewer listens there (Connection refused); '
+                       'going on without it']
+    result = rerun_cli('rrd', 'verify', str(path))
+    assert result.returncode == 0, result.stdout + result.stderr
+    _, content, _, _ = read(path)
+    assert len(content[(f'/{BALLS}', 'Points2D:positions')]) == simulation.step_index + 1
+
+
+def test_killed_viewer_is_reported_once(tmp_path, listener):
+    process, url, _ = listener()
+    path = tmp_path / 'run.rrd'
+    reports = []
+    simulation = Simulation({}, sinks=[RerunSink(path, view=url, report=reports.append)])
+    for _ in range(60):
+        simulation.step()
+    simulation.flush()
+    process.kill()
+    process.wait()
+    deadline = time.monotonic() + LIVENESS_SECONDS
+    while not reports:
+        assert time.monotonic() < deadline, 'the killed viewer was never reported'
+        for _ in range(30):
+            simulation.step()
+        simulation.flush()
+        time.sleep(0.05)
+    simulation.close()
+    # The SDK notices the broken connection, or else the probe finds the port closed.
+    (report,) = reports
+    assert report.startswith(f'live view at {url}: ') and report.endswith('; going on without it')
+    result = rerun_cli('rrd', 'verify', str(path))
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_view_alone_without_a_file(listener):
+    process, url, received = listener()
+    collected = run([RerunSink(view=url)], steps=30)
+    stop_listener(process)
+    _, content, _, _ = read(received)
+    positions = content[(f'/{BALLS}', 'Points2D:positions')]
+    assert positions == {r.step: as_float32(r.positions) for r in collected.records}
+
+
+# The node ------------------------------------------------------------------------------------
+
+NODE = str(Path(sys.executable).parent / 'ball_world')
+
+
+def run_node(*parameters, timeout=LIVENESS_SECONDS * 3):
+    command = [NODE, '--ros-args']
+    for parameter in parameters:
+        command += ['-p', parameter]
+    return subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+
+
+def test_node_streams_to_a_viewer_and_records_one_recording(tmp_path, listener):
+    process, url, received = listener()
+    path = tmp_path / 'run.rrd'
+    result = run_node('max_steps:=120', 'rate_hz:=120.0', 'dt:=0.0166666667',
+                      f'view.rerun:={url}', f'record.rerun:={path}', 'rerun.velocities:=true',
+                      'rerun.trail_seconds:=0.5')
+    stop_listener(process)
+    assert result.returncode == 0, result.stderr
+    assert 'going on without it' not in result.stderr
+    store_file, content_file, _, _ = read(path)
+    store_view, content_view, _, _ = read(received)
+    assert store_view.recording_id == store_file.recording_id
+    assert content_view == content_file
+    assert sorted(content_file[(f'/{BALLS}', 'Points2D:positions')]) == list(range(121))
+    assert (f'/{VELOCITIES}', 'Arrows2D:vectors') in content_file
+    assert (f'/{TRAILS}', 'LineStrips2D:strips') in content_file
+    rtf = scalars(content_file, REAL_TIME_FACTOR)
+    assert sorted(rtf) == list(range(2, 121)) and all(value > 0.0 for (value,) in rtf.values())
+
+
+def test_node_without_a_viewer_says_so_once_and_runs(tmp_path):
+    url = f'rerun+http://127.0.0.1:{free_port()}/proxy'
+    result = run_node('max_steps:=150', f'view.rerun:={url}')
+    assert result.returncode == 0, result.stderr
+    assert result.stderr.count('no viewer listens there') == 1, result.stderr
+    assert 'max_steps 150 reached' in result.stderr
+
+
+@pytest.mark.parametrize('value', ['viewer', 'rerun+http://127.0.0.1:9876', 'http://h:1/proxy'])
+def test_node_refuses_a_bad_view_with_one_line(value):
+    result = run_node(f'view.rerun:={value}')
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        f"ball_world: parameter 'view.rerun': expected 'spawn' or a URL like "
+        f"rerun+http://127.0.0.1:9876/proxy, got '{value}'"]

@@ -271,6 +271,13 @@ PARAMETERS = (
               AT_START, max_length=MAX_PATH_LENGTH),
     Parameter('record.rerun_every', INTEGER, 1, 'Log every k-th step to the .rrd (steps with '
               'impulses are always logged).', AT_START, 1, 1_000_000),
+    Parameter('view.rerun', STRING, '', "Live Rerun view: '' off, 'spawn' starts the native "
+              'viewer, or a rerun+http://HOST:PORT/proxy URL of a running viewer or rerun '
+              '--serve-web.', AT_START, max_length=MAX_PATH_LENGTH),
+    Parameter('rerun.velocities', BOOL, False, 'Rerun: draw velocity arrows (costly for large '
+              'worlds).', AT_START),
+    Parameter('rerun.trail_seconds', DOUBLE, 0.0, 'Rerun: draw each path over this many '
+              'simulated seconds; 0: none (costly for large worlds).', AT_START, 0.0, 10.0),
 )
 
 BY_NAME = {parameter.name: parameter for parameter in PARAMETERS}

@@ -1,4 +1,4 @@
-"""Rerun logging of a run: a Sink that writes a `.rrd` file the Rerun Viewer opens as is.
+"""Rerun logging of a run: a Sink that writes an `.rrd` file and/or streams to a live viewer.
 
 Layout of the recording (application id 'ball_world'):
 
@@ -6,37 +6,62 @@ Layout of the recording (application id 'ball_world'):
   (the 2D view ignores ViewCoordinates), so the arena's children are logged in true world
   coordinates and this proper rotation turns them upside down for the view: +y points up as
   in RViz, and every logged position equals the simulated one.
-- `arena/balls` (Points2D): positions every logged step; radii, colours and labels once per
-  segment at its first step, so a step costs one float32 array.
+- `arena/balls` (Points2D): positions every logged step; radii, colours and name labels at
+  the first step of a segment and again whenever the balls (their names, in pose order)
+  change, so a step costs one float32 array.
 - `arena/walls` (LineStrips2D), once per segment at its first step: not static, because a
   reset may change the walls and static data would rewrite the earlier segments.
-- `arena/impulses` (Arrows2D): the impulses applied before a step, at their ball, drawn as
-  the velocity change J/m times ARROW_SECONDS (how far the kick alone carries the ball in
-  that time) and labelled with J; cleared at the next logged step.
-- `plots/kinetic_energy`, `plots/momentum` (x, y), `plots/collisions` (ball-ball,
-  ball-wall), `plots/real_time_factor` (Scalars).
+- `arena/impulses` (Arrows2D): each applied impulse for IMPULSE_SECONDS of simulated time,
+  in white (no ball has that colour), at the point where it was applied, pointing along the
+  velocity change, labelled with the ball's name and J. Its length is the velocity change
+  times ARROW_SECONDS, kept between a floor (a tiny push is still seen) and a ceiling
+  (a huge one stays on screen) set by the size of the scene.
+- `arena/velocities` (Arrows2D, optional): each ball's velocity times VELOCITY_SECONDS.
+- `arena/trails` (LineStrips2D, optional): each ball's path over the last trail seconds.
+- `plots/energy_change` (Scalars): kinetic energy relative to step 0 of the segment, in
+  percent, rounded to ENERGY_RESOLUTION: an exact simulation conserves energy to ~1e-15, and
+  an autoscaled plot would blow that rounding noise up to full-height steps. Real changes
+  (impulses, a bug) are far above it. The legend names the absolute energy at step 0.
+- `plots/collisions` (Scalars): ball-ball and ball-wall collisions since step 0 of the
+  segment. Cumulative integers stay integers when the plot aggregates many steps per pixel
+  (Max of a non-decreasing series), unlike per-step counts, which averaging turns into 0.5s.
+- `plots/real_time_factor` (Scalars): simulated over wall time over the last RTF_WINDOW s
+  of wall clock (from step 1 of a segment on) when the sink is given a clock (live), else
+  the record's own value (conversions of a recording show what was recorded).
+
+Momentum is not logged: in a walled box every wall bounce changes it, so its plot is noise
+to a reader; it stays in the `stats` topic and the MCAP.
 
 Timelines: `sim_time`, the record's log time (simulation time plus the segment offset, so it
 never goes back across resets), and `step`, a step counter over the whole recording: the
-record's step plus the number of steps of the earlier segments, so with a constant dt
-`sim_time = step * dt`. The SDK's wall-clock `log_time` and `log_tick` timelines are
-switched off, and the recording id is derived from the run's parameters, so identical runs
-give identical recorded content.
+record's step plus the number of steps of the earlier segments. The SDK's wall-clock
+`log_time` and `log_tick` timelines are switched off, and the recording id is derived from
+the run's parameters, so identical runs give identical recorded content.
 
+Destinations: the file and the viewer each get their own stream with the same recording id
+(see rerun_outlet), fed the same calls, so they show one recording; either can fail alone.
 Per-step data is buffered and sent as columns (one chunk per entity for many steps), which
-is what keeps logging cheap at thousands of balls; `flush()` sends what is buffered.
+keeps logging cheap at thousands of balls; `flush()` sends what is buffered.
+
+Balls are named: `ball_<i>` by default, or the `names` a record (and a WorldSnapshot)
+carries, in pose order, so balls may appear and disappear between steps; a record may also
+carry `radii` and `masses` for names its segment did not start with.
 """
+from collections import deque
 import colorsys
 import json
 import math
 import os
 from pathlib import Path
+import sys
 import uuid
+import zlib
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from ball_world.recording.rerun_outlet import new_stream, Outlet, OutletFailed, parse_view
 from ball_world.step_record import PACKAGE_NAME
 
 APPLICATION_ID = PACKAGE_NAME
@@ -45,8 +70,9 @@ ARENA = 'arena'
 BALLS = 'arena/balls'
 WALLS = 'arena/walls'
 IMPULSES = 'arena/impulses'
-ENERGY = 'plots/kinetic_energy'
-MOMENTUM = 'plots/momentum'
+VELOCITIES = 'arena/velocities'
+TRAILS = 'arena/trails'
+ENERGY = 'plots/energy_change'
 COLLISIONS = 'plots/collisions'
 REAL_TIME_FACTOR = 'plots/real_time_factor'
 
@@ -63,20 +89,53 @@ MAX_PENDING_POSITIONS = 500_000
 #: Fixed namespace of the recording ids (uuid5 of the parameters).
 RECORDING_NAMESPACE = uuid.uuid5(uuid.NAMESPACE_DNS, 'ball_world.ros.rerun')
 
-#: An impulse arrow is the velocity change it gives times this many seconds.
+#: Relative energy changes are rounded to this: far above the ~1e-15 rounding noise of an
+#: exact step, far below any real change.
+ENERGY_RESOLUTION = 1e-12
+
+#: An impulse stays on screen this long in simulated time (until the first logged step at
+#: or after it).
+IMPULSE_SECONDS = 0.5
+#: An impulse arrow is the velocity change it gives times this many seconds...
 ARROW_SECONDS = 0.25
+#: ...but at least / at most this fraction of the scene's larger side.
+ARROW_MIN_FRACTION = 0.12
+ARROW_MAX_FRACTION = 0.3
+IMPULSE_COLOR = (255, 255, 255)
+
+#: A velocity arrow is the velocity times this many seconds.
+VELOCITY_SECONDS = 0.25
+
+#: The real-time factor is measured over this much wall time (plus the step just before).
+RTF_WINDOW = 1.0
 
 WALL_COLOR = (200, 200, 200)
 GOLDEN_RATIO_CONJUGATE = (math.sqrt(5.0) - 1.0) / 2.0
 
 
-def ball_colors(count):
-    """A stable colour per ball index: hues a golden-ratio step apart stay distinct for any N."""
-    colors = np.empty((count, 3), dtype=np.uint8)
-    for i in range(count):
-        red, green, blue = colorsys.hsv_to_rgb((i * GOLDEN_RATIO_CONJUGATE) % 1.0, 0.65, 0.95)
-        colors[i] = (round(red * 255), round(green * 255), round(blue * 255))
-    return colors
+def ball_color(name):
+    """A stable colour per ball name, kept when other balls come and go.
+
+    `ball_<i>` gets hue i times the golden ratio (neighbouring indices stay distinct for any
+    N); any other name a hue from its CRC-32.
+    """
+    prefix, _, index = name.rpartition('_')
+    if prefix == 'ball' and index.isdigit() and len(index) < 10:
+        hue = (int(index) * GOLDEN_RATIO_CONJUGATE) % 1.0
+    else:
+        hue = zlib.crc32(name.encode()) / 2**32
+    red, green, blue = colorsys.hsv_to_rgb(hue, 0.65, 0.95)
+    return round(red * 255), round(green * 255), round(blue * 255)
+
+
+def default_names(count):
+    return tuple(f'ball_{i}' for i in range(count))
+
+
+def names_of(item):
+    """The ball names of a record or snapshot, in pose order (`ball_<i>` unless it says)."""
+    names = getattr(item, 'names', None)
+    return tuple(names) if names is not None else default_names(len(item.positions))
 
 
 def recording_id(parameters):
@@ -91,7 +150,7 @@ def scene_bounds(world):
     boxes = [np.column_stack((np.minimum(walls[:, 0:2], walls[:, 2:4]),
                               np.maximum(walls[:, 0:2], walls[:, 2:4])))]
     if len(world.radii):
-        reach = world.radii[:, None]
+        reach = np.asarray(world.radii)[:, None]
         boxes.append(np.column_stack((world.positions - reach, world.positions + reach)))
     boxes = np.concatenate(boxes)
     if len(boxes) == 0:
@@ -103,7 +162,7 @@ def scene_bounds(world):
 
 
 def blueprint(world):
-    """The arena large on the left (+y up, bounds fitted), the four plots stacked on the right.
+    """The arena large on the left (+y up, bounds fitted), three plots stacked on the right.
 
     The 2D view's origin is the root, above the `arena` flip, so its visual bounds are in the
     flipped frame: world y in [ymin, ymax] is view y in [-ymax, -ymin].
@@ -113,14 +172,57 @@ def blueprint(world):
         origin='/', contents=f'/{ARENA}/**', name='arena (+y up)',
         visual_bounds=rrb.VisualBounds2D(x_range=[xmin, xmax], y_range=[-ymax, -ymin]))
     plots = rrb.Vertical(
-        rrb.TimeSeriesView(origin=f'/{ENERGY}', name='kinetic energy [J]'),
-        rrb.TimeSeriesView(origin=f'/{MOMENTUM}', name='momentum [kg m/s]'),
-        rrb.TimeSeriesView(origin=f'/{COLLISIONS}', name='collisions per step'),
-        rrb.TimeSeriesView(origin=f'/{REAL_TIME_FACTOR}', name='real-time factor'))
+        rrb.TimeSeriesView(origin=f'/{ENERGY}', name='kinetic energy change since step 0 [%]'),
+        rrb.TimeSeriesView(origin=f'/{COLLISIONS}', name='collisions since step 0'),
+        rrb.TimeSeriesView(origin=f'/{REAL_TIME_FACTOR}',
+                           name=f'real-time factor (last {RTF_WINDOW:g} s)'))
     return rrb.Blueprint(
-        rrb.Horizontal(arena, plots, column_shares=[3, 2]),
+        rrb.Horizontal(arena, plots, column_shares=[2, 1]),
         rrb.TimePanel(timeline=SIM_TIME, state='collapsed', play_state='following'),
         collapse_panels=True)
+
+
+def energy_change(energy, energy0):
+    """Percent change from energy0, rounded to ENERGY_RESOLUTION; the energy itself if 0."""
+    if energy0 <= 0.0:
+        return energy
+    return round((energy - energy0) / energy0 / ENERGY_RESOLUTION) * ENERGY_RESOLUTION * 100.0
+
+
+def energy_legend(energy0):
+    if energy0 <= 0.0:
+        return 'kinetic energy [J] (0 J at step 0)'
+    return f'change from {energy0:.6g} J at step 0'
+
+
+class RealTimeFactor:
+    """Simulated over wall time over the last `window` s of arrivals, plus the step before.
+
+    Keeping the last step before the window means a stall longer than the window still
+    shows (one step over the whole stall) and low rates still get a value.
+    """
+
+    def __init__(self, clock, window=RTF_WINDOW):
+        self.clock = clock
+        self.window = window
+        self._steps = deque()  # (wall s, simulation ns)
+
+    def clear(self):
+        self._steps.clear()
+
+    def add(self, stamp_ns):
+        """Note a step's arrival; return the factor, or None until there are two steps."""
+        now = self.clock()
+        steps = self._steps
+        steps.append((now, stamp_ns))
+        while len(steps) > 2 and steps[1][0] < now - self.window:
+            steps.popleft()
+        if len(steps) < 2:
+            return None
+        (wall0, sim0), (wall1, sim1) = steps[0], steps[-1]
+        if wall1 <= wall0:
+            return None
+        return (sim1 - sim0) * 1e-9 / (wall1 - wall0)
 
 
 class _Pending:
@@ -133,8 +235,8 @@ class _Pending:
         self.steps = []
         self.times_ns = []
         self.positions = []
+        self.velocities = []
         self.energy = []
-        self.momentum = []
         self.collisions = []
         self.rtf_steps = []
         self.rtf_times_ns = []
@@ -145,191 +247,317 @@ class _Pending:
         return len(self.steps)
 
 
-class RerunSink:
-    """Logs a run to a Rerun `.rrd` file; see the module docstring for what goes where.
+class _Segment:
+    """What one segment's start says about its balls: radius and mass by name."""
 
-    every=k logs every k-th step of a segment, plus step 0, every step with impulses and the
-    last step before a reset or close; collision counts are summed over the skipped steps so
-    their totals stay right.
+    def __init__(self, world):
+        names = names_of(world)
+        self.radius = dict(zip(names, np.asarray(world.radii, dtype=np.float64).tolist()))
+        self.mass = dict(zip(names, np.asarray(world.masses, dtype=np.float64).tolist()))
+        self.smallest = min(self.radius.values(), default=0.1)
+        xmin, ymin, xmax, ymax = scene_bounds(world)
+        self.span = max(xmax - xmin, ymax - ymin)
+
+
+class RerunSink:
+    """Logs a run to a Rerun `.rrd` file and/or a live viewer; see the module docstring.
+
+    path: the .rrd file, or None. view: None, 'spawn' (start the native viewer) or a
+    rerun+http://HOST:PORT/proxy URL. every=k logs every k-th step of a segment, plus step
+    0, every step with impulses and the last step before a reset or close; collision totals
+    stay exact. velocities, trail_seconds: the optional layers. clock: a wall clock in
+    seconds (time.monotonic) to measure the real-time factor over the last second; without
+    it the record's value is logged. report: called with one line when one destination
+    fails while another goes on (when the last one fails, the sink raises instead, so its
+    owner drops it and says so).
     """
 
-    def __init__(self, path, every=1):
+    def __init__(self, path=None, every=1, view=None, velocities=False, trail_seconds=0.0,
+                 clock=None, report=None):
         if isinstance(every, bool) or not isinstance(every, int) or every < 1:
             raise ValueError(f'every must be a whole number >= 1, got {every!r}')
-        self.path = Path(path)
-        directory = self.path.parent
-        if not directory.is_dir() or not os.access(directory, os.W_OK):
-            raise OSError(f'{str(self.path)!r}: {str(directory)!r} is not a writable directory')
-        # The SDK opens the file only at the first segment, on its own thread; try it now so
-        # a path that cannot be written (/proc/..., /dev/full) fails at start, not silently.
-        try:
-            with open(self.path, 'wb') as probe:
-                probe.write(b'\0')
-                probe.flush()
-        except OSError as error:
-            raise OSError(f'{str(self.path)!r}: {error.strerror or error}') from None
+        if not (isinstance(trail_seconds, (int, float)) and 0.0 <= trail_seconds < math.inf):
+            raise ValueError(f'trail_seconds must be >= 0, got {trail_seconds!r}')
+        if path is None and view is None:
+            raise ValueError('RerunSink needs a path, a view or both')
+        if view is not None:
+            parse_view(view)  # refuse a bad view now, before anything is opened
+        self.path = None if path is None else Path(path)
+        if self.path is not None:
+            _probe_file(self.path)
+        self.view = view
         self.every = every
-        self.stream = None
+        self.velocities = bool(velocities)
+        self.trail_seconds = float(trail_seconds)
+        self.report = report or (lambda line: print(f'ball_world: {line}', file=sys.stderr))
+        self.outlets = []
+        self._rtf = RealTimeFactor(clock) if clock is not None else None
+        self._opened = False
         self._pending = _Pending()
+        self._segment = None
         self._segment_base = 0  # value of the step timeline at step 0 of this segment
         self._last_global = None  # step timeline of the last record seen (logged or not)
         self._unlogged = None  # the last record seen, when it was not logged
-        self._collisions = np.zeros(2, dtype=np.int64)  # since the last logged step
-        self._arrows_shown = False
-        self._masses = np.empty(0)
-        self._colors = np.empty((0, 3), dtype=np.uint8)
+        self._totals = np.zeros(2, dtype=np.int64)  # collisions since step 0 of the segment
+        self._energy0 = None
+        self._shown_names = None
+        self._impulses = []  # (expires log ns, origin, vector, label) on screen
+        self._trail = deque()  # (log ns, positions) of the trail's steps
         self._closed = False
 
     # Sink protocol ----------------------------------------------------------------------
 
     def start_segment(self, world, info):
-        """Open the file on the first segment; log the segment's walls and ball styles."""
+        """Open the destinations on the first segment; log the segment's walls and balls."""
         if self._closed:
             raise RuntimeError('RerunSink is closed')
-        if self.stream is None:
+        if not self._opened:
             self._open(world, info.parameters)
         else:
             self._finish_segment()
             self._segment_base = self._last_global + 1
-        count = len(world.radii)
-        self._masses = np.asarray(world.masses, dtype=np.float64)
-        self._colors = ball_colors(count)
-        self._collisions[:] = 0
+        self._segment = _Segment(world)
+        self._totals[:] = 0
+        self._energy0 = None
+        self._shown_names = None
+        self._impulses = []
+        self._trail.clear()
+        if self._rtf is not None:
+            self._rtf.clear()
         self._set_time(self._segment_base, info.log_offset_ns)
-        self.stream.log(BALLS, rr.Points2D.from_fields(
-            radii=np.asarray(world.radii, dtype=np.float32), colors=self._colors,
-            labels=[f'ball_{i}' for i in range(count)], show_labels=count <= LABEL_LIMIT,
-            draw_order=30.0))
         strips = np.asarray(world.walls, dtype=np.float64).reshape(-1, 2, 2)
-        self.stream.log(WALLS, rr.LineStrips2D(
+        self._emit('log', WALLS, rr.LineStrips2D(
             strips, radii=rr.Radius.ui_points(1.5), colors=WALL_COLOR, draw_order=20.0))
-        self.stream.log(IMPULSES, rr.Arrows2D.cleared())
-        self._arrows_shown = False
+        self._emit('log', IMPULSES, rr.Arrows2D.cleared())
 
     def write_step(self, record):
         """Buffer the step if it is one to log; send the buffer when it is full."""
-        if self.stream is None or self._closed:
+        if not self._opened or self._closed:
             raise RuntimeError('RerunSink.write_step before start_segment or after close')
         self._last_global = self._segment_base + record.step
-        self._collisions += (record.ball_ball, record.ball_wall)
+        self._totals += (record.ball_ball, record.ball_wall)
+        if self._energy0 is None:
+            self._energy0 = float(record.kinetic_energy)
+            self._set_time(self._last_global, record.log_time_ns)
+            self._emit('log', ENERGY, rr.SeriesLines(names=energy_legend(self._energy0)))
+        rtf = record.real_time_factor
+        if self._rtf is not None:
+            # Step 0 is the initial state, written when the world is built, not a step: the
+            # pause before the first step (the node starting up) is no slowness.
+            rtf = self._rtf.add(record.log_time_ns) if record.step else None
         if record.step % self.every == 0 or record.impulses:
-            self._log(record)
+            self._log(record, rtf)
         else:
-            self._unlogged = record
+            self._unlogged = (record, rtf)
 
     def flush(self):
-        """Send the buffered steps and wait until the stream has written them."""
-        if self.stream is None or self._closed:
+        """Send the buffered steps and have each destination write them (bounded waits)."""
+        if not self._opened or self._closed:
             return
         self._send()
-        self.stream.flush()
+        self._each_outlet(lambda outlet: outlet.flush())
 
     def close(self):
         """Log the final state, send everything and finish the file (footer included)."""
         if self._closed:
             return
-        if self.stream is None:
-            self._open(None, {})  # closed before any segment: still a valid, empty recording
-        self._finish_segment()
-        self._send()
-        self.stream.flush()
-        self.stream.disconnect()
-        self.stream = None
-        self._closed = True
+        try:
+            if not self._opened:
+                self._open(None, {})  # closed before any segment: still a valid recording
+            self._finish_segment()
+            self._send()
+        finally:
+            self._closed = True
+            errors = []
+            for outlet in self.outlets:
+                try:
+                    outlet.close()
+                except OutletFailed as error:
+                    errors.append(str(error))
+            if errors:
+                raise OutletFailed('; '.join(errors))
 
-    # Internals --------------------------------------------------------------------------
+    # Destinations -----------------------------------------------------------------------
 
     def _open(self, world, parameters):
-        """Create the stream and the file: with the blueprint fitted to the first world."""
-        self.stream = rr.RecordingStream(
-            APPLICATION_ID, recording_id=recording_id(parameters), send_properties=False)
-        self.stream.set_log_time_enabled(False)
-        self.stream.set_log_tick_enabled(False)
-        self.stream.save(self.path, default_blueprint=None if world is None else blueprint(world))
-        self.stream.log(ARENA, rr.Transform3D(
+        """Create the destinations, with the blueprint fitted to the first world."""
+        self._opened = True
+        plan = None if world is None else blueprint(world)
+        rid = recording_id(parameters)
+        if self.path is not None:
+            self.outlets.append(Outlet.file(self.path, new_stream(APPLICATION_ID, rid), plan))
+        if self.view is not None:
+            self.outlets.append(Outlet.view(self.view, new_stream(APPLICATION_ID, rid), plan))
+        self._emit('log', ARENA, rr.Transform3D(
             rotation=rr.RotationAxisAngle(axis=(1.0, 0.0, 0.0), degrees=180.0)), static=True)
-        self.stream.log(ENERGY, rr.SeriesLines(names='kinetic energy', colors=(230, 180, 40)),
-                        static=True)
-        self.stream.log(MOMENTUM, rr.SeriesLines(
-            names=['x', 'y'], colors=[(230, 80, 80), (80, 200, 90)]), static=True)
-        self.stream.log(COLLISIONS, rr.SeriesLines(
-            names=['ball-ball', 'ball-wall'], colors=[(90, 150, 240), (200, 200, 200)]),
-            static=True)
-        self.stream.log(REAL_TIME_FACTOR, rr.SeriesLines(
+        self._emit('log', ENERGY, rr.SeriesLines(colors=(230, 180, 40)), static=True)
+        self._emit('log', COLLISIONS, rr.SeriesLines(
+            names=['ball-ball', 'ball-wall'], colors=[(90, 150, 240), (200, 200, 200)],
+            aggregation_policy='Max', interpolation_mode='StepAfter'), static=True)
+        self._emit('log', REAL_TIME_FACTOR, rr.SeriesLines(
             names='real-time factor', colors=(180, 120, 230)), static=True)
+
+    def _emit(self, name, *args, **kwargs):
+        """Queue the same SDK call on every destination (failures surface at flush)."""
+        for outlet in self.outlets:
+            outlet.call(name, *args, **kwargs)
+
+    def _each_outlet(self, action):
+        """Run action on every live outlet; drop one that failed and say so once.
+
+        When the last one fails the error is raised, so the Simulation drops the sink and
+        its owner reports it; the sink then holds nothing that could block.
+        """
+        for outlet in list(self.outlets):
+            try:
+                action(outlet)
+            except OutletFailed as error:
+                self.outlets.remove(outlet)
+                if not self.outlets:
+                    self._closed = True
+                    raise
+                self.report(f'{error}; going on without it')
+
+    # Logging ----------------------------------------------------------------------------
 
     def _finish_segment(self):
         """Log the segment's last step if every=k skipped it, so the file ends on the truth."""
         if self._unlogged is not None:
-            self._log(self._unlogged)
+            self._log(*self._unlogged)
 
     def _set_time(self, step, log_time_ns):
-        self.stream.set_time(STEP, sequence=step)
-        self.stream.set_time(SIM_TIME, duration=np.timedelta64(log_time_ns, 'ns'))
+        self._emit('set_time', STEP, sequence=step)
+        self._emit('set_time', SIM_TIME, duration=np.timedelta64(log_time_ns, 'ns'))
 
-    def _log(self, record):
+    def _log(self, record, rtf):
         self._unlogged = None
         step = self._segment_base + record.step
+        names = names_of(record)
+        if names != self._shown_names:
+            self._log_balls(record, names, step)
         pending = self._pending
         pending.steps.append(step)
         pending.times_ns.append(record.log_time_ns)
         pending.positions.append(np.asarray(record.positions, dtype=np.float32))
+        if self.velocities:
+            pending.velocities.append(np.asarray(record.velocities, dtype=np.float32))
         pending.position_count += len(record.positions)
-        pending.energy.append(record.kinetic_energy)
-        pending.momentum.append(record.momentum)
-        pending.collisions.append(self._collisions.copy())
-        self._collisions[:] = 0
-        rtf = record.real_time_factor
+        pending.energy.append(energy_change(record.kinetic_energy, self._energy0))
+        pending.collisions.append(self._totals.copy())
         if rtf is not None and math.isfinite(rtf):
             pending.rtf_steps.append(step)
             pending.rtf_times_ns.append(record.log_time_ns)
             pending.rtf.append(rtf)
-        if record.impulses:
-            self._log_impulses(record, step)
-        elif self._arrows_shown:
-            self._set_time(step, record.log_time_ns)
-            self.stream.log(IMPULSES, rr.Arrows2D.cleared())
-            self._arrows_shown = False
+        self._log_impulses(record, names, step)
+        if self.trail_seconds:
+            self._log_trails(record, names, step)
         if (len(pending) >= MAX_PENDING_STEPS
                 or pending.position_count >= MAX_PENDING_POSITIONS):
             self._send()
 
-    def _log_impulses(self, record, step):
-        balls = np.array([impulse.ball for impulse in record.impulses], dtype=np.int64)
-        impulse = np.array([(i.jx, i.jy) for i in record.impulses], dtype=np.float64)
+    def _log_balls(self, record, names, step):
+        """Radii, colours and labels of the balls as they are now, in pose order."""
+        segment = self._segment
+        radii = getattr(record, 'radii', None)
+        if radii is None:
+            radii = [segment.radius.get(name, segment.smallest) for name in names]
+        self._shown_names = names
+        self._trail.clear()  # a trail follows an index: start again when the balls change
         self._set_time(step, record.log_time_ns)
-        self.stream.log(IMPULSES, rr.Arrows2D(
-            origins=record.positions[balls],
-            vectors=impulse / self._masses[balls, None] * ARROW_SECONDS,
-            colors=self._colors[balls], radii=rr.Radius.ui_points(2.0), draw_order=40.0,
-            labels=[f'{i.frame_id}: J = ({i.jx:.3g}, {i.jy:.3g}) N s'
-                    for i in record.impulses]))
-        self._arrows_shown = True
+        self._emit('log', BALLS, rr.Points2D.from_fields(
+            radii=np.asarray(radii, dtype=np.float32),
+            colors=np.array([ball_color(name) for name in names], dtype=np.uint8).reshape(-1, 3),
+            labels=list(names), show_labels=len(names) <= LABEL_LIMIT, draw_order=30.0))
+
+    def _log_impulses(self, record, names, step):
+        """Keep each impulse on screen IMPULSE_SECONDS; re-log the arrows when they change."""
+        now = record.log_time_ns
+        shown = [i for i in self._impulses if i[0] > now]
+        changed = len(shown) != len(self._impulses) or bool(record.impulses)
+        masses = getattr(record, 'masses', None)
+        for impulse in record.impulses:
+            name = names[impulse.ball]
+            mass = masses[impulse.ball] if masses is not None else self._segment.mass[name]
+            shown.append((now + round(IMPULSE_SECONDS * 1e9),
+                          np.asarray(record.positions[impulse.ball], dtype=np.float64),
+                          self._arrow(impulse.jx / mass, impulse.jy / mass),
+                          f'{name}: J = ({impulse.jx:.3g}, {impulse.jy:.3g}) N s'))
+        self._impulses = shown
+        if not changed:
+            return
+        self._set_time(step, now)
+        if not shown:
+            self._emit('log', IMPULSES, rr.Arrows2D.cleared())
+            return
+        self._emit('log', IMPULSES, rr.Arrows2D(
+            origins=[i[1] for i in shown], vectors=[i[2] for i in shown],
+            labels=[i[3] for i in shown], show_labels=True, colors=IMPULSE_COLOR,
+            radii=rr.Radius.ui_points(3.0), draw_order=40.0))
+
+    def _arrow(self, dvx, dvy):
+        """The velocity change times ARROW_SECONDS, its length clamped to the scene's size."""
+        length = math.hypot(dvx, dvy)
+        if length == 0.0:
+            return (0.0, 0.0)
+        span = self._segment.span
+        shown = min(max(length * ARROW_SECONDS, ARROW_MIN_FRACTION * span),
+                    ARROW_MAX_FRACTION * span)
+        return (dvx / length * shown, dvy / length * shown)
+
+    def _log_trails(self, record, names, step):
+        trail = self._trail
+        now = record.log_time_ns
+        trail.append((now, np.asarray(record.positions, dtype=np.float32)))
+        while trail[0][0] < now - self.trail_seconds * 1e9:
+            trail.popleft()
+        strips = np.stack([positions for _, positions in trail], axis=1)
+        self._set_time(step, now)
+        self._emit('log', TRAILS, rr.LineStrips2D(
+            strips, colors=np.array([ball_color(n) for n in names], dtype=np.uint8)
+            .reshape(-1, 3), radii=rr.Radius.ui_points(1.0), draw_order=10.0))
 
     def _send(self):
         """Send the buffered steps as one columnar chunk per entity."""
         pending = self._pending
         if not len(pending):
             return
-        stream = self.stream
         index = self._index(pending.steps, pending.times_ns)
-        positions = rr.components.Position2DBatch(np.concatenate(pending.positions))
         sizes = [len(p) for p in pending.positions]
-        stream.send_columns(BALLS, index, [
-            rr.ComponentColumn(rr.Points2D.descriptor_positions(), positions, lengths=sizes)])
-        stream.send_columns(ENERGY, index, rr.Scalars.columns(
+        positions = np.concatenate(pending.positions)
+        self._emit('send_columns', BALLS, index, [rr.ComponentColumn(
+            rr.Points2D.descriptor_positions(), rr.components.Position2DBatch(positions),
+            lengths=sizes)])
+        if pending.velocities:
+            vectors = np.concatenate(pending.velocities) * np.float32(VELOCITY_SECONDS)
+            self._emit('send_columns', VELOCITIES, index, [
+                rr.ComponentColumn(rr.Arrows2D.descriptor_origins(),
+                                   rr.components.Position2DBatch(positions), lengths=sizes),
+                rr.ComponentColumn(rr.Arrows2D.descriptor_vectors(),
+                                   rr.components.Vector2DBatch(vectors), lengths=sizes)])
+        self._emit('send_columns', ENERGY, index, rr.Scalars.columns(
             scalars=np.array(pending.energy, dtype=np.float64)))
-        stream.send_columns(MOMENTUM, index, rr.Scalars.columns(
-            scalars=np.array(pending.momentum, dtype=np.float64).reshape(-1, 2)))
-        stream.send_columns(COLLISIONS, index, rr.Scalars.columns(
+        self._emit('send_columns', COLLISIONS, index, rr.Scalars.columns(
             scalars=np.array(pending.collisions, dtype=np.float64).reshape(-1, 2)))
         if pending.rtf:
-            stream.send_columns(
-                REAL_TIME_FACTOR, self._index(pending.rtf_steps, pending.rtf_times_ns),
-                rr.Scalars.columns(scalars=np.array(pending.rtf, dtype=np.float64)))
+            self._emit('send_columns', REAL_TIME_FACTOR,
+                       self._index(pending.rtf_steps, pending.rtf_times_ns),
+                       rr.Scalars.columns(scalars=np.array(pending.rtf, dtype=np.float64)))
         pending.clear()
 
     @staticmethod
     def _index(steps, times_ns):
         return [rr.TimeColumn(STEP, sequence=np.array(steps, dtype=np.int64)),
                 rr.TimeColumn(SIM_TIME, duration=np.array(times_ns, dtype='timedelta64[ns]'))]
+
+
+def _probe_file(path):
+    """Fail now on a path that cannot be written: the SDK opens it later, on its thread."""
+    directory = path.parent
+    if not directory.is_dir() or not os.access(directory, os.W_OK):
+        raise OSError(f'{str(path)!r}: {str(directory)!r} is not a writable directory')
+    try:
+        with open(path, 'wb') as probe:
+            probe.write(b'\0')
+            probe.flush()
+    except OSError as error:
+        raise OSError(f'{str(path)!r}: {error.strerror or error}') from None

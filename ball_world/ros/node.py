@@ -18,6 +18,7 @@ from rclpy._rclpy_pybind11 import RCLError
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
+import rclpy.logging
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
@@ -89,14 +90,26 @@ def open_sinks(values):
             if values[name]:
                 claims.append((name, claim_output(values[name], values['record.overwrite'],
                                                   'set record.overwrite:=true', claims)))
-        for name, claim in claims:
-            if name == 'record.mcap':
-                from ball_world.recording.mcap_writer import McapSink
-                sinks.append(BackgroundSink(McapSink(claim)))
-            else:
-                from ball_world.recording.rerun_log import RerunSink
-                sinks.append(ClaimedSink(RerunSink(claim.path,
-                                                   every=values['record.rerun_every']), claim))
+        claimed = dict(claims)
+        if 'record.mcap' in claimed:
+            from ball_world.recording.mcap_writer import McapSink
+            sinks.append(BackgroundSink(McapSink(claimed['record.mcap'])))
+        if 'record.rerun' in claimed or values['view.rerun']:
+            from ball_world.recording.rerun_log import RerunSink
+            rerun_file = claimed.get('record.rerun')
+            name = 'record.rerun' if rerun_file else 'view.rerun'
+            sink = RerunSink(
+                rerun_file.path if rerun_file else None, every=values['record.rerun_every'],
+                view=values['view.rerun'] or None, velocities=values['rerun.velocities'],
+                trail_seconds=values['rerun.trail_seconds'], clock=time.monotonic,
+                report=rclpy.logging.get_logger('ball_world').error)
+            sinks.append(ClaimedSink(sink, rerun_file) if rerun_file else sink)
+    except ValueError as error:  # the only value a RerunSink checks is the view
+        for sink in sinks:
+            sink.close()
+        for _, claim in claims[len(sinks):]:
+            claim.discard()
+        raise StartupError(f"parameter 'view.rerun': {error}") from None
     except OSError as error:
         for sink in sinks:
             sink.close()  # nothing recorded yet: each removes the file it created

@@ -1,0 +1,282 @@
+"""Where a Rerun recording goes (an .rrd file, a live viewer), each on its own worker thread.
+
+The Rerun SDK can block its caller for good: when the disk fills under an .rrd, the file
+writer thread dies and `RecordingStream.flush` may wait forever for an answer that never
+comes (seen with rerun-sdk 0.41); a gRPC sink whose viewer never answers waits 5 s on
+`disconnect`. The simulation must step on and stop cleanly whatever the destination does,
+so every SDK call of a destination runs on a thread of its own, fed by a bounded queue that
+the stepping thread never waits on, and every wait on that thread is bounded:
+
+- a call that raises (a write error, a flush of the file that times out) fails the outlet;
+  a view's flushes may time out for VIEW_PATIENCE s (a slow viewer) before it fails;
+- a call that has not returned after STALL_SECONDS, or a queue that fills up, fails it too;
+  the stuck thread is abandoned (a daemon) with its stream, and the SDK's at-exit hook,
+  which would wait on that stream for good, is dropped;
+- a view is also failed when its viewer's port stops accepting connections: the SDK drops
+  data silently once a viewer is gone, so only a probe can tell (a stalled viewer still
+  accepts connections and is kept: the SDK drops what it cannot send, never blocking).
+
+Each outlet has its own RecordingStream with the same application and recording id, so the
+file and the viewer hold one recording with the same content, and one can fail alone.
+"""
+import os
+from pathlib import Path
+import queue
+import shutil
+import socket
+import sys
+import threading
+import time
+from urllib.parse import urlsplit
+
+import rerun as rr
+
+#: A call still running after this long means the destination hangs: the outlet is dropped.
+STALL_SECONDS = 5.0
+#: Longest wait of a flush for the stream to write what was logged.
+FLUSH_TIMEOUT = 2.0
+#: A viewer may be too slow to take the data (its flushes time out) for this long before
+#: the view is dropped; meanwhile the SDK holds what it could not send.
+VIEW_PATIENCE = 10.0
+#: Longest wait of close() for an outlet to finish its file or connection.
+CLOSE_TIMEOUT = 10.0
+#: Calls that may wait for the worker (a logged step makes a few per 64 steps).
+MAX_QUEUED_CALLS = 256
+#: Longest wait for a viewer's port to accept the liveness probe.
+PROBE_TIMEOUT = 1.0
+
+SPAWN = 'spawn'
+#: Port of the native viewer that `spawn` starts (the SDK's default).
+SPAWN_PORT = 9876
+VIEW_SCHEMES = {'rerun': 443, 'rerun+http': 80, 'rerun+https': 443}
+
+
+class OutletFailed(RuntimeError):
+    """A destination stopped taking data; the message says which and why, in one line."""
+
+
+def parse_view(value):
+    """(host, port) of a view: 'spawn' or a rerun+http(s)://HOST:PORT/proxy URL.
+
+    Raises ValueError with the accepted forms, so a typo is refused at start rather than
+    found out as a view that never shows anything.
+    """
+    if value == SPAWN:
+        return '127.0.0.1', SPAWN_PORT
+    try:
+        parts = urlsplit(value)
+        port = parts.port
+    except ValueError:
+        parts, port = None, None
+    if (parts is None or parts.scheme not in VIEW_SCHEMES or not parts.hostname
+            or parts.path != '/proxy' or parts.query or parts.fragment):
+        raise ValueError(f"expected 'spawn' or a URL like rerun+http://127.0.0.1:9876/proxy, "
+                         f'got {value!r}')
+    return parts.hostname, port or VIEW_SCHEMES[parts.scheme]
+
+
+def new_stream(application_id, recording_id):
+    """A stream with the simulation's timelines only (no wall-clock log_time, no log_tick)."""
+    stream = rr.RecordingStream(application_id, recording_id=recording_id,
+                                send_properties=False)
+    stream.set_log_time_enabled(False)
+    stream.set_log_tick_enabled(False)
+    return stream
+
+
+class Outlet:
+    """One destination: a RecordingStream whose calls run, in order, on a worker thread.
+
+    call(name, *args) queues stream.<name>(*args) and returns at once, never raising: the
+    stepping path stays free of failure handling. A failure is raised as OutletFailed, once,
+    from the next flush() or close(); from then on the outlet drops every call (`failed`
+    holds the reason).
+    """
+
+    def __init__(self, description, stream, connect, probe=None, explain=None):
+        self.description = description
+        self.stream = stream
+        self.failed = None
+        self._probe = probe
+        self._explain = explain
+        self._late_since = None  # a view: when its flushes started timing out
+        self._error = None
+        self._reported = False
+        self._busy_since = None
+        self._queue = queue.Queue(maxsize=MAX_QUEUED_CALLS)
+        self._thread = threading.Thread(target=self._work, daemon=True,
+                                        name=f'rerun-{description.split()[0]}')
+        self._thread.start()
+        self._put(connect, ())
+
+    @classmethod
+    def file(cls, path, stream, blueprint):
+        return cls(f'file {str(path)!r}', stream,
+                   lambda: stream.save(Path(path), default_blueprint=blueprint),
+                   explain=lambda: _file_state(path))
+
+    @classmethod
+    def view(cls, target, stream, blueprint):
+        """Stream to a viewer: target is 'spawn' or a URL (checked with parse_view)."""
+        address = parse_view(target)
+        if target == SPAWN:
+            rerun_cli = Path(sys.executable).parent / 'rerun'
+
+            def connect():
+                stream.spawn(port=SPAWN_PORT, default_blueprint=blueprint,
+                             **({'executable_path': str(rerun_cli)}
+                                if rerun_cli.exists() else {}))
+            description = f'live view in the viewer spawned on port {SPAWN_PORT}'
+        else:
+            def connect():
+                _probe(address, 'no viewer listens there')
+                stream.connect_grpc(target, default_blueprint=blueprint)
+            description = f'live view at {target}'
+        return cls(description, stream, connect,
+                   probe=lambda: _probe(address, 'the viewer is gone'))
+
+    # Caller's side ----------------------------------------------------------------------
+
+    def call(self, name, *args, **kwargs):
+        """Queue stream.<name>(*args, **kwargs), or drop it if the outlet failed."""
+        method = getattr(self.stream, name)
+        self._put(lambda: method(*args, **kwargs), ())
+
+    def flush(self):
+        """Raise OutletFailed once if the outlet failed; else queue a bounded flush.
+
+        A view's flush also probes the viewer's port.
+        """
+        self.check()
+        self._put(self._flush, ())
+
+    def close(self, timeout=CLOSE_TIMEOUT):
+        """Flush, finish the file or connection, and wait for it at most `timeout` s.
+
+        Raises OutletFailed if the outlet failed before or during the close and that was
+        not reported yet.
+        """
+        if self.failed is None and self._error is None:
+            self._put(self._close, ())
+            self._thread.join(timeout)
+            if self._thread.is_alive():
+                self._fail(f'did not finish within {timeout:g} s')
+        self._check()
+
+    def check(self):
+        """Raise OutletFailed once if the outlet failed or hangs."""
+        busy_since = self._busy_since
+        if self._error is None and busy_since is not None \
+                and time.monotonic() - busy_since > STALL_SECONDS:
+            self._fail(f'no answer for {STALL_SECONDS:g} s')
+        self._check()
+
+    def _check(self):
+        if self._error is not None and not self._reported:
+            self._reported = True
+            self.failed = self._error
+            self._abandon()
+            raise OutletFailed(f'{self.description}: {self._error}')
+
+    def _put(self, call, args):
+        if self._error is not None:
+            return
+        try:
+            self._queue.put_nowait((call, args))
+        except queue.Full:
+            self._fail(f'no answer: {MAX_QUEUED_CALLS} calls waiting')
+
+    def _fail(self, error):
+        if self._error is None:
+            self._error = error
+            if self._explain is not None:
+                self._error += f' ({self._explain()})'
+
+    def _abandon(self):
+        """Drop the queued calls and let the worker end the stream, if it still can.
+
+        The SDK's at-exit hook disconnects every stream, and on a stream whose file writer
+        died that waits forever (the process then never exits, whatever the signal). Every
+        outlet that still works is closed explicitly by its sink, so the hook is dropped.
+        """
+        rr.unregister_shutdown()
+        while True:
+            try:
+                self._queue.get_nowait()
+            except queue.Empty:
+                break
+        try:
+            self._queue.put_nowait((None, ()))
+        except queue.Full:
+            pass
+
+    # Worker's side ----------------------------------------------------------------------
+
+    def _work(self):
+        while True:
+            call, args = self._queue.get()
+            if call is None:
+                self._disconnect_quietly()
+                return
+            if self._error is not None:
+                continue
+            self._busy_since = time.monotonic()
+            try:
+                call(*args)
+            except Exception as error:  # noqa: B902 - any SDK failure ends this outlet only
+                self._fail(_one_line(error))
+            finally:
+                self._busy_since = None
+            if call == self._close and self._error is None:
+                return
+
+    def _flush(self):
+        if self._probe is None:
+            self.stream.flush(timeout_sec=FLUSH_TIMEOUT)
+            return
+        # A view: a timed-out flush is a slow viewer, which may catch up; a broken
+        # connection, a closed port or VIEW_PATIENCE s of timeouts is a viewer gone.
+        try:
+            self.stream.flush(timeout_sec=FLUSH_TIMEOUT)
+            self._late_since = None
+        except RuntimeError as error:
+            if 'timed out' not in str(error):
+                raise
+            now = time.monotonic()
+            self._late_since = self._late_since or now
+            if now - self._late_since >= VIEW_PATIENCE:
+                raise RuntimeError(f'the viewer took no data for {VIEW_PATIENCE:g} s') from None
+        self._probe()
+
+    def _close(self):
+        self.stream.flush(timeout_sec=FLUSH_TIMEOUT)
+        self.stream.disconnect()
+
+    def _disconnect_quietly(self):
+        try:
+            self.stream.disconnect()
+        except Exception:  # noqa: B902,S110 - the outlet already failed and was reported
+            pass
+
+
+def _probe(address, reason):
+    """Raise OSError(reason) if nothing accepts a TCP connection at address."""
+    try:
+        socket.create_connection(address, timeout=PROBE_TIMEOUT).close()
+    except OSError as error:
+        raise OSError(f'{reason} ({error.strerror or error})') from None
+
+
+def _file_state(path):
+    """How far a file got and the room left beside it: what a write error usually means."""
+    try:
+        size = os.path.getsize(path)
+        free = shutil.disk_usage(os.path.dirname(os.path.abspath(path))).free
+    except OSError as error:
+        return error.strerror or str(error)
+    return f'{size:,} bytes written, {free:,} bytes free on its file system'
+
+
+def _one_line(error):
+    text = ' '.join(str(error).split()) or type(error).__name__
+    return text
