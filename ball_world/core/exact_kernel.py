@@ -1,0 +1,527 @@
+"""Exact mode's event loop: per-ball predictions, a tournament tree, a hashed cell list.
+
+Each ball holds one prediction, its earliest event: an impact with another ball, an impact
+with a wall segment, or leaving its grid cell. A tournament tree over the balls yields the
+earliest prediction of all. Processing an event moves only the balls involved (each ball
+keeps its own clock) and predicts again for them; every other prediction that named one of
+them as partner is recognised as stale by the partner's collision counter when it comes up,
+and is then predicted again. Nothing is missed: a pair's impact on their current straight
+paths was evaluated by whichever of the two changed course last.
+
+Cells are squares a little wider than the largest diameter, so touching balls are always in
+neighbouring cells; a ball looks for partners in its 3 x 3 block, for walls in its own cell,
+and leaving its cell is itself an event. Cells are hashed into a table of buckets, so the
+world needs no bounds (a bucket shared by distant cells only adds candidates, and a
+predicted impact is exact whatever the cells). Each wall is listed in the buckets of every
+cell where a ball could touch it; a wall too long for that is checked by every ball.
+
+Robustness near contact (why rounding cannot creep into overlap or loop):
+- A pair or a wall collides only while approaching, and a pair that already overlaps and
+  approaches collides at once, so an overlap is never left to grow.
+- A ball and the partner (ball or wall) of its latest collision are not predicted against
+  each other again until one of them changes course for another reason: straight paths
+  that have just separated at contact cannot meet again (the distance between a point and a
+  line or a convex set is convex along a straight path), so this loses nothing, and it
+  removes the zero-time re-collisions rounding would otherwise cause.
+- Times are relative to the step's start and never decrease: a prediction earlier than the
+  current time (an overlap) is clamped to it.
+
+State lives across steps (the lists, the predictions, the tree): at the start of each step
+the kernel compares the world's positions and velocities with the values it left, and
+predicts again for any ball an impulse or a set-state changed; a change of ball count,
+radii or walls rebuilds everything (exact.py decides).
+"""
+import collections
+import math
+
+import numpy as np
+
+from ball_world.core.exact_impacts import (collide_pair, collide_wall, compile_kernel, INFINITY,
+                                           pair_impact_time, wall_impact_time)
+
+# Event kinds, in the order simultaneous events are processed.
+PAIR = 0
+WALL = 1
+CROSSING = 2
+NOTHING = 3
+
+# Columns of State.balls.
+CELL_X = 0
+CELL_Y = 1
+NEXT = 2          # next ball in the same bucket, or NO_BALL
+PREVIOUS = 3      # previous ball in the same bucket, or NO_BALL
+COUNTER = 4       # changes of course so far: a prediction naming this ball records it
+LAST = 5          # partner of the latest collision: a ball, wall_code(k), or NO_PARTNER
+KIND = 6          # the predicted event's kind
+PARTNER = 7       # its partner: a ball, a wall, or the crossing direction
+STAMP = 8         # the partner ball's COUNTER when predicted
+COLUMNS = 9
+NO_BALL = -1
+NO_PARTNER = -1
+
+# Outcomes of a step.
+DONE = 0
+OVER_BUDGET = 1
+NOT_FINITE = 2
+
+#: Cells are this much wider than the largest diameter, so rounding of a ball's position
+#: against its cell's edges can never put touching balls two cells apart.
+CELL_MARGIN = 1.0 + 2.0 ** -20
+#: Hash buckets per ball (a power of two at least this many times the ball count).
+BUCKETS_PER_BALL = 2
+#: Wall entries in the buckets, per bucket, before further long walls become global.
+WALL_ENTRIES_PER_BUCKET = 16
+
+State = collections.namedtuple('State', (
+    'cell',             # cell width, m
+    'mask',             # buckets - 1
+    'leaves',           # leaves of the tournament tree (a power of two >= balls)
+    'clock',            # (N,) each ball's own time within the step, s
+    'event_time',       # (N,) each ball's predicted event, s from the step's start
+    'balls',            # (N, COLUMNS) int64, see the column names
+    'heads',            # (buckets,) first ball of each bucket
+    'wall_first',       # (buckets + 1,) each bucket's walls: wall_items[first[b]:first[b+1]]
+    'wall_items',
+    'global_walls',     # walls every ball checks
+    'tree',             # (2 leaves,) winner ball of each node, NO_BALL if none
+    'seen_positions',   # what the kernel left in the world, to notice edits
+    'seen_velocities',
+    'seen_radii',
+    'seen_walls',       # (M, 4) segments
+))
+
+
+@compile_kernel
+def wall_code(k):
+    """LAST's encoding of wall k (balls are >= 0, NO_PARTNER is -1)."""
+    return -2 - k
+
+
+@compile_kernel
+def _bucket(cx, cy, mask):
+    h = cx * 0x9E3779B1 + cy * 0x7FEB352D
+    h ^= h >> 17
+    return h & mask
+
+
+@compile_kernel
+def _cell_of(coordinate, cell):
+    return np.int64(math.floor(coordinate / cell))
+
+
+@compile_kernel
+def _link(balls, heads, i, bucket):
+    first = heads[bucket]
+    balls[i, NEXT] = first
+    balls[i, PREVIOUS] = NO_BALL
+    if first != NO_BALL:
+        balls[first, PREVIOUS] = i
+    heads[bucket] = i
+
+
+@compile_kernel
+def _unlink(balls, heads, i, bucket):
+    before = balls[i, PREVIOUS]
+    after = balls[i, NEXT]
+    if before != NO_BALL:
+        balls[before, NEXT] = after
+    else:
+        heads[bucket] = after
+    if after != NO_BALL:
+        balls[after, PREVIOUS] = before
+
+
+@compile_kernel
+def _place(state, i, px, py):
+    """Put ball i in the cell of (px, py)."""
+    cx = _cell_of(px, state.cell)
+    cy = _cell_of(py, state.cell)
+    state.balls[i, CELL_X] = cx
+    state.balls[i, CELL_Y] = cy
+    _link(state.balls, state.heads, i, _bucket(cx, cy, state.mask))
+
+
+@compile_kernel
+def _move(x, v, clock, i, t):
+    """Bring ball i's position to time t along its straight path."""
+    elapsed = t - clock[i]
+    if elapsed != 0.0:
+        x[i, 0] += v[i, 0] * elapsed
+        x[i, 1] += v[i, 1] * elapsed
+        clock[i] = t
+
+
+@compile_kernel
+def _precedes(t, kind, partner, best_t, best_kind, best_partner):
+    """One ball's candidates in processing order: time, then kind, then partner index."""
+    if t != best_t:
+        return t < best_t
+    if kind != best_kind:
+        return kind < best_kind
+    return partner < best_partner
+
+
+@compile_kernel
+def _predict(state, i, now, x, v, radii, starts, ends, directions, lengths):
+    """Find ball i's earliest event from time `now` on and store it (not in the tree)."""
+    balls = state.balls
+    clock = state.clock
+    px = x[i, 0] + v[i, 0] * (now - clock[i])
+    py = x[i, 1] + v[i, 1] * (now - clock[i])
+    vx = v[i, 0]
+    vy = v[i, 1]
+    cx = balls[i, CELL_X]
+    cy = balls[i, CELL_Y]
+    cell = state.cell
+
+    # Leaving the cell: direction 0 (+x), 1 (-x), 2 (+y), 3 (-y).
+    best_t = INFINITY
+    best_kind = NOTHING
+    best_partner = NO_PARTNER
+    best_stamp = 0
+    leave = INFINITY
+    direction = NO_PARTNER
+    if vx > 0.0:
+        leave = ((cx + 1) * cell - px) / vx
+        direction = 0
+    elif vx < 0.0:
+        leave = (cx * cell - px) / vx
+        direction = 1
+    if vy > 0.0:
+        leave_y = ((cy + 1) * cell - py) / vy
+        if leave_y < leave:
+            leave = leave_y
+            direction = 2
+    elif vy < 0.0:
+        leave_y = (cy * cell - py) / vy
+        if leave_y < leave:
+            leave = leave_y
+            direction = 3
+    if direction != NO_PARTNER:
+        best_t = now + max(0.0, leave)
+        best_kind = CROSSING
+        best_partner = direction
+
+    # Walls listed in the own cell's bucket, then the global ones.
+    last = balls[i, LAST]
+    radius = radii[i]
+    bucket = _bucket(cx, cy, state.mask)
+    first = state.wall_first[bucket]
+    listed = state.wall_first[bucket + 1] - first
+    for s in range(listed + state.global_walls.shape[0]):
+        k = state.wall_items[first + s] if s < listed else state.global_walls[s - listed]
+        if last == wall_code(k):
+            continue
+        t = wall_impact_time(px, py, vx, vy, radius, starts[k, 0], starts[k, 1], ends[k, 0],
+                             ends[k, 1], directions[k, 0], directions[k, 1], lengths[k])
+        if t < INFINITY:
+            t += now
+            if _precedes(t, WALL, k, best_t, best_kind, best_partner):
+                best_t = t
+                best_kind = WALL
+                best_partner = k
+
+    # Balls in the 3 x 3 block of cells.
+    for gx in range(cx - 1, cx + 2):
+        for gy in range(cy - 1, cy + 2):
+            j = state.heads[_bucket(gx, gy, state.mask)]
+            while j != NO_BALL:
+                if j != i and not (last == j and balls[j, LAST] == i):
+                    qx = x[j, 0] + v[j, 0] * (now - clock[j])
+                    qy = x[j, 1] + v[j, 1] * (now - clock[j])
+                    t = pair_impact_time(px - qx, py - qy, vx - v[j, 0], vy - v[j, 1],
+                                         radius + radii[j])
+                    if t < INFINITY:
+                        t += now
+                        if _precedes(t, PAIR, j, best_t, best_kind, best_partner):
+                            best_t = t
+                            best_kind = PAIR
+                            best_partner = j
+                            best_stamp = balls[j, COUNTER]
+                j = balls[j, NEXT]
+
+    state.event_time[i] = best_t
+    balls[i, KIND] = best_kind
+    balls[i, PARTNER] = best_partner
+    balls[i, STAMP] = best_stamp
+
+
+@compile_kernel
+def _first(state, a, b):
+    """Of two balls' events (NO_BALL for none), the one processed first.
+
+    Simultaneous events go by kind (ball-ball, ball-wall, cell crossing), then by the lower
+    ball index, then by the partner (the higher ball index, or the wall index); one pair
+    event predicted by both of its balls is the same event.
+    """
+    if a == NO_BALL:
+        return b
+    if b == NO_BALL:
+        return a
+    ta = state.event_time[a]
+    tb = state.event_time[b]
+    if ta != tb:
+        return a if ta < tb else b
+    balls = state.balls
+    kind = balls[a, KIND]
+    if kind != balls[b, KIND]:
+        return a if kind < balls[b, KIND] else b
+    low_a = a
+    high_a = balls[a, PARTNER]
+    low_b = b
+    high_b = balls[b, PARTNER]
+    if kind == PAIR:
+        low_a, high_a = min(a, high_a), max(a, high_a)
+        low_b, high_b = min(b, high_b), max(b, high_b)
+    if low_a != low_b:
+        return a if low_a < low_b else b
+    if high_a != high_b:
+        return a if high_a < high_b else b
+    return min(a, b)
+
+
+@compile_kernel
+def _update_tree(state, i):
+    tree = state.tree
+    node = (state.leaves + i) >> 1
+    while node >= 1:
+        tree[node] = _first(state, tree[2 * node], tree[2 * node + 1])
+        node >>= 1
+
+
+@compile_kernel
+def _build_tree(state, n):
+    tree = state.tree
+    leaves = state.leaves
+    for i in range(leaves):
+        tree[leaves + i] = i if i < n else NO_BALL
+    for node in range(leaves - 1, 0, -1):
+        tree[node] = _first(state, tree[2 * node], tree[2 * node + 1])
+
+
+@compile_kernel
+def _wall_buckets(k, cell, mask, starts, directions, lengths, seen, counts, fill, items):
+    """Visit each bucket a ball touching wall k can be in, once: count it, or list k in it.
+
+    The wall is sampled every half cell from end to end; a ball touching it has its centre
+    within r_max + cell / 4 < 3/4 cell of a sample, so in the 3 x 3 block of that sample's
+    cell. With `items` empty the buckets are counted, else k is written at `fill`.
+    """
+    spacing = 0.5 * cell
+    samples = int(math.ceil(lengths[k] / spacing)) + 1
+    for s in range(samples):
+        along = min(s * spacing, lengths[k])
+        sx = _cell_of(starts[k, 0] + along * directions[k, 0], cell)
+        sy = _cell_of(starts[k, 1] + along * directions[k, 1], cell)
+        for gx in range(sx - 1, sx + 2):
+            for gy in range(sy - 1, sy + 2):
+                b = _bucket(gx, gy, mask)
+                if seen[b] == k:
+                    continue
+                seen[b] = k
+                if items.shape[0] == 0:
+                    counts[b] += 1
+                else:
+                    items[fill[b]] = k
+                    fill[b] += 1
+
+
+@compile_kernel
+def _register_walls(cell, mask, starts, directions, lengths):
+    """Bucket lists of walls (first, items), and the walls too long to list (global).
+
+    A wall is listed while it needs no more entries than there are buckets and the lists
+    stay within WALL_ENTRIES_PER_BUCKET per bucket; longer walls are checked by every ball.
+    """
+    buckets = mask + 1
+    m = starts.shape[0]
+    counts = np.zeros(buckets, dtype=np.int64)
+    seen = np.full(buckets, -1, dtype=np.int64)
+    listed = np.zeros(m, dtype=np.bool_)
+    no_items = np.empty(0, dtype=np.int64)
+    entries = 0
+    for k in range(m):
+        needed = 9 * (int(math.ceil(lengths[k] / (0.5 * cell))) + 1)
+        if needed <= buckets and entries + needed <= WALL_ENTRIES_PER_BUCKET * buckets:
+            listed[k] = True
+            entries += needed
+            _wall_buckets(k, cell, mask, starts, directions, lengths, seen, counts, counts,
+                          no_items)
+    first = np.zeros(buckets + 1, dtype=np.int64)
+    for b in range(buckets):
+        first[b + 1] = first[b] + counts[b]
+    items = np.empty(max(1, first[buckets]), dtype=np.int64)
+    fill = first[:buckets].copy()
+    seen[:] = -1
+    for k in range(m):
+        if listed[k]:
+            _wall_buckets(k, cell, mask, starts, directions, lengths, seen, counts, fill, items)
+    return first, items, np.flatnonzero(~listed).astype(np.int64)
+
+
+@compile_kernel
+def build(x, v, radii, segments, starts, ends, directions, lengths):
+    """A fresh state for the world at the start of a step: cells, walls, predictions, tree."""
+    n = x.shape[0]
+    largest = 0.0
+    for i in range(n):
+        largest = max(largest, radii[i])
+    cell = 2.0 * largest * CELL_MARGIN
+    buckets = 64
+    while buckets < BUCKETS_PER_BALL * n:
+        buckets *= 2
+    mask = buckets - 1
+    leaves = 1
+    while leaves < n:
+        leaves *= 2
+    wall_first, wall_items, global_walls = _register_walls(cell, mask, starts, directions,
+                                                           lengths)
+    state = State(cell, mask, leaves, np.zeros(n), np.empty(n),
+                  np.empty((n, COLUMNS), dtype=np.int64), np.full(buckets, NO_BALL, np.int64),
+                  wall_first, wall_items, global_walls,
+                  np.full(2 * leaves, NO_BALL, np.int64), x.copy(), v.copy(), radii.copy(),
+                  segments.copy())
+    balls = state.balls
+    for i in range(n):
+        balls[i, COUNTER] = 0
+        balls[i, LAST] = NO_PARTNER
+        _place(state, i, x[i, 0], x[i, 1])
+    for i in range(n):
+        _predict(state, i, 0.0, x, v, radii, starts, ends, directions, lengths)
+    _build_tree(state, n)
+    return state
+
+
+@compile_kernel
+def matches(state, radii, segments):
+    """Whether the state was built for these radii and walls (else it must be rebuilt)."""
+    if radii.shape[0] != state.seen_radii.shape[0]:
+        return False
+    if segments.shape[0] != state.seen_walls.shape[0]:
+        return False
+    for i in range(radii.shape[0]):
+        if radii[i] != state.seen_radii[i]:
+            return False
+    for k in range(segments.shape[0]):
+        for c in range(4):
+            if segments[k, c] != state.seen_walls[k, c]:
+                return False
+    return True
+
+
+@compile_kernel
+def _edited(state, x, v, i):
+    seen_x = state.seen_positions
+    seen_v = state.seen_velocities
+    return (x[i, 0] != seen_x[i, 0] or x[i, 1] != seen_x[i, 1] or v[i, 0] != seen_v[i, 0]
+            or v[i, 1] != seen_v[i, 1])
+
+
+@compile_kernel
+def _absorb_edits(state, x, v, radii, starts, ends, directions, lengths):
+    """Predict again for balls changed since the last step (impulses, set-state).
+
+    A changed ball's counter moves on, so every prediction that named it becomes stale, and
+    it forgets its latest partner (the path that separated from it is gone).
+    """
+    n = x.shape[0]
+    balls = state.balls
+    changed = 0
+    for i in range(n):
+        if _edited(state, x, v, i):
+            if not (math.isfinite(x[i, 0]) and math.isfinite(x[i, 1])
+                    and math.isfinite(v[i, 0]) and math.isfinite(v[i, 1])):
+                return NOT_FINITE
+            _unlink(balls, state.heads, i, _bucket(balls[i, CELL_X], balls[i, CELL_Y],
+                                                   state.mask))
+            _place(state, i, x[i, 0], x[i, 1])
+            balls[i, COUNTER] += 1
+            balls[i, LAST] = NO_PARTNER
+            changed += 1
+    if changed == 0:
+        return DONE
+    # Predict only once every changed ball sits in its new cell.
+    for i in range(n):
+        if _edited(state, x, v, i):
+            _predict(state, i, 0.0, x, v, radii, starts, ends, directions, lengths)
+            _update_tree(state, i)
+    return DONE
+
+
+@compile_kernel
+def advance(state, x, v, radii, masses, starts, ends, directions, lengths, dt, budget, totals,
+            per_ball):
+    """Process every event before dt in order, then bring all balls to dt.
+
+    totals gets [ball-ball collisions, ball-wall collisions, events processed] added;
+    per_ball (empty, or one entry per ball) gets each ball's ball-ball collisions added.
+    Returns DONE, NOT_FINITE (an edited ball is not finite; nothing moved) or OVER_BUDGET
+    (more than `budget` events: the balls are left at the time reached, see exact.py).
+    """
+    status = _absorb_edits(state, x, v, radii, starts, ends, directions, lengths)
+    if status != DONE:
+        return status
+    n = x.shape[0]
+    balls = state.balls
+    clock = state.clock
+    count_each = per_ball.shape[0] == n
+    events = 0
+    end = dt
+    while True:
+        i = state.tree[1]
+        now = state.event_time[i]
+        if not now < dt:
+            break
+        if events == budget:
+            status = OVER_BUDGET
+            end = now
+            break
+        events += 1
+        kind = balls[i, KIND]
+        if kind == PAIR:
+            j = balls[i, PARTNER]
+            if balls[j, COUNTER] == balls[i, STAMP]:
+                _move(x, v, clock, i, now)
+                _move(x, v, clock, j, now)
+                if collide_pair(v, masses, i, j, x[i, 0] - x[j, 0], x[i, 1] - x[j, 1]):
+                    totals[0] += 1
+                    if count_each:
+                        per_ball[i] += 1
+                        per_ball[j] += 1
+                balls[i, COUNTER] += 1
+                balls[j, COUNTER] += 1
+                balls[i, LAST] = j
+                balls[j, LAST] = i
+                _predict(state, j, now, x, v, radii, starts, ends, directions, lengths)
+                _update_tree(state, j)
+        elif kind == WALL:
+            k = balls[i, PARTNER]
+            _move(x, v, clock, i, now)
+            if collide_wall(v, i, x[i, 0], x[i, 1], starts[k, 0], starts[k, 1], ends[k, 0],
+                            ends[k, 1], directions[k, 0], directions[k, 1], lengths[k]):
+                totals[1] += 1
+            balls[i, COUNTER] += 1
+            balls[i, LAST] = wall_code(k)
+        else:
+            direction = balls[i, PARTNER]
+            _unlink(balls, state.heads, i, _bucket(balls[i, CELL_X], balls[i, CELL_Y],
+                                                   state.mask))
+            if direction < 2:
+                balls[i, CELL_X] += 1 if direction == 0 else -1
+            else:
+                balls[i, CELL_Y] += 1 if direction == 2 else -1
+            _link(balls, state.heads, i, _bucket(balls[i, CELL_X], balls[i, CELL_Y],
+                                                 state.mask))
+        _predict(state, i, now, x, v, radii, starts, ends, directions, lengths)
+        _update_tree(state, i)
+    totals[2] += events
+
+    # Everyone to the end time; predictions become relative to the next step's start.
+    for i in range(n):
+        _move(x, v, clock, i, end)
+        clock[i] = 0.0
+        state.event_time[i] -= end
+    _build_tree(state, n)
+    state.seen_positions[:] = x
+    state.seen_velocities[:] = v
+    return status
