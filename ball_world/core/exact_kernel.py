@@ -67,14 +67,15 @@ NOT_FINITE = 2
 #: Cells are this much wider than the largest diameter, so rounding of a ball's position
 #: against its cell's edges can never put touching balls two cells apart.
 CELL_MARGIN = 1.0 + 2.0 ** -20
-#: Hash buckets per ball (a power of two at least this many times the ball count).
-BUCKETS_PER_BALL = 2
+#: Most buckets per ball (the bucket count is a power of two).
+BUCKETS_PER_BALL = 4
 #: Wall entries in the buckets, per bucket, before further long walls become global.
 WALL_ENTRIES_PER_BUCKET = 16
 
 State = collections.namedtuple('State', (
     'cell',             # cell width, m
-    'mask',             # buckets - 1
+    'column_mask',      # the buckets tile the plane: column_mask + 1 columns of cells,
+    'row_bits',         # 2 ** row_bits rows (see _bucket)
     'leaves',           # leaves of the tournament tree (a power of two >= balls)
     'clock',            # (N,) each ball's own time within the step, s
     'event_time',       # (N,) each ball's predicted event, s from the step's start
@@ -98,10 +99,13 @@ def wall_code(k):
 
 
 @compile_kernel
-def _bucket(cx, cy, mask):
-    h = cx * 0x9E3779B1 + cy * 0x7FEB352D
-    h ^= h >> 17
-    return h & mask
+def _bucket(cx, cy, column_mask, row_bits):
+    """Cell (cx, cy)'s bucket: the buckets are a torus of cells laid over the plane.
+
+    Neighbouring cells share no bucket while the torus is larger than the world (the usual
+    case), and a 3 x 3 block reads three short runs of memory.
+    """
+    return ((cx & column_mask) << row_bits) | (cy & ((1 << row_bits) - 1))
 
 
 @compile_kernel
@@ -138,7 +142,7 @@ def _place(state, i, px, py):
     cy = _cell_of(py, state.cell)
     state.balls[i, CELL_X] = cx
     state.balls[i, CELL_Y] = cy
-    _link(state.balls, state.heads, i, _bucket(cx, cy, state.mask))
+    _link(state.balls, state.heads, i, _bucket(cx, cy, state.column_mask, state.row_bits))
 
 
 @compile_kernel
@@ -205,7 +209,7 @@ def _predict(state, i, now, x, v, radii, starts, ends, directions, lengths):
     # Walls listed in the own cell's bucket, then the global ones.
     last = balls[i, LAST]
     radius = radii[i]
-    bucket = _bucket(cx, cy, state.mask)
+    bucket = _bucket(cx, cy, state.column_mask, state.row_bits)
     first = state.wall_first[bucket]
     listed = state.wall_first[bucket + 1] - first
     for s in range(listed + state.global_walls.shape[0]):
@@ -224,7 +228,7 @@ def _predict(state, i, now, x, v, radii, starts, ends, directions, lengths):
     # Balls in the 3 x 3 block of cells.
     for gx in range(cx - 1, cx + 2):
         for gy in range(cy - 1, cy + 2):
-            j = state.heads[_bucket(gx, gy, state.mask)]
+            j = state.heads[_bucket(gx, gy, state.column_mask, state.row_bits)]
             while j != NO_BALL:
                 if j != i and not (last == j and balls[j, LAST] == i):
                     qx = x[j, 0] + v[j, 0] * (now - clock[j])
@@ -247,7 +251,7 @@ def _predict(state, i, now, x, v, radii, starts, ends, directions, lengths):
 
 
 @compile_kernel
-def _first(state, a, b):
+def _first(event_time, balls, a, b):
     """Of two balls' events (NO_BALL for none), the one processed first.
 
     Simultaneous events go by kind (ball-ball, ball-wall, cell crossing), then by the lower
@@ -258,11 +262,10 @@ def _first(state, a, b):
         return b
     if b == NO_BALL:
         return a
-    ta = state.event_time[a]
-    tb = state.event_time[b]
+    ta = event_time[a]
+    tb = event_time[b]
     if ta != tb:
         return a if ta < tb else b
-    balls = state.balls
     kind = balls[a, KIND]
     if kind != balls[b, KIND]:
         return a if kind < balls[b, KIND] else b
@@ -281,26 +284,25 @@ def _first(state, a, b):
 
 
 @compile_kernel
-def _update_tree(state, i):
-    tree = state.tree
-    node = (state.leaves + i) >> 1
+def _update_tree(tree, leaves, event_time, balls, i):
+    """Replay ball i's path to the root after its prediction changed."""
+    node = (leaves + i) >> 1
     while node >= 1:
-        tree[node] = _first(state, tree[2 * node], tree[2 * node + 1])
+        tree[node] = _first(event_time, balls, tree[2 * node], tree[2 * node + 1])
         node >>= 1
 
 
 @compile_kernel
-def _build_tree(state, n):
-    tree = state.tree
-    leaves = state.leaves
+def _build_tree(tree, leaves, event_time, balls, n):
     for i in range(leaves):
         tree[leaves + i] = i if i < n else NO_BALL
     for node in range(leaves - 1, 0, -1):
-        tree[node] = _first(state, tree[2 * node], tree[2 * node + 1])
+        tree[node] = _first(event_time, balls, tree[2 * node], tree[2 * node + 1])
 
 
 @compile_kernel
-def _wall_buckets(k, cell, mask, starts, directions, lengths, seen, counts, fill, items):
+def _wall_buckets(k, cell, column_mask, row_bits, starts, directions, lengths, seen, counts,
+                  fill, items):
     """Visit each bucket a ball touching wall k can be in, once: count it, or list k in it.
 
     The wall is sampled every half cell from end to end; a ball touching it has its centre
@@ -315,7 +317,7 @@ def _wall_buckets(k, cell, mask, starts, directions, lengths, seen, counts, fill
         sy = _cell_of(starts[k, 1] + along * directions[k, 1], cell)
         for gx in range(sx - 1, sx + 2):
             for gy in range(sy - 1, sy + 2):
-                b = _bucket(gx, gy, mask)
+                b = _bucket(gx, gy, column_mask, row_bits)
                 if seen[b] == k:
                     continue
                 seen[b] = k
@@ -327,13 +329,13 @@ def _wall_buckets(k, cell, mask, starts, directions, lengths, seen, counts, fill
 
 
 @compile_kernel
-def _register_walls(cell, mask, starts, directions, lengths):
+def _register_walls(cell, column_mask, row_bits, starts, directions, lengths):
     """Bucket lists of walls (first, items), and the walls too long to list (global).
 
     A wall is listed while it needs no more entries than there are buckets and the lists
     stay within WALL_ENTRIES_PER_BUCKET per bucket; longer walls are checked by every ball.
     """
-    buckets = mask + 1
+    buckets = (column_mask + 1) << row_bits
     m = starts.shape[0]
     counts = np.zeros(buckets, dtype=np.int64)
     seen = np.full(buckets, -1, dtype=np.int64)
@@ -345,8 +347,8 @@ def _register_walls(cell, mask, starts, directions, lengths):
         if needed <= buckets and entries + needed <= WALL_ENTRIES_PER_BUCKET * buckets:
             listed[k] = True
             entries += needed
-            _wall_buckets(k, cell, mask, starts, directions, lengths, seen, counts, counts,
-                          no_items)
+            _wall_buckets(k, cell, column_mask, row_bits, starts, directions, lengths, seen,
+                          counts, counts, no_items)
     first = np.zeros(buckets + 1, dtype=np.int64)
     for b in range(buckets):
         first[b + 1] = first[b] + counts[b]
@@ -355,8 +357,41 @@ def _register_walls(cell, mask, starts, directions, lengths):
     seen[:] = -1
     for k in range(m):
         if listed[k]:
-            _wall_buckets(k, cell, mask, starts, directions, lengths, seen, counts, fill, items)
+            _wall_buckets(k, cell, column_mask, row_bits, starts, directions, lengths, seen,
+                          counts, fill, items)
     return first, items, np.flatnonzero(~listed).astype(np.int64)
+
+
+@compile_kernel
+def _torus(x, cell):
+    """The bucket torus (column_mask, row_bits): as large as the balls' extent, in cells,
+    within BUCKETS_PER_BALL buckets per ball; beyond that distant cells share buckets."""
+    n = x.shape[0]
+    low_x = high_x = x[0, 0]
+    low_y = high_y = x[0, 1]
+    for i in range(n):
+        low_x = min(low_x, x[i, 0])
+        high_x = max(high_x, x[i, 0])
+        low_y = min(low_y, x[i, 1])
+        high_y = max(high_y, x[i, 1])
+    limit = 64
+    while limit < BUCKETS_PER_BALL * n:
+        limit *= 2
+    # Compare extents as floats: a world far wider than the torus needs no exact count.
+    wide = (high_x - low_x) / cell + 3.0
+    tall = (high_y - low_y) / cell + 3.0
+    columns = 1
+    while columns < wide and columns < limit:
+        columns *= 2
+    row_bits = 0
+    while (1 << row_bits) < tall and (1 << row_bits) < limit:
+        row_bits += 1
+    while columns * (1 << row_bits) > limit:
+        if columns >= (1 << row_bits):
+            columns //= 2
+        else:
+            row_bits -= 1
+    return columns - 1, row_bits
 
 
 @compile_kernel
@@ -367,17 +402,15 @@ def build(x, v, radii, segments, starts, ends, directions, lengths):
     for i in range(n):
         largest = max(largest, radii[i])
     cell = 2.0 * largest * CELL_MARGIN
-    buckets = 64
-    while buckets < BUCKETS_PER_BALL * n:
-        buckets *= 2
-    mask = buckets - 1
+    column_mask, row_bits = _torus(x, cell)
     leaves = 1
     while leaves < n:
         leaves *= 2
-    wall_first, wall_items, global_walls = _register_walls(cell, mask, starts, directions,
-                                                           lengths)
-    state = State(cell, mask, leaves, np.zeros(n), np.empty(n),
-                  np.empty((n, COLUMNS), dtype=np.int64), np.full(buckets, NO_BALL, np.int64),
+    wall_first, wall_items, global_walls = _register_walls(cell, column_mask, row_bits, starts,
+                                                           directions, lengths)
+    state = State(cell, column_mask, row_bits, leaves, np.zeros(n), np.empty(n),
+                  np.empty((n, COLUMNS), dtype=np.int64),
+                  np.full(wall_first.shape[0] - 1, NO_BALL, np.int64),
                   wall_first, wall_items, global_walls,
                   np.full(2 * leaves, NO_BALL, np.int64), x.copy(), v.copy(), radii.copy(),
                   segments.copy())
@@ -388,7 +421,7 @@ def build(x, v, radii, segments, starts, ends, directions, lengths):
         _place(state, i, x[i, 0], x[i, 1])
     for i in range(n):
         _predict(state, i, 0.0, x, v, radii, starts, ends, directions, lengths)
-    _build_tree(state, n)
+    _build_tree(state.tree, state.leaves, state.event_time, balls, n)
     return state
 
 
@@ -433,7 +466,7 @@ def _absorb_edits(state, x, v, radii, starts, ends, directions, lengths):
                     and math.isfinite(v[i, 0]) and math.isfinite(v[i, 1])):
                 return NOT_FINITE
             _unlink(balls, state.heads, i, _bucket(balls[i, CELL_X], balls[i, CELL_Y],
-                                                   state.mask))
+                                                   state.column_mask, state.row_bits))
             _place(state, i, x[i, 0], x[i, 1])
             balls[i, COUNTER] += 1
             balls[i, LAST] = NO_PARTNER
@@ -444,7 +477,7 @@ def _absorb_edits(state, x, v, radii, starts, ends, directions, lengths):
     for i in range(n):
         if _edited(state, x, v, i):
             _predict(state, i, 0.0, x, v, radii, starts, ends, directions, lengths)
-            _update_tree(state, i)
+            _update_tree(state.tree, state.leaves, state.event_time, balls, i)
     return DONE
 
 
@@ -493,7 +526,7 @@ def advance(state, x, v, radii, masses, starts, ends, directions, lengths, dt, b
                 balls[i, LAST] = j
                 balls[j, LAST] = i
                 _predict(state, j, now, x, v, radii, starts, ends, directions, lengths)
-                _update_tree(state, j)
+                _update_tree(state.tree, state.leaves, state.event_time, balls, j)
         elif kind == WALL:
             k = balls[i, PARTNER]
             _move(x, v, clock, i, now)
@@ -505,15 +538,15 @@ def advance(state, x, v, radii, masses, starts, ends, directions, lengths, dt, b
         else:
             direction = balls[i, PARTNER]
             _unlink(balls, state.heads, i, _bucket(balls[i, CELL_X], balls[i, CELL_Y],
-                                                   state.mask))
+                                                   state.column_mask, state.row_bits))
             if direction < 2:
                 balls[i, CELL_X] += 1 if direction == 0 else -1
             else:
                 balls[i, CELL_Y] += 1 if direction == 2 else -1
             _link(balls, state.heads, i, _bucket(balls[i, CELL_X], balls[i, CELL_Y],
-                                                 state.mask))
+                                                 state.column_mask, state.row_bits))
         _predict(state, i, now, x, v, radii, starts, ends, directions, lengths)
-        _update_tree(state, i)
+        _update_tree(state.tree, state.leaves, state.event_time, balls, i)
     totals[2] += events
 
     # Everyone to the end time; predictions become relative to the next step's start.
@@ -521,7 +554,7 @@ def advance(state, x, v, radii, masses, starts, ends, directions, lengths, dt, b
         _move(x, v, clock, i, end)
         clock[i] = 0.0
         state.event_time[i] -= end
-    _build_tree(state, n)
+    _build_tree(state.tree, state.leaves, state.event_time, balls, n)
     state.seen_positions[:] = x
     state.seen_velocities[:] = v
     return status
