@@ -25,6 +25,7 @@ pressed between two walls exactly one diameter apart, a row of touching balls be
 walls, moving); such a world makes `step` raise EventBudgetExceeded instead of hanging.
 """
 import importlib.util
+import math
 import weakref
 
 import numpy as np
@@ -37,6 +38,7 @@ EVENTS_PER_BALL = 1000
 MIN_EVENT_BUDGET = 1_000_000
 
 _states = weakref.WeakKeyDictionary()
+_NO_COUNTS = np.empty(0, dtype=np.int64)
 
 
 class EventBudgetExceeded(RuntimeError):
@@ -68,20 +70,23 @@ def step(world, dt, per_ball=None):
     """
     from ball_world.core import exact_kernel as kernel
 
+    if not 0.0 <= dt < math.inf:
+        raise ValueError(f'exact step: dt must be finite and >= 0, got {dt}')
     n = len(world.positions)
     if n == 0:
         return 0, 0, 0
     walls = world.walls
-    state = _states.get(world)
-    if state is None or not kernel.matches(state, world.radii, walls.segments):
-        state = _build(world, kernel)
-        _states[world] = state
     totals = np.zeros(3, dtype=np.int64)
-    counts = per_ball if per_ball is not None else np.empty(0, dtype=np.int64)
+    counts = per_ball if per_ball is not None else _NO_COUNTS
     budget = event_budget(n)
-    status = kernel.advance(state, world.positions, world.velocities, world.radii, world.masses,
-                            walls.starts, walls.ends, walls.directions, walls.lengths,
-                            float(dt), budget, totals, counts)
+    arguments = (world.positions, world.velocities, world.radii, world.masses, walls.segments,
+                 walls.starts, walls.ends, walls.directions, walls.lengths, float(dt), budget,
+                 totals, counts)
+    state = _states.get(world)
+    status = kernel.STALE_STATE if state is None else kernel.advance(state, *arguments)
+    if status == kernel.STALE_STATE:
+        state = _states[world] = _build(world, kernel)
+        status = kernel.advance(state, *arguments)
     if status == kernel.NOT_FINITE:
         invalidate(world)
         raise ValueError('exact step: a ball position or velocity is not finite')

@@ -63,6 +63,7 @@ NO_PARTNER = -1
 DONE = 0
 OVER_BUDGET = 1
 NOT_FINITE = 2
+STALE_STATE = 3
 
 #: Cells are this much wider than the largest diameter, so rounding of a ball's position
 #: against its cell's edges can never put touching balls two cells apart.
@@ -426,7 +427,7 @@ def build(x, v, radii, segments, starts, ends, directions, lengths):
 
 
 @compile_kernel
-def matches(state, radii, segments):
+def _matches(state, radii, segments):
     """Whether the state was built for these radii and walls (else it must be rebuilt)."""
     if radii.shape[0] != state.seen_radii.shape[0]:
         return False
@@ -482,15 +483,18 @@ def _absorb_edits(state, x, v, radii, starts, ends, directions, lengths):
 
 
 @compile_kernel
-def advance(state, x, v, radii, masses, starts, ends, directions, lengths, dt, budget, totals,
-            per_ball):
+def advance(state, x, v, radii, masses, segments, starts, ends, directions, lengths, dt, budget,
+            totals, per_ball):
     """Process every event before dt in order, then bring all balls to dt.
 
     totals gets [ball-ball collisions, ball-wall collisions, events processed] added;
     per_ball (empty, or one entry per ball) gets each ball's ball-ball collisions added.
-    Returns DONE, NOT_FINITE (an edited ball is not finite; nothing moved) or OVER_BUDGET
-    (more than `budget` events: the balls are left at the time reached, see exact.py).
+    Returns DONE; STALE_STATE (the state was built for other radii or walls: build a new
+    one; nothing moved); NOT_FINITE (an edited ball is not finite; nothing moved); or
+    OVER_BUDGET (more than `budget` events: the balls are left at the time reached).
     """
+    if not _matches(state, radii, segments):
+        return STALE_STATE
     status = _absorb_edits(state, x, v, radii, starts, ends, directions, lengths)
     if status != DONE:
         return status
