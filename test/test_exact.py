@@ -6,7 +6,7 @@ times from the initial gap, the textbook outgoing velocities), never from the ke
 """
 import math
 
-from benchmarks.gas import Gas
+from benchmarks.gas import enskog_collision_rate, Gas, henderson_z, Rates
 from hypothesis import given, settings, strategies as st
 from numba import njit
 import numpy as np
@@ -365,33 +365,16 @@ def test_energy_momentum_no_overlap_and_determinism(seed, dt, walls):
 
 # A hard-disk gas against kinetic theory ------------------------------------------------------
 
-def enskog_collision_rate(n, sigma, kt_over_m):
-    """Collisions per disk per second in an equilibrium hard-disk fluid (2D Enskog).
-
-    A disk meets every disk whose centre passes within sigma of its own: relative to it, the
-    centres in a strip of width 2 sigma swept at the relative speed g, 2 n sigma |g| per
-    second in a dilute gas; in a dense one the density at contact is
-    n g(sigma), the contact value of the pair distribution. For 2D Maxwellian velocities the
-    relative velocity is Maxwellian with the reduced mass m / 2, so <|g|> = sqrt(pi kT / m):
-
-        omega = 2 n sigma g(sigma) sqrt(pi kT / m).
-
-    g(sigma) comes from the 2D virial equation of state Z = P / (n kT) = 1 + 2 eta g(sigma)
-    (eta = n pi sigma^2 / 4) with Henderson's Z = (1 + eta^2 / 8) / (1 - eta)^2, which gives
-    g(sigma) = (1 - 7 eta / 16) / (1 - eta)^2.
-    """
-    eta = n * math.pi * sigma * sigma / 4.0
-    contact = (1.0 - 7.0 * eta / 16.0) / (1.0 - eta) ** 2
-    return 2.0 * n * sigma * contact * math.sqrt(math.pi * kt_over_m)
-
-
-def henderson_z(eta):
-    return (1.0 + eta * eta / 8.0) / (1.0 - eta) ** 2
-
-
 @pytest.mark.parametrize('area_fraction', [0.1, 0.3, 0.5])
 def test_gas_keeps_energy_never_overlaps_and_collides_at_the_enskog_rate(area_fraction):
     """400 disks (sigma = 1, m = 1, all at speed 1 at first) in a box, 10,000 steps.
+
+    The hard-disk collision rate per disk (2D Enskog, derived in benchmarks/gas.py):
+
+        omega = 2 n sigma g(sigma) sqrt(pi kT / m),  g(sigma) = (1 - 7 eta / 16) / (1 - eta)^2
+
+    from the virial equation Z = 1 + 2 eta g(sigma) with Henderson's
+    Z = (1 + eta^2 / 8) / (1 - eta)^2, eta = n pi sigma^2 / 4.
 
     Walls change the density within a few diameters of them, so the ball-ball rate is taken
     where the gas is bulk: per disk, over the disks that are at least 3 sigma from every wall
@@ -408,33 +391,23 @@ def test_gas_keeps_energy_never_overlaps_and_collides_at_the_enskog_rate(area_fr
     duration = 300.0 / enskog_collision_rate(4.0 * area_fraction / math.pi, sigma, 0.5)
     dt = duration / steps
     world = gas.world()
-    kt_over_m = world.kinetic_energy() / n_balls
     energy = world.kinetic_energy()
-    margin = 0.5 * sigma + 3.0 * sigma
+    kt_over_m = energy / n_balls
+    rates = Rates(gas, margin=0.5 * sigma + 3.0 * sigma)
     per_ball = np.zeros(n_balls, dtype=np.int64)
-    inside_before = None
-    collisions = ball_time = inside_count = wall_hits = 0
     for k in range(steps):
-        x = world.positions
-        inside_before = ((x > margin) & (x < side - margin)).all(axis=1)
+        before = world.positions.copy()
         counted = per_ball.copy()
-        _, ball_wall, _ = exact.step(world, dt, per_ball)
-        x = world.positions
-        inside = ((x > margin) & (x < side - margin)).all(axis=1)
+        ball_ball, ball_wall, _ = exact.step(world, dt, per_ball)
         if k >= warm_up:
-            both = inside & inside_before
-            collisions += int((per_ball - counted)[both].sum())
-            ball_time += int(both.sum()) * dt
-            inside_count += int(inside.sum())
-            wall_hits += ball_wall
-        pair, wall = smallest_gaps(x, world.radii, side)
+            rates.add(dt, before, world.positions, ball_ball, ball_wall, per_ball - counted)
+        pair, wall = smallest_gaps(world.positions, world.radii, side)
         assert pair > -ROUNDING and wall > -ROUNDING
     assert world.kinetic_energy() == pytest.approx(energy, rel=ROUNDING)
 
-    measured_time = (steps - warm_up) * dt
-    n_bulk = inside_count / (steps - warm_up) / (side - 2.0 * margin) ** 2
+    n_bulk = rates.bulk_density()
     expected = enskog_collision_rate(n_bulk, sigma, kt_over_m)
+    assert rates.bulk_collision_rate() == pytest.approx(expected, rel=0.03)
     eta_bulk = n_bulk * math.pi * sigma * sigma / 4.0
     wall_rate = n_bulk * henderson_z(eta_bulk) * math.sqrt(kt_over_m / (2.0 * math.pi))
-    assert collisions / ball_time == pytest.approx(expected, rel=0.03)
-    assert wall_hits / measured_time == pytest.approx(wall_rate * 4.0 * (side - sigma), rel=0.03)
+    assert rates.wall_rate() == pytest.approx(wall_rate * 4.0 * (side - sigma), rel=0.03)
