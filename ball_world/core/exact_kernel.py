@@ -52,10 +52,12 @@ NEXT = 2          # next ball in the same bucket, or NO_BALL
 PREVIOUS = 3      # previous ball in the same bucket, or NO_BALL
 COUNTER = 4       # changes of course so far: a prediction naming this ball records it
 LAST = 5          # partner of the latest collision: a ball, wall_code(k), or NO_PARTNER
-KIND = 6          # the predicted event's kind
-PARTNER = 7       # its partner: a ball, a wall, or the crossing direction
-STAMP = 8         # the partner ball's COUNTER when predicted
-COLUMNS = 9
+HIT_KIND = 6      # the earliest impact predicted: PAIR, WALL or NOTHING
+HIT_PARTNER = 7   # its partner: a ball or a wall
+HIT_STAMP = 8     # the partner ball's COUNTER when predicted
+EXIT = 9          # where the ball leaves its cell: 0 (+x), 1 (-x), 2 (+y), 3 (-y), NO_PARTNER
+KIND = 10         # the next event: HIT_KIND, or CROSSING when leaving the cell comes first
+COLUMNS = 11
 NO_BALL = -1
 NO_PARTNER = -1
 
@@ -79,7 +81,9 @@ State = collections.namedtuple('State', (
     'row_bits',         # 2 ** row_bits rows (see _bucket)
     'leaves',           # leaves of the tournament tree (a power of two >= balls)
     'clock',            # (N,) each ball's own time within the step, s
-    'event_time',       # (N,) each ball's predicted event, s from the step's start
+    'hit_time',         # (N,) each ball's earliest impact, s from the step's start
+    'exit_time',        # (N,) when it leaves its cell
+    'event_time',       # (N,) the earlier of the two: the key of the tree
     'balls',            # (N, COLUMNS) int64, see the column names
     'heads',            # (buckets,) first ball of each bucket
     'wall_first',       # (buckets + 1,) each bucket's walls: wall_items[first[b]:first[b+1]]
@@ -167,23 +171,77 @@ def _precedes(t, kind, partner, best_t, best_kind, best_partner):
 
 
 @compile_kernel
-def _predict(state, i, now, x, v, radii, starts, ends, directions, lengths):
-    """Find ball i's earliest event from time `now` on and store it (not in the tree)."""
-    balls = state.balls
-    clock = state.clock
-    px = x[i, 0] + v[i, 0] * (now - clock[i])
-    py = x[i, 1] + v[i, 1] * (now - clock[i])
-    vx = v[i, 0]
-    vy = v[i, 1]
+def _scan_walls(i, now, px, py, vx, vy, bucket, balls, hit_time, wall_first, wall_items,
+                global_walls, radii, starts, ends, directions, lengths):
+    """Merge ball i's impacts with the walls of `bucket` and the global walls into its hit."""
+    best_t = hit_time[i]
+    best_kind = balls[i, HIT_KIND]
+    best_partner = balls[i, HIT_PARTNER]
+    found = False
+    last = balls[i, LAST]
+    radius = radii[i]
+    first = wall_first[bucket]
+    listed = wall_first[bucket + 1] - first
+    for s in range(listed + global_walls.shape[0]):
+        k = wall_items[first + s] if s < listed else global_walls[s - listed]
+        if last == wall_code(k):
+            continue
+        t = wall_impact_time(px, py, vx, vy, radius, starts[k, 0], starts[k, 1], ends[k, 0],
+                             ends[k, 1], directions[k, 0], directions[k, 1], lengths[k])
+        if t < INFINITY:
+            t += now
+            if _precedes(t, WALL, k, best_t, best_kind, best_partner):
+                best_t = t
+                best_kind = WALL
+                best_partner = k
+                found = True
+    if found:
+        hit_time[i] = best_t
+        balls[i, HIT_KIND] = WALL
+        balls[i, HIT_PARTNER] = best_partner
+
+
+@compile_kernel
+def _scan_balls(i, now, px, py, vx, vy, gx_low, gx_high, gy_low, gy_high, balls, hit_time,
+                heads, clock, column_mask, row_bits, x, v, radii):
+    """Merge ball i's impacts with the balls of cells [gx_low, gx_high] x [gy_low, gy_high]."""
+    best_t = hit_time[i]
+    best_kind = balls[i, HIT_KIND]
+    best_partner = balls[i, HIT_PARTNER]
+    best_stamp = 0
+    found = False
+    last = balls[i, LAST]
+    radius = radii[i]
+    for gx in range(gx_low, gx_high + 1):
+        for gy in range(gy_low, gy_high + 1):
+            j = heads[_bucket(gx, gy, column_mask, row_bits)]
+            while j != NO_BALL:
+                if j != i and not (last == j and balls[j, LAST] == i):
+                    qx = x[j, 0] + v[j, 0] * (now - clock[j])
+                    qy = x[j, 1] + v[j, 1] * (now - clock[j])
+                    t = pair_impact_time(px - qx, py - qy, vx - v[j, 0], vy - v[j, 1],
+                                         radius + radii[j])
+                    if t < INFINITY:
+                        t += now
+                        if _precedes(t, PAIR, j, best_t, best_kind, best_partner):
+                            best_t = t
+                            best_kind = PAIR
+                            best_partner = j
+                            best_stamp = balls[j, COUNTER]
+                            found = True
+                j = balls[j, NEXT]
+    if found:
+        hit_time[i] = best_t
+        balls[i, HIT_KIND] = PAIR
+        balls[i, HIT_PARTNER] = best_partner
+        balls[i, HIT_STAMP] = best_stamp
+
+
+@compile_kernel
+def _predict_exit(i, now, px, py, vx, vy, balls, exit_time, cell):
+    """When and where ball i leaves its cell: EXIT 0 (+x), 1 (-x), 2 (+y), 3 (-y)."""
     cx = balls[i, CELL_X]
     cy = balls[i, CELL_Y]
-    cell = state.cell
-
-    # Leaving the cell: direction 0 (+x), 1 (-x), 2 (+y), 3 (-y).
-    best_t = INFINITY
-    best_kind = NOTHING
-    best_partner = NO_PARTNER
-    best_stamp = 0
     leave = INFINITY
     direction = NO_PARTNER
     if vx > 0.0:
@@ -202,53 +260,85 @@ def _predict(state, i, now, x, v, radii, starts, ends, directions, lengths):
         if leave_y < leave:
             leave = leave_y
             direction = 3
-    if direction != NO_PARTNER:
-        best_t = now + max(0.0, leave)
-        best_kind = CROSSING
-        best_partner = direction
+    # A position rounded just past its cell's edge leaves at once, never in the past.
+    exit_time[i] = now + max(0.0, leave) if direction != NO_PARTNER else INFINITY
+    balls[i, EXIT] = direction
 
-    # Walls listed in the own cell's bucket, then the global ones.
-    last = balls[i, LAST]
-    radius = radii[i]
-    bucket = _bucket(cx, cy, state.column_mask, state.row_bits)
-    first = state.wall_first[bucket]
-    listed = state.wall_first[bucket + 1] - first
-    for s in range(listed + state.global_walls.shape[0]):
-        k = state.wall_items[first + s] if s < listed else state.global_walls[s - listed]
-        if last == wall_code(k):
-            continue
-        t = wall_impact_time(px, py, vx, vy, radius, starts[k, 0], starts[k, 1], ends[k, 0],
-                             ends[k, 1], directions[k, 0], directions[k, 1], lengths[k])
-        if t < INFINITY:
-            t += now
-            if _precedes(t, WALL, k, best_t, best_kind, best_partner):
-                best_t = t
-                best_kind = WALL
-                best_partner = k
 
-    # Balls in the 3 x 3 block of cells.
-    for gx in range(cx - 1, cx + 2):
-        for gy in range(cy - 1, cy + 2):
-            j = state.heads[_bucket(gx, gy, state.column_mask, state.row_bits)]
-            while j != NO_BALL:
-                if j != i and not (last == j and balls[j, LAST] == i):
-                    qx = x[j, 0] + v[j, 0] * (now - clock[j])
-                    qy = x[j, 1] + v[j, 1] * (now - clock[j])
-                    t = pair_impact_time(px - qx, py - qy, vx - v[j, 0], vy - v[j, 1],
-                                         radius + radii[j])
-                    if t < INFINITY:
-                        t += now
-                        if _precedes(t, PAIR, j, best_t, best_kind, best_partner):
-                            best_t = t
-                            best_kind = PAIR
-                            best_partner = j
-                            best_stamp = balls[j, COUNTER]
-                j = balls[j, NEXT]
+@compile_kernel
+def _schedule(i, balls, hit_time, exit_time, event_time):
+    """Ball i's next event: its hit, or leaving its cell if that comes strictly first."""
+    if balls[i, HIT_KIND] != NOTHING and hit_time[i] <= exit_time[i]:
+        event_time[i] = hit_time[i]
+        balls[i, KIND] = balls[i, HIT_KIND]
+    elif balls[i, EXIT] != NO_PARTNER:
+        event_time[i] = exit_time[i]
+        balls[i, KIND] = CROSSING
+    else:
+        event_time[i] = INFINITY
+        balls[i, KIND] = NOTHING
 
-    state.event_time[i] = best_t
-    balls[i, KIND] = best_kind
-    balls[i, PARTNER] = best_partner
-    balls[i, STAMP] = best_stamp
+
+@compile_kernel
+def _predict(state, i, now, x, v, radii, starts, ends, directions, lengths):
+    """Ball i's earliest events from time `now` on, over its whole 3 x 3 block (not the tree)."""
+    balls = state.balls
+    px = x[i, 0] + v[i, 0] * (now - state.clock[i])
+    py = x[i, 1] + v[i, 1] * (now - state.clock[i])
+    vx = v[i, 0]
+    vy = v[i, 1]
+    cx = balls[i, CELL_X]
+    cy = balls[i, CELL_Y]
+    state.hit_time[i] = INFINITY
+    balls[i, HIT_KIND] = NOTHING
+    balls[i, HIT_PARTNER] = NO_PARTNER
+    balls[i, HIT_STAMP] = 0
+    _predict_exit(i, now, px, py, vx, vy, balls, state.exit_time, state.cell)
+    _scan_walls(i, now, px, py, vx, vy, _bucket(cx, cy, state.column_mask, state.row_bits),
+                balls, state.hit_time, state.wall_first, state.wall_items, state.global_walls,
+                radii, starts, ends, directions, lengths)
+    _scan_balls(i, now, px, py, vx, vy, cx - 1, cx + 1, cy - 1, cy + 1, balls, state.hit_time,
+                state.heads, state.clock, state.column_mask, state.row_bits, x, v, radii)
+    _schedule(i, balls, state.hit_time, state.exit_time, state.event_time)
+
+
+@compile_kernel
+def _cross(state, i, now, x, v, radii, starts, ends, directions, lengths):
+    """Move ball i into the next cell and predict against what is new there only.
+
+    Its stored hit was the earliest over the old 3 x 3 block, which shares all but one
+    strip of three cells with the new block; only that strip and the new cell's walls need
+    looking at (an impact already predicted with a ball now out of reach is still exact).
+    """
+    balls = state.balls
+    mask = state.column_mask
+    bits = state.row_bits
+    _unlink(balls, state.heads, i, _bucket(balls[i, CELL_X], balls[i, CELL_Y], mask, bits))
+    direction = balls[i, EXIT]
+    if direction < 2:
+        balls[i, CELL_X] += 1 if direction == 0 else -1
+    else:
+        balls[i, CELL_Y] += 1 if direction == 2 else -1
+    cx = balls[i, CELL_X]
+    cy = balls[i, CELL_Y]
+    _link(balls, state.heads, i, _bucket(cx, cy, mask, bits))
+    px = x[i, 0] + v[i, 0] * (now - state.clock[i])
+    py = x[i, 1] + v[i, 1] * (now - state.clock[i])
+    vx = v[i, 0]
+    vy = v[i, 1]
+    _predict_exit(i, now, px, py, vx, vy, balls, state.exit_time, state.cell)
+    _scan_walls(i, now, px, py, vx, vy, _bucket(cx, cy, mask, bits), balls, state.hit_time,
+                state.wall_first, state.wall_items, state.global_walls, radii, starts, ends,
+                directions, lengths)
+    if direction < 2:
+        strip = cx + 1 if direction == 0 else cx - 1
+        _scan_balls(i, now, px, py, vx, vy, strip, strip, cy - 1, cy + 1, balls, state.hit_time,
+                    state.heads, state.clock, mask, bits, x, v, radii)
+    else:
+        strip = cy + 1 if direction == 2 else cy - 1
+        _scan_balls(i, now, px, py, vx, vy, cx - 1, cx + 1, strip, strip, balls, state.hit_time,
+                    state.heads, state.clock, mask, bits, x, v, radii)
+    _schedule(i, balls, state.hit_time, state.exit_time, state.event_time)
 
 
 @compile_kernel
@@ -270,10 +360,11 @@ def _first(event_time, balls, a, b):
     kind = balls[a, KIND]
     if kind != balls[b, KIND]:
         return a if kind < balls[b, KIND] else b
+    partner = EXIT if kind == CROSSING else HIT_PARTNER
     low_a = a
-    high_a = balls[a, PARTNER]
+    high_a = balls[a, partner]
     low_b = b
-    high_b = balls[b, PARTNER]
+    high_b = balls[b, partner]
     if kind == PAIR:
         low_a, high_a = min(a, high_a), max(a, high_a)
         low_b, high_b = min(b, high_b), max(b, high_b)
@@ -409,7 +500,8 @@ def build(x, v, radii, segments, starts, ends, directions, lengths):
         leaves *= 2
     wall_first, wall_items, global_walls = _register_walls(cell, column_mask, row_bits, starts,
                                                            directions, lengths)
-    state = State(cell, column_mask, row_bits, leaves, np.zeros(n), np.empty(n),
+    state = State(cell, column_mask, row_bits, leaves, np.zeros(n), np.empty(n), np.empty(n),
+                  np.empty(n),
                   np.empty((n, COLUMNS), dtype=np.int64),
                   np.full(wall_first.shape[0] - 1, NO_BALL, np.int64),
                   wall_first, wall_items, global_walls,
@@ -429,26 +521,18 @@ def build(x, v, radii, segments, starts, ends, directions, lengths):
 @compile_kernel
 def _matches(state, radii, segments):
     """Whether the state was built for these radii and walls (else it must be rebuilt)."""
-    if radii.shape[0] != state.seen_radii.shape[0]:
-        return False
-    if segments.shape[0] != state.seen_walls.shape[0]:
+    seen_radii = state.seen_radii
+    seen_walls = state.seen_walls
+    if radii.shape[0] != seen_radii.shape[0] or segments.shape[0] != seen_walls.shape[0]:
         return False
     for i in range(radii.shape[0]):
-        if radii[i] != state.seen_radii[i]:
+        if radii[i] != seen_radii[i]:
             return False
     for k in range(segments.shape[0]):
         for c in range(4):
-            if segments[k, c] != state.seen_walls[k, c]:
+            if segments[k, c] != seen_walls[k, c]:
                 return False
     return True
-
-
-@compile_kernel
-def _edited(state, x, v, i):
-    seen_x = state.seen_positions
-    seen_v = state.seen_velocities
-    return (x[i, 0] != seen_x[i, 0] or x[i, 1] != seen_x[i, 1] or v[i, 0] != seen_v[i, 0]
-            or v[i, 1] != seen_v[i, 1])
 
 
 @compile_kernel
@@ -460,25 +544,32 @@ def _absorb_edits(state, x, v, radii, starts, ends, directions, lengths):
     """
     n = x.shape[0]
     balls = state.balls
-    changed = 0
+    seen_x = state.seen_positions
+    seen_v = state.seen_velocities
+    changed = np.empty(n, dtype=np.int64)
+    count = 0
     for i in range(n):
-        if _edited(state, x, v, i):
-            if not (math.isfinite(x[i, 0]) and math.isfinite(x[i, 1])
-                    and math.isfinite(v[i, 0]) and math.isfinite(v[i, 1])):
-                return NOT_FINITE
-            _unlink(balls, state.heads, i, _bucket(balls[i, CELL_X], balls[i, CELL_Y],
-                                                   state.column_mask, state.row_bits))
-            _place(state, i, x[i, 0], x[i, 1])
-            balls[i, COUNTER] += 1
-            balls[i, LAST] = NO_PARTNER
-            changed += 1
-    if changed == 0:
-        return DONE
+        if (x[i, 0] != seen_x[i, 0] or x[i, 1] != seen_x[i, 1] or v[i, 0] != seen_v[i, 0]
+                or v[i, 1] != seen_v[i, 1]):
+            changed[count] = i
+            count += 1
+    for c in range(count):
+        i = changed[c]
+        if not (math.isfinite(x[i, 0]) and math.isfinite(x[i, 1])
+                and math.isfinite(v[i, 0]) and math.isfinite(v[i, 1])):
+            return NOT_FINITE
+    for c in range(count):
+        i = changed[c]
+        _unlink(balls, state.heads, i, _bucket(balls[i, CELL_X], balls[i, CELL_Y],
+                                               state.column_mask, state.row_bits))
+        _place(state, i, x[i, 0], x[i, 1])
+        balls[i, COUNTER] += 1
+        balls[i, LAST] = NO_PARTNER
     # Predict only once every changed ball sits in its new cell.
-    for i in range(n):
-        if _edited(state, x, v, i):
-            _predict(state, i, 0.0, x, v, radii, starts, ends, directions, lengths)
-            _update_tree(state.tree, state.leaves, state.event_time, balls, i)
+    for c in range(count):
+        i = changed[c]
+        _predict(state, i, 0.0, x, v, radii, starts, ends, directions, lengths)
+        _update_tree(state.tree, state.leaves, state.event_time, balls, i)
     return DONE
 
 
@@ -501,12 +592,15 @@ def advance(state, x, v, radii, masses, segments, starts, ends, directions, leng
     n = x.shape[0]
     balls = state.balls
     clock = state.clock
+    tree = state.tree
+    leaves = state.leaves
+    event_time = state.event_time
     count_each = per_ball.shape[0] == n
     events = 0
     end = dt
     while True:
-        i = state.tree[1]
-        now = state.event_time[i]
+        i = tree[1]
+        now = event_time[i]
         if not now < dt:
             break
         if events == budget:
@@ -515,9 +609,13 @@ def advance(state, x, v, radii, masses, segments, starts, ends, directions, leng
             break
         events += 1
         kind = balls[i, KIND]
+        if kind == CROSSING:
+            _cross(state, i, now, x, v, radii, starts, ends, directions, lengths)
+            _update_tree(tree, leaves, event_time, balls, i)
+            continue
         if kind == PAIR:
-            j = balls[i, PARTNER]
-            if balls[j, COUNTER] == balls[i, STAMP]:
+            j = balls[i, HIT_PARTNER]
+            if balls[j, COUNTER] == balls[i, HIT_STAMP]:
                 _move(x, v, clock, i, now)
                 _move(x, v, clock, j, now)
                 if collide_pair(v, masses, i, j, x[i, 0] - x[j, 0], x[i, 1] - x[j, 1]):
@@ -530,35 +628,34 @@ def advance(state, x, v, radii, masses, segments, starts, ends, directions, leng
                 balls[i, LAST] = j
                 balls[j, LAST] = i
                 _predict(state, j, now, x, v, radii, starts, ends, directions, lengths)
-                _update_tree(state.tree, state.leaves, state.event_time, balls, j)
-        elif kind == WALL:
-            k = balls[i, PARTNER]
+                _update_tree(tree, leaves, event_time, balls, j)
+        else:
+            k = balls[i, HIT_PARTNER]
             _move(x, v, clock, i, now)
             if collide_wall(v, i, x[i, 0], x[i, 1], starts[k, 0], starts[k, 1], ends[k, 0],
                             ends[k, 1], directions[k, 0], directions[k, 1], lengths[k]):
                 totals[1] += 1
             balls[i, COUNTER] += 1
             balls[i, LAST] = wall_code(k)
-        else:
-            direction = balls[i, PARTNER]
-            _unlink(balls, state.heads, i, _bucket(balls[i, CELL_X], balls[i, CELL_Y],
-                                                   state.column_mask, state.row_bits))
-            if direction < 2:
-                balls[i, CELL_X] += 1 if direction == 0 else -1
-            else:
-                balls[i, CELL_Y] += 1 if direction == 2 else -1
-            _link(balls, state.heads, i, _bucket(balls[i, CELL_X], balls[i, CELL_Y],
-                                                 state.column_mask, state.row_bits))
+        # After a collision, or a stale prediction (its partner changed course since).
         _predict(state, i, now, x, v, radii, starts, ends, directions, lengths)
-        _update_tree(state.tree, state.leaves, state.event_time, balls, i)
+        _update_tree(tree, leaves, event_time, balls, i)
     totals[2] += events
 
     # Everyone to the end time; predictions become relative to the next step's start.
+    hit_time = state.hit_time
+    exit_time = state.exit_time
+    seen_x = state.seen_positions
+    seen_v = state.seen_velocities
     for i in range(n):
         _move(x, v, clock, i, end)
         clock[i] = 0.0
-        state.event_time[i] -= end
-    _build_tree(state.tree, state.leaves, state.event_time, balls, n)
-    state.seen_positions[:] = x
-    state.seen_velocities[:] = v
+        hit_time[i] -= end
+        exit_time[i] -= end
+        event_time[i] -= end
+        seen_x[i, 0] = x[i, 0]
+        seen_x[i, 1] = x[i, 1]
+        seen_v[i, 0] = v[i, 0]
+        seen_v[i, 1] = v[i, 1]
+    _build_tree(tree, leaves, event_time, balls, n)
     return status
