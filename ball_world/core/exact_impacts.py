@@ -28,6 +28,12 @@ def compile_kernel(function):
     return njit(cache=True, nogil=True)(function)
 
 
+def compile_inline(function):
+    """compile_kernel, and inlined into its callers by numba (small helpers on hot paths: a
+    call that passes arrays costs more than such a helper's work)."""
+    return njit(cache=True, nogil=True, inline='always')(function)
+
+
 @compile_kernel
 def pair_impact_time(rx, ry, dvx, dvy, sigma):
     """Time until |r + dv t| = sigma, for r = r_a - r_b and dv = v_a - v_b; inf if never.

@@ -36,8 +36,9 @@ import math
 
 import numpy as np
 
-from ball_world.core.exact_impacts import (collide_pair, collide_wall, compile_kernel, INFINITY,
-                                           pair_impact_time, wall_impact_time)
+from ball_world.core.exact_impacts import (collide_pair, collide_wall, compile_inline,
+                                           compile_kernel, INFINITY, pair_impact_time,
+                                           wall_impact_time)
 
 # Event kinds, in the order simultaneous events are processed.
 PAIR = 0
@@ -97,13 +98,13 @@ State = collections.namedtuple('State', (
 ))
 
 
-@compile_kernel
+@compile_inline
 def wall_code(k):
     """LAST's encoding of wall k (balls are >= 0, NO_PARTNER is -1)."""
     return -2 - k
 
 
-@compile_kernel
+@compile_inline
 def _bucket(cx, cy, column_mask, row_bits):
     """Cell (cx, cy)'s bucket: the buckets are a torus of cells laid over the plane.
 
@@ -113,12 +114,12 @@ def _bucket(cx, cy, column_mask, row_bits):
     return ((cx & column_mask) << row_bits) | (cy & ((1 << row_bits) - 1))
 
 
-@compile_kernel
+@compile_inline
 def _cell_of(coordinate, cell):
     return np.int64(math.floor(coordinate / cell))
 
 
-@compile_kernel
+@compile_inline
 def _link(balls, heads, i, bucket):
     first = heads[bucket]
     balls[i, NEXT] = first
@@ -128,7 +129,7 @@ def _link(balls, heads, i, bucket):
     heads[bucket] = i
 
 
-@compile_kernel
+@compile_inline
 def _unlink(balls, heads, i, bucket):
     before = balls[i, PREVIOUS]
     after = balls[i, NEXT]
@@ -150,7 +151,7 @@ def _place(state, i, px, py):
     _link(state.balls, state.heads, i, _bucket(cx, cy, state.column_mask, state.row_bits))
 
 
-@compile_kernel
+@compile_inline
 def _move(x, v, clock, i, t):
     """Bring ball i's position to time t along its straight path."""
     elapsed = t - clock[i]
@@ -160,7 +161,7 @@ def _move(x, v, clock, i, t):
         clock[i] = t
 
 
-@compile_kernel
+@compile_inline
 def _precedes(t, kind, partner, best_t, best_kind, best_partner):
     """One ball's candidates in processing order: time, then kind, then partner index."""
     if t != best_t:
@@ -170,7 +171,7 @@ def _precedes(t, kind, partner, best_t, best_kind, best_partner):
     return partner < best_partner
 
 
-@compile_kernel
+@compile_inline
 def _scan_walls(i, now, px, py, vx, vy, bucket, balls, hit_time, wall_first, wall_items,
                 global_walls, radii, starts, ends, directions, lengths):
     """Merge ball i's impacts with the walls of `bucket` and the global walls into its hit."""
@@ -201,7 +202,7 @@ def _scan_walls(i, now, px, py, vx, vy, bucket, balls, hit_time, wall_first, wal
         balls[i, HIT_PARTNER] = best_partner
 
 
-@compile_kernel
+@compile_inline
 def _scan_balls(i, now, px, py, vx, vy, gx_low, gx_high, gy_low, gy_high, balls, hit_time,
                 heads, clock, column_mask, row_bits, x, v, radii):
     """Merge ball i's impacts with the balls of cells [gx_low, gx_high] x [gy_low, gy_high]."""
@@ -237,7 +238,7 @@ def _scan_balls(i, now, px, py, vx, vy, gx_low, gx_high, gy_low, gy_high, balls,
         balls[i, HIT_STAMP] = best_stamp
 
 
-@compile_kernel
+@compile_inline
 def _predict_exit(i, now, px, py, vx, vy, balls, exit_time, cell):
     """When and where ball i leaves its cell: EXIT 0 (+x), 1 (-x), 2 (+y), 3 (-y)."""
     cx = balls[i, CELL_X]
@@ -265,7 +266,7 @@ def _predict_exit(i, now, px, py, vx, vy, balls, exit_time, cell):
     balls[i, EXIT] = direction
 
 
-@compile_kernel
+@compile_inline
 def _schedule(i, balls, hit_time, exit_time, event_time):
     """Ball i's next event: its hit, or leaving its cell if that comes strictly first."""
     if balls[i, HIT_KIND] != NOTHING and hit_time[i] <= exit_time[i]:
@@ -341,7 +342,7 @@ def _cross(state, i, now, x, v, radii, starts, ends, directions, lengths):
     _schedule(i, balls, state.hit_time, state.exit_time, state.event_time)
 
 
-@compile_kernel
+@compile_inline
 def _first(event_time, balls, a, b):
     """Of two balls' events (NO_BALL for none), the one processed first.
 
