@@ -55,24 +55,42 @@ def _folded(start, velocity, t, low, high):
     return low + (unfolded if unfolded <= span else 2.0 * span - unfolded)
 
 
+def _unfolded(position, hits, radius, side):
+    """Distance travelled along one axis from the wall at `radius`, after `hits` reflections,
+    for a ball that started moving in +axis (inverse of the folding)."""
+    span = side - 2.0 * radius
+    into = position - radius
+    return hits * span + (into if hits % 2 == 0 else span - into)
+
+
 def box_lag(speeds):
-    """Rows: speed, then each mode's distance from the analytic path after 10 s."""
+    """Rows: speed, then each mode's lag behind the analytic path after 10 s.
+
+    The lag is measured along the unfolded path (each wall hit taken at the first overlapped
+    sample shortens it), so it grows without wrapping around the box; speeds up to 100 m/s
+    keep every ball to at most one hit per axis per step, so the hits can be counted.
+    """
     side, radius, dt, steps, heading = 10.0, 0.5, 1.0 / 60.0, 600, 0.3
     walls, _ = arena_walls({'arena': [0.0, 0.0, side, side]})
     rows = []
     for speed in speeds:
         v = [speed * math.cos(heading), speed * math.sin(heading)]
-        exact_path = [_folded(3.0, v[0], steps * dt, radius, side - radius),
-                      _folded(4.0, v[1], steps * dt, radius, side - radius)]
+        start = [3.0, 4.0]
+        exact_travel = [start[axis] - radius + v[axis] * steps * dt for axis in (0, 1)]
         row = [f'{speed:g}']
         for mode in MODES:
             stepper = STEPPERS[mode]
-            world = _world(stepper, [[3.0, 4.0]], [v], [radius], [1.0], walls)
+            world = _world(stepper, [start], [v], [radius], [1.0], walls)
+            hits = np.zeros(2, dtype=np.int64)
             for _ in range(steps):
+                before = np.sign(world.velocities[0])
                 stepper(world, dt)
-            row.append(f'{np.hypot(*(world.positions[0] - exact_path)):.2g}')
+                hits += before != np.sign(world.velocities[0])
+            lag = [exact_travel[axis] - _unfolded(world.positions[0, axis], hits[axis], radius,
+                                                  side) for axis in (0, 1)]
+            row.append(f'{math.hypot(*lag):.2g}')
         rows.append(row)
-    return ['speed (m/s)'] + [f'{mode}: error (m)' for mode in MODES], rows
+    return ['speed (m/s)'] + [f'{mode}: lag (m)' for mode in MODES], rows
 
 
 def deflection(impacts, travels, phases):
@@ -204,7 +222,7 @@ def main(argv=None):
     quick = args.quick
     sections = [
         ('One ball in a 10 m box, 10 s at dt = 1/60 s', box_lag(
-            [1.0, 100.0] if quick else [1.0, 10.0, 100.0, 1000.0])),
+            [1.0, 100.0] if quick else [1.0, 10.0, 100.0])),
         ('Deflection of a resting ball (equal masses), error against asin(b / sigma)',
          deflection([0.9] if quick else [0.5, 0.9, 0.99], [0.5] if quick else [0.1, 0.5, 2.0],
                     8 if quick else 32)),

@@ -199,6 +199,30 @@ def test_newtons_cradle(gap, striker_gap):
     np.testing.assert_array_equal(world.positions[:4], before[:4])
 
 
+def test_worlds_wider_than_the_bucket_table_and_walls_longer_than_it():
+    """Cells far apart share buckets and long walls are checked by every ball: exact still.
+
+    Two head-on pairs 100 km apart, and a small ball hitting a 2 km wall (far more cells
+    than the bucket table holds) at the closed-form time.
+    """
+    radius, dt = 0.01, 0.1
+    pairs = [[0.0, 0.0], [0.1, 0.0], [1e5, 0.0], [1e5 + 0.1, 0.0]]
+    ball = [[0.0, 5.0 + 0.5]]
+    world = World(pairs + ball, [[1.0, 0.0], [-1.0, 0.0]] * 2 + [[0.0, -10.0]],
+                  [radius] * 5, [1.0] * 5, walls=[[-1e3, 5.0, 1e3, 5.0]])
+    ball_ball, ball_wall, _ = exact.step(world, dt)
+    assert (ball_ball, ball_wall) == (2, 1)
+    # Each pair meets after (0.1 - 0.02) / 2 s and swaps velocities.
+    t_pair = 0.04
+    for first in (0, 2):
+        left = pairs[first][0] + t_pair - (dt - t_pair)
+        np.testing.assert_allclose(world.positions[first:first + 2, 0],
+                                   [left, left + 0.1 + 2 * (dt - 2 * t_pair)], atol=1e-9)
+    t_wall = (0.5 - radius) / 10.0
+    np.testing.assert_allclose(world.positions[4], [0.0, 5.0 + radius + 10.0 * (dt - t_wall)],
+                               atol=1e-12)
+
+
 # Near contact --------------------------------------------------------------------------------
 
 def test_shallowest_graze_is_found_and_a_near_miss_is_not():
