@@ -1,19 +1,23 @@
-"""Exact mode's event loop: per-ball predictions, a tournament tree, a hashed cell list.
+"""Exact mode's event loop: per-ball predictions, a tournament tree, a cell list.
 
-Each ball holds one prediction, its earliest event: an impact with another ball, an impact
-with a wall segment, or leaving its grid cell. A tournament tree over the balls yields the
-earliest prediction of all. Processing an event moves only the balls involved (each ball
-keeps its own clock) and predicts again for them; every other prediction that named one of
-them as partner is recognised as stale by the partner's collision counter when it comes up,
-and is then predicted again. Nothing is missed: a pair's impact on their current straight
-paths was evaluated by whichever of the two changed course last.
+Each ball holds two predictions: its earliest impact (with another ball or a wall segment)
+and the time it leaves its grid cell; its next event is the earlier of the two. A tournament
+tree over the balls yields the earliest event of all. Processing an event moves only the
+balls involved (each ball keeps its own clock) and predicts again for them; every other
+prediction that named one of them as partner is recognised as stale by the partner's
+collision counter when it comes up, and is then predicted again.
 
 Cells are squares a little wider than the largest diameter, so touching balls are always in
-neighbouring cells; a ball looks for partners in its 3 x 3 block, for walls in its own cell,
-and leaving its cell is itself an event. Cells are hashed into a table of buckets, so the
-world needs no bounds (a bucket shared by distant cells only adds candidates, and a
-predicted impact is exact whatever the cells). Each wall is listed in the buckets of every
-cell where a ball could touch it; a wall too long for that is checked by every ball.
+neighbouring cells: a ball looks for partners in its 3 x 3 block and for walls in its own
+cell. When it enters a new cell it only looks at the strip of three cells new to its block
+and the new cell's walls, keeping its stored impact for the rest. Nothing is missed: for
+any two balls in neighbouring cells, their next impact on their current paths is no earlier
+than the stored impact of one of them (the one that changed course, or came into reach,
+last), and balls further apart cannot touch before one of them changes cell. Buckets of
+cells form a torus laid over the plane, so the world needs no bounds (distant cells sharing
+a bucket only add candidates, and a predicted impact is exact whatever the cells). Each
+wall is listed in the buckets of every cell where a ball could touch it; a wall too long
+for that is checked by every ball.
 
 Robustness near contact (why rounding cannot creep into overlap or loop):
 - A pair or a wall collides only while approaching, and a pair that already overlaps and
