@@ -6,9 +6,10 @@ Scenes (equal disks of radius 0.5 m in a square box, all at one speed, random di
 - the node's scene: area fraction 0.2, 24 m/s, dt 0.01 s (0.48 R per step), which the node
   must step 100 times a second with room left for recording.
 
-Both modes step their own copy of the same start. They are timed in alternating rounds and
-the medians compared, so a machine shared with other work slows both alike: read the ratio,
-not the absolute rates, on a busy machine.
+Both modes step their own copy of the same start. They are timed in alternating rounds, by
+this process's CPU time (on a machine shared with other work, wall-clock time mostly
+measures the waiting), and the medians compared: a busy machine still slows both alike, so
+read the ratio rather than the absolute rates there.
 
 Run: python -m benchmarks.exact_speed [--n 1000 10000] [--rounds 5] [--seconds 0.5]
 """
@@ -33,13 +34,13 @@ SCENES = (
 
 
 def _rate(step, seconds):
-    """Steps per second of `step()` over at least `seconds` (and at least 3 steps)."""
+    """Steps per CPU second of `step()` over at least `seconds` (and at least 3 steps)."""
     count = 0
-    start = time.perf_counter()
+    start = time.process_time()
     while True:
         step()
         count += 1
-        elapsed = time.perf_counter() - start
+        elapsed = time.process_time() - start
         if elapsed >= seconds and count >= 3:
             return count / elapsed
 
