@@ -16,8 +16,8 @@ from rclpy.action import ActionClient, ActionServer
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile
 import simulation_interfaces
-import simulation_interfaces.msg
 from simulation_interfaces.action import SimulateSteps
+import simulation_interfaces.msg
 from simulation_interfaces.msg import Result, SimulatorFeatures
 from simulation_interfaces.srv import GetSimulatorFeatures
 
@@ -150,4 +150,3 @@ def test_action_round_trips_a_goal_in_process(context):
     assert outcome.result.result.result == Result.RESULT_OK
     client.destroy()
     server.destroy()
-
