@@ -12,8 +12,9 @@
 #
 # Built once and reused: a stamp in VENV holds a hash of everything the build reads (definition
 # files, this script, the CMake helper, the requirements), and nothing is done while it matches.
-# The build tree stays in VENV/build/simulation_interfaces so that a change rebuilds only what it
-# touches. A failure prints one line naming what is missing and exits 1.
+# Any change rebuilds from scratch (rosidl regenerates every file when one definition changes, so
+# an old build tree saves nothing); the tree is deleted after a successful install, the log kept
+# in VENV/build. A failure prints one line naming what is missing and exits 1.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -29,7 +30,7 @@ python=$venv/bin/python
 package=interfaces/simulation_interfaces
 stamp=$venv/.ball_world-simulation-interfaces
 build=$venv/build/simulation_interfaces
-log=$build/build.log
+log=$venv/build/simulation_interfaces.log
 
 inputs=$( (find "$package" -type f; echo scripts/build_interfaces.sh;
            echo scripts/wheels_python_paths.cmake; echo requirements/ros-build-wheels.txt;
@@ -38,8 +39,8 @@ inputs=$( (find "$package" -type f; echo scripts/build_interfaces.sh;
 wanted=$(sha256sum $inputs | sha256sum | cut -d' ' -f1)
 [ "$(cat "$stamp" 2>/dev/null)" = "$wanted" ] && exit 0
 
-for tool in cmake make c++; do
-  command -v "$tool" >/dev/null 2>&1 || fail "'$tool' not found (install cmake, make and g++)"
+for tool in cmake make cc c++; do
+  command -v "$tool" >/dev/null 2>&1 || fail "'$tool' not found (install cmake, make, gcc and g++)"
 done
 "$python" -c 'import os, sys, sysconfig
 sys.exit(not os.path.exists(os.path.join(sysconfig.get_path("include"), "Python.h")))' ||
@@ -70,17 +71,16 @@ explain_failure() {
 }
 
 echo "setup: building simulation_interfaces into $venv (about 4 minutes on 2 cores, once)"
+rm -rf "$build"
 mkdir -p "$build"
 : > "$log"
-rm -f "$build/CMakeCache.txt"  # configure afresh: the inputs changed
-AMENT_PREFIX_PATH="$venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}" cmake -S "$package" -B "$build" \
-  -DCMAKE_BUILD_TYPE=Release -DBUILD_TESTING=OFF \
-  -DCMAKE_INSTALL_PREFIX="$venv" -DCMAKE_PREFIX_PATH="$venv" \
-  -DPython3_EXECUTABLE="$python" \
+# rosidl looks up the available typesupports in the ament index of these prefixes.
+export AMENT_PREFIX_PATH="$venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
+cmake -S "$package" -B "$build" -DCMAKE_BUILD_TYPE=Release -DBUILD_TESTING=OFF \
+  -DCMAKE_INSTALL_PREFIX="$venv" -DCMAKE_PREFIX_PATH="$venv" -DPython3_EXECUTABLE="$python" \
   -DCMAKE_PROJECT_INCLUDE="$PWD/scripts/wheels_python_paths.cmake" >> "$log" 2>&1 ||
   explain_failure configure
-AMENT_PREFIX_PATH="$venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}" \
-  cmake --build "$build" --parallel "$(nproc)" >> "$log" 2>&1 || explain_failure build
+cmake --build "$build" --parallel "$(nproc)" >> "$log" 2>&1 || explain_failure build
 cmake --install "$build" >> "$log" 2>&1 || explain_failure install
 
 "$python" -c '
@@ -90,4 +90,5 @@ from simulation_interfaces.srv import GetSimulatorFeatures
 check_for_type_support(GetSimulatorFeatures)
 check_for_type_support(SimulateSteps)' >> "$log" 2>&1 ||
   fail "the installed types do not load in $python; log: $log"
+rm -rf "$build"
 echo "$wanted" > "$stamp"
