@@ -4,6 +4,10 @@
 # ROS 2 Jazzy comes from a sourced installation when there is one (ROS_DISTRO=jazzy), and
 # otherwise from the ros-jazzy-* wheels on PyPI, which exist only for CPython 3.12. Re-running
 # is fast: dependencies are installed again only when a requirements file changes.
+#
+# The simulation_interfaces types come from the sourced distribution's package; the wheels
+# set-up builds them from interfaces/simulation_interfaces into the venv (scripts/
+# build_interfaces.sh: a few minutes the first time, then only when their inputs change).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=${BALL_WORLD_VENV:-.venv}
@@ -53,12 +57,22 @@ if [ ! -x "$venv/bin/python" ] || ! is_python312 "$venv/bin/python"; then
 fi
 
 requirements=(requirements/base.txt benchmarks/requirements.txt)
-[ "$mode" = wheels ] && requirements+=(requirements/ros-wheels.txt)
+[ "$mode" = wheels ] &&
+  requirements+=(requirements/ros-wheels.txt requirements/ros-build-wheels.txt)
 stamp="$venv/.ball_world-requirements"
 wanted=$(echo "$mode" | cat - "${requirements[@]}" | sha256sum | cut -d' ' -f1)
 if [ "$(cat "$stamp" 2>/dev/null)" != "$wanted" ]; then
   echo "setup: installing dependencies into $venv ($mode)"
   "$venv/bin/python" -m pip install --quiet $(printf -- '-r %s ' "${requirements[@]}")
   echo "$wanted" > "$stamp"
+fi
+
+if [ "$mode" = wheels ]; then
+  scripts/build_interfaces.sh "$venv"
+elif ! "$venv/bin/python" -c 'import simulation_interfaces.srv' >/dev/null 2>&1; then
+  echo 'setup: the sourced ROS 2 Jazzy has no simulation_interfaces: install it' \
+       '(apt install ros-jazzy-simulation-interfaces) or build this copy in an overlay' \
+       '(colcon build --base-paths interfaces && source install/setup.bash).' >&2
+  exit 1
 fi
 "$venv/bin/python" -m pip install --quiet --no-deps --no-build-isolation .
