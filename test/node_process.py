@@ -4,7 +4,7 @@ import subprocess
 import pytest
 
 
-def finish(process, timeout=20.0):
+def finish(process, timeout=120.0):
     """(exit code, stdout, stderr) once the node has exited on its own; fail if it hangs."""
     try:
         out, err = process.communicate(timeout=timeout)
