@@ -4,6 +4,7 @@ running node, with an rclpy probe watching what arrives; and its terminal handli
 import os
 from pathlib import Path
 import pty
+import select
 import shutil
 import signal
 import subprocess
@@ -124,7 +125,10 @@ def test_terminal_is_restored_when_a_key_handler_raises():
         with pytest.raises(RuntimeError, match="key 'x'"):
             teleop.drive(node, slave, slave)
         assert termios.tcgetattr(slave) == before
-        assert b'\x1b[?25h' in os.read(master, 65536)  # the cursor is shown again
+        shown = b''
+        while select.select([master], [], [], 0.0)[0]:
+            shown += os.read(master, 65536)
+        assert shown.endswith(b'\x1b[?25h\r\n')  # the cursor is shown again, last
     finally:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, RawKeys.QUIT_SIGNALS)
         for signum, handler in handlers.items():
@@ -144,10 +148,10 @@ class Tmux:
         if shutil.which('tmux') is None:
             pytest.skip('tmux is not installed (apt-get install tmux)')
         self.directory = directory
-        self.socket = f'ball_world_teleop_test_{os.getpid()}'
+        self.socket = str(directory / 'tmux.socket')  # a server of its own for each test
 
     def tmux(self, *args):
-        return subprocess.run(['tmux', '-L', self.socket, *args], check=True,
+        return subprocess.run(['tmux', '-S', self.socket, *args], check=True,
                               capture_output=True, text=True).stdout
 
     def start(self, *teleop_args):
@@ -188,7 +192,7 @@ class Tmux:
         return path.read_text()
 
     def close(self):
-        subprocess.run(['tmux', '-L', self.socket, 'kill-server'], capture_output=True)
+        subprocess.run(['tmux', '-S', self.socket, 'kill-server'], capture_output=True)
 
 
 @pytest.fixture
@@ -215,6 +219,24 @@ def test_terminal_is_restored_on_every_way_out(terminal, way_out):
     else:
         terminal.keys(way_out)
     assert_restored(terminal)
+
+
+def test_a_closed_terminal_ends_the_teleop(terminal):
+    terminal.start('--ros-args', '-r', f'__ns:={NAMESPACE}_alone')
+    terminal.wait_for('q or Ctrl-C: quit')
+    pid = int(terminal.file('pid'))
+    terminal.tmux('kill-session', '-t', 'teleop')  # the window closes: SIGHUP, then EIO
+    deadline = time.monotonic() + DEADLINE
+    while Path(f'/proc/{pid}').exists() and b'Z' not in _state(pid):
+        assert time.monotonic() < deadline, 'the teleop outlived its terminal'
+        time.sleep(0.05)
+
+
+def _state(pid):
+    try:
+        return Path(f'/proc/{pid}/stat').read_bytes().split(b') ')[1][:1]
+    except (FileNotFoundError, IndexError):
+        return b'Z'
 
 
 class Probe:
@@ -261,24 +283,43 @@ class Probe:
 
 
 @pytest.fixture
-def world():
-    node = subprocess.Popen(
-        [str(BIN / 'ball_world'), '--ros-args', '-r', f'__ns:={NAMESPACE}', '-p',
-         f'rate_hz:={RATE_HZ}.0', '-p', 'markers.rate_hz:=0.0', *WORLD],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    probe = Probe(NAMESPACE)
-    yield probe
-    probe.close()
-    node.send_signal(signal.SIGINT)
-    code, _, err = finish(node)
-    assert code == 0, err
+def probe():
+    watcher = Probe(NAMESPACE)
+    yield watcher
+    watcher.close()
 
 
-def test_keys_drive_the_world_in_a_terminal(terminal, world):
+@pytest.fixture
+def start_world():
+    started = []
+
+    def start():
+        started.append(subprocess.Popen(
+            [str(BIN / 'ball_world'), '--ros-args', '-r', f'__ns:={NAMESPACE}', '-p',
+             f'rate_hz:={RATE_HZ}.0', '-p', 'markers.rate_hz:=0.0', *WORLD],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
+
+    yield start
+    for node in started:
+        node.send_signal(signal.SIGINT)
+        code, _, err = finish(node)
+        assert code == 0, err
+
+
+def test_keys_drive_the_world_in_a_terminal(terminal, probe, start_world):
+    world = probe
+    # The teleop starts before the world, as it may for a user. By the time the world is
+    # up, the teleop and the probe have long discovered each other, so the probe hears
+    # every impulse (a volatile publisher sends only to the readers it already knows).
     terminal.start('--ros-args', '-r', f'__ns:={NAMESPACE}', '-p', 'ball:=ball_1')
-    terminal.wait_for(f'world    {NAMESPACE}/balls: 3 balls')
+    terminal.wait_for(f'world    waiting for {NAMESPACE}/balls (is ball_world running?)')
+    terminal.wait_for('ball     ball_1: not in the world')
     world.spin_until(lambda: world.impulse_sub.get_publisher_count() > 0,
-                     'the teleop to publish impulses')
+                     'the probe to discover the teleop')
+    terminal.keys('Right')
+    terminal.wait_for("status   no ball 'ball_1' in the world; Tab selects one")
+    start_world()
+    terminal.wait_for(f'world    {NAMESPACE}/balls: 3 balls')
     expected = []
     velocities = np.zeros((3, 2))
 

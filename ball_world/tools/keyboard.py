@@ -62,7 +62,10 @@ class KeyDecoder:
 
 
 class Screen:
-    """The help text, then lines redrawn in place; never wider than the terminal."""
+    """The help text, then lines redrawn in place; never wider than the terminal.
+
+    Output processing stays on (RawKeys changes input only), so '\\n' starts a new line.
+    """
 
     def __init__(self, fd, header):
         self.fd = fd
@@ -74,8 +77,8 @@ class Screen:
 
     def start(self):
         width = self._width()
-        self._write('\x1b[?25l\x1b[2J\x1b[H'
-                    + ''.join(line[:width] + '\r\n' for line in self.header))
+        self._write('\x1b[?25l\x1b[2J\x1b[H'  # hide the cursor, clear, home
+                    + ''.join(line[:width] + '\n' for line in self.header))
 
     def _width(self):
         try:
@@ -94,7 +97,10 @@ class Screen:
 
     def finish(self):
         row = len(self.header) + 2 + len(self.shown)
-        self._write(f'\x1b[{row};1H\x1b[?25h\r\n')
+        try:
+            self._write(f'\x1b[{row};1H\x1b[?25h\n')  # below the lines, cursor shown
+        except OSError:
+            pass  # the terminal is gone (hung up): nothing left to show
 
 
 class RawKeys:
@@ -155,5 +161,8 @@ class RawKeys:
 
     def __exit__(self, *exc):
         self.hold_signals()
-        termios.tcsetattr(self.fd, termios.TCSADRAIN, self.saved)
+        try:
+            termios.tcsetattr(self.fd, termios.TCSADRAIN, self.saved)
+        except termios.error:
+            pass  # the terminal is gone (hung up): nothing left to restore
         return False

@@ -12,7 +12,6 @@ terminal can be restored: the terminal is put back exactly as it was on every wa
 import argparse
 import math
 import sys
-import time
 
 from geometry_msgs.msg import PoseArray, Vector3Stamped
 from rcl_interfaces.msg import ParameterDescriptor
@@ -33,10 +32,10 @@ DEFAULT_IMPULSE = 0.1
 IMPULSE_RANGE = (1e-4, 100.0)
 #: The world node whose services are called, relative to this node's namespace.
 WORLD_NODE = 'ball_world'
-#: Longest wait for ROS work before the keyboard is looked at again, s.
-POLL = 0.02
-#: Shortest time between two redraws of the world line (it changes at every step), s.
+#: Longest wait for a key: the world line is redrawn at least this often, s.
 REDRAW_PERIOD = 0.1
+#: ROS callbacks taken per look: the latest balls and the service answers that came.
+CALLBACKS_PER_LOOK = 4
 
 KEYS = """\
 Push a ball of ball_world with the arrow keys.
@@ -142,11 +141,13 @@ class Teleop(Node):
 
     def _on_balls(self, data):
         try:
-            self.stamp_ns, _, self.positions = decode_pose_array(data)
+            stamp_ns, _, positions = decode_pose_array(data)
         except ValueError as error:
             self.status = f'ignored a bad message on {self.balls_topic}: {error}'
             return
-        self.selection.update(names_for(len(self.positions)))
+        self.stamp_ns, self.positions = stamp_ns, positions
+        if len(positions) != len(self.selection.names):  # names are rebuilt on change only
+            self.selection.update(names_for(len(positions)))
 
     # Keys -------------------------------------------------------------------------------
 
@@ -286,7 +287,12 @@ def run(argv):
 
 
 def drive(node, keyboard, display):
-    """The loop: ROS work for at most POLL, then the keys typed meanwhile, then the screen."""
+    """The loop: wait for a key (REDRAW_PERIOD at most), handle it, take the ROS work, draw.
+
+    One thread does everything, so signals land where the terminal is restored. The ROS
+    work is taken without waiting: the world's balls are read with depth 1, so only the
+    latest waits between two looks, and service answers are few.
+    """
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
     screen = Screen(display, KEYS)
@@ -295,22 +301,18 @@ def drive(node, keyboard, display):
         try:
             keys.let_signals_in()
             screen.start()
-            last_draw = 0.0
             while not node.done:
-                executor.spin_once(timeout_sec=POLL)
-                typed = decoder.feed(keys.read(0.0))
-                for key in typed:
+                for key in decoder.feed(keys.read(REDRAW_PERIOD)):
                     node.on_key(key)
-                now = time.monotonic()
-                if typed or now - last_draw >= REDRAW_PERIOD:
-                    screen.draw(node.lines())
-                    last_draw = now
+                for _ in range(CALLBACKS_PER_LOOK):
+                    executor.spin_once(timeout_sec=0.0)
+                screen.draw(node.lines())
         except Quit:
             pass
         finally:
             keys.hold_signals()
             screen.finish()
-            executor.shutdown(timeout_sec=0)
+            executor.shutdown(timeout_sec=0.0)
 
 
 def main(argv=None):
