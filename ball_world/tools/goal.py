@@ -54,6 +54,7 @@ class ParameterError(ValueError):
 
 
 class GoalController(Node):
+    """Reads the world's state, pushes one ball towards its goal at a fixed rate."""
 
     def __init__(self):
         super().__init__('ball_world_goal')
