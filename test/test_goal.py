@@ -86,18 +86,6 @@ class Watch:
         rclpy.try_shutdown(context=self.context)
 
 
-def start(executable, *args):
-    return subprocess.Popen([str(BIN / executable), '--ros-args', *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-
-def stop(process):
-    process.send_signal(signal.SIGINT)
-    code, out, err = finish(process)
-    assert code == 0 and 'Traceback' not in err, err
-    return out + err
-
-
 @pytest.fixture
 def watch():
     watcher = Watch()
@@ -105,39 +93,52 @@ def watch():
     watcher.close()
 
 
-def test_goal_reaches_holds_and_recovers_from_a_bump(watch):
-    controller = start('ball_world_goal', *CONTROLLER)
-    world = start('ball_world', *WORLD)  # started second: the control starts at t = 0
-    try:
-        watch.spin_until(lambda: watch.positions and (
-            watch.distance() < TOLERANCE or watch.times[-1] > REACH_S), 'the goal')
-        reached = watch.times[-1]
-        assert watch.distance() < TOLERANCE, (
-            f'{watch.distance():.3f} m from the goal after {reached:.2f} s')
+@pytest.fixture
+def start():
+    """Starts executables with ROS arguments; stops them all at the end, checks they exit 0."""
+    started = []
 
-        watch.spin_until(lambda: watch.times[-1] >= reached + HOLD_S, 'the hold')
-        held = [watch.distance(i) for i, t in enumerate(watch.times) if t >= reached]
-        assert max(held) < HOLD_TOLERANCE
+    def run(executable, *args):
+        started.append(subprocess.Popen(
+            [str(BIN / executable), '--ros-args', *args],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
 
-        kicked = watch.kick_ball_1_at_ball_0()
-        first = len(watch.times)
+    yield run
+    for process in started:
+        process.send_signal(signal.SIGINT)
+    ends = [finish(process) for process in started]
+    for code, _, err in ends:
+        assert code == 0 and 'Traceback' not in err, err
 
-        def excursion():
-            return max((watch.distance(i) for i in range(first, len(watch.times))), default=0)
 
-        watch.spin_until(lambda: watch.times[-1] > kicked + RETURN_S or (
-            excursion() > BUMP and watch.distance() < TOLERANCE), 'the return')
-        assert excursion() > BUMP, 'the kicked ball never hit the held one'
-        assert watch.distance() < TOLERANCE, (
-            f'{watch.distance():.3f} m from the goal {watch.times[-1] - kicked:.2f} s after '
-            f'the kick (excursion {excursion():.2f} m)')
-        print(f'reached {TOLERANCE} m at t = {reached:.2f} s, held within {max(held):.4f} m, '
-              f'knocked {excursion():.3f} m away, back {watch.times[-1] - kicked:.2f} s after '
-              'the kick')
-    finally:
-        log = stop(controller)
-        stop(world)
-    assert f'holding ball_0 at ({GOAL[0]:g}, {GOAL[1]:g})' in log
+def test_goal_reaches_holds_and_recovers_from_a_bump(watch, start):
+    start('ball_world_goal', *CONTROLLER)
+    start('ball_world', *WORLD)  # started second: the control starts at t = 0
+    watch.spin_until(lambda: watch.positions and (
+        watch.distance() < TOLERANCE or watch.times[-1] > REACH_S), 'the goal')
+    reached = watch.times[-1]
+    assert watch.distance() < TOLERANCE, (
+        f'{watch.distance():.3f} m from the goal after {reached:.2f} s')
+
+    watch.spin_until(lambda: watch.times[-1] >= reached + HOLD_S, 'the hold')
+    held = [watch.distance(i) for i, t in enumerate(watch.times) if t >= reached]
+    assert max(held) < HOLD_TOLERANCE
+
+    kicked = watch.kick_ball_1_at_ball_0()
+    first = len(watch.times)
+
+    def excursion():
+        return max((watch.distance(i) for i in range(first, len(watch.times))), default=0)
+
+    watch.spin_until(lambda: watch.times[-1] > kicked + RETURN_S or (
+        excursion() > BUMP and watch.distance() < TOLERANCE), 'the return')
+    assert excursion() > BUMP, 'the kicked ball never hit the held one'
+    assert watch.distance() < TOLERANCE, (
+        f'{watch.distance():.3f} m from the goal {watch.times[-1] - kicked:.2f} s after '
+        f'the kick (excursion {excursion():.2f} m)')
+    print(f'reached {TOLERANCE} m at t = {reached:.2f} s, held within {max(held):.4f} m, '
+          f'knocked {excursion():.3f} m away, back {watch.times[-1] - kicked:.2f} s after '
+          'the kick')
 
 
 def run_goal(*args):

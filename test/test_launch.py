@@ -19,9 +19,8 @@ import rclpy
 from visualization_msgs.msg import MarkerArray
 import yaml
 
-from ball_world.core.scenario import DEFAULTS
+from ball_world.core.parameters import DEFAULTS
 from ball_world.ros.node import BallWorld, MARKER_QOS, STEP_QOS
-from ball_world.ros.parameters import SPEC_BY_NAME
 
 ROOT = Path(__file__).resolve().parents[1]
 RVIZ_FILE = ROOT / 'rviz' / 'ball_world.rviz'
@@ -61,7 +60,7 @@ def node_publishers():
 
 def test_rviz_fixed_frame_is_the_nodes_default_frame(rviz):
     assert (rviz['Visualization Manager']['Global Options']['Fixed Frame']
-            == SPEC_BY_NAME['frame_id'].default)
+            == DEFAULTS['frame_id'])
 
 
 @pytest.mark.parametrize('display_class, message_type, qos', [

@@ -302,7 +302,8 @@ def start_world():
     yield start
     for node in started:
         node.send_signal(signal.SIGINT)
-        code, _, err = finish(node)
+    ends = [finish(node) for node in started]
+    for code, _, err in ends:
         assert code == 0, err
 
 
