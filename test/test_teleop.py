@@ -20,6 +20,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool
 
 from ball_world.tools import teleop
 from ball_world.tools.keyboard import KeyDecoder, RawKeys
@@ -271,6 +272,13 @@ class Probe:
             assert time.monotonic() < deadline, f'timed out waiting for {what}'
             self.executor.spin_once(timeout_sec=0.05)
 
+    def pause(self, paused):
+        client = self.node.create_client(SetBool, 'ball_world/pause')
+        self.spin_until(client.service_is_ready, 'the pause service')
+        future = client.call_async(SetBool.Request(data=paused))
+        self.spin_until(future.done, 'the pause answer')
+        assert future.result().success
+
     def spin_for(self, seconds):
         end = time.monotonic() + seconds
         while time.monotonic() < end:
@@ -350,6 +358,14 @@ def test_keys_drive_the_world_in_a_terminal(terminal, probe, start_world):
     push(['Right'], 2, 0.05, 0.0)
     terminal.wait_for('impulse  0.05 N s per key')
 
+    # Another client pauses the world: space then means resume, although the teleop last
+    # saw it running (its pause changes nothing, so it resumes at once).
+    world.pause(True)
+    world.spin_for(0.2)
+    stopped_at = world.stamps[-1]
+    terminal.keys('Space')
+    terminal.wait_for(f'status   resume: running at step {stopped_at // DT_NS}')
+    world.spin_until(lambda: world.stamps[-1] > stopped_at, 'stepping after the resume')
     terminal.keys('Space')
     terminal.wait_for('status   pause: paused at step')
     world.spin_for(0.2)

@@ -165,9 +165,7 @@ class Teleop(Node):
         elif key in ('-', '_'):
             self.impulse = max(self.impulse / 2.0, IMPULSE_RANGE[0])
         elif key == ' ':
-            pause = not self.paused
-            self.call('pause' if pause else 'resume', self.pause_client,
-                      SetBool.Request(data=pause))
+            self.toggle_pause(not self.paused)
         elif key in ('s', '.'):
             self.call('step', self.step_client, Trigger.Request())
         elif key == 'r':
@@ -195,7 +193,7 @@ class Teleop(Node):
 
     # Services ---------------------------------------------------------------------------
 
-    def call(self, action, client, request):
+    def call(self, action, client, request, on_success=None):
         """Call a service without waiting; its answer becomes the status line."""
         if not client.service_is_ready():
             self.status = (f'{action}: no service {client.srv_name}; is ball_world running '
@@ -205,12 +203,27 @@ class Teleop(Node):
 
         def answered(future):
             response = future.result()
-            if response.success and client is self.pause_client:
-                self.paused = request.data
             verdict = '' if response.success else 'refused: '
             self.status = f'{action}: {verdict}{response.message}'
+            if on_success is not None and response.success:
+                on_success(response)
 
         client.call_async(request).add_done_callback(answered)
+
+    def toggle_pause(self, pause, retry=True):
+        """Pause or resume: space means "the other state than the world's".
+
+        What this tool believes can be stale (the world may start paused, or another client
+        may pause it). The world answers 'already paused' to a pause that changes nothing;
+        then the key meant the opposite, which is sent at once.
+        """
+        def answered(response):
+            self.paused = pause
+            if retry and response.message.startswith('already'):
+                self.toggle_pause(not pause, retry=False)
+
+        self.call('pause' if pause else 'resume', self.pause_client,
+                  SetBool.Request(data=pause), answered)
 
     # Screen -----------------------------------------------------------------------------
 
