@@ -321,7 +321,7 @@ def test_keys_drive_the_world_in_a_terminal(terminal, probe, start_world):
     # up, the teleop and the probe have long discovered each other, so the probe hears
     # every impulse (a volatile publisher sends only to the readers it already knows).
     terminal.start('--ros-args', '-r', f'__ns:={NAMESPACE}', '-p', 'ball:=ball_1')
-    terminal.wait_for(f'world    waiting for {NAMESPACE}/balls (is ball_world running?)')
+    terminal.wait_for(f'world    waiting for {NAMESPACE}/balls (no world yet, or a paused one')
     terminal.wait_for('ball     ball_1: not in the world')
     world.spin_until(lambda: world.impulse_sub.get_publisher_count() > 0,
                      'the probe to discover the teleop')

@@ -229,7 +229,8 @@ class Teleop(Node):
 
     def world_line(self):
         if self.positions is None:
-            return f'world    waiting for {self.balls_topic} (is ball_world running?)'
+            return (f'world    waiting for {self.balls_topic} (no world yet, or a paused one: '
+                    'space resumes, s steps)')
         state = 'paused' if self.paused else 'running'
         return (f'world    {self.balls_topic}: {len(self.positions)} balls, '
                 f't = {self.stamp_ns / 1e9:.3f} s, {state}')
