@@ -14,6 +14,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
+        ('share/' + package_name + '/rviz', glob('rviz/*.rviz')),
     ],
     install_requires=['setuptools', 'numpy'],
     zip_safe=True,
@@ -31,6 +32,8 @@ setup(
             'ball_world_resim = ball_world.tools.resim:main',
             'ball_world_to_rrd = ball_world.tools.to_rrd:main',
             'ball_world_sim = ball_world.tools.sim:main',
+            'ball_world_teleop = ball_world.tools.teleop:main',
+            'ball_world_goal = ball_world.tools.goal:main',
         ],
     },
 )

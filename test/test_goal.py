@@ -1,0 +1,170 @@
+"""ball_world_goal with the world, both as processes: the ball reaches its goal, stays there,
+is knocked away by another ball and comes back; and its command line.
+
+The claims come from the closed loop, not from runs of this test: with the true mass, kp = kd
+= 4 is critically damped (2 rad/s), so from 6.4 m away the ball is within 2 cm after about
+4 s and approaches without overshoot; a 0.1 kg ball at 3 m/s hitting the 0.5 kg ball head on
+gives it 1 m/s, which such a loop turns into an excursion of 1 / (2 e) = 0.18 m. A model of
+the loop on the World itself (impulses every 3 steps of 1/60 s, applied one step late)
+reaches 2 cm at 4.2 s, stays within 2 cm, is knocked 0.17 m and is back within 2 cm 3.6 s
+later. Both processes run on simulated time (publish_clock / use_sim_time), so the machine's
+load cannot change these figures; the limits below leave about a factor of two.
+"""
+import math
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+from geometry_msgs.msg import PoseArray, Vector3Stamped
+from node_process import finish
+import numpy as np
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+BIN = Path(sys.executable).parent
+GOAL = (6.0, 7.0)
+MASS, KICKER_MASS, KICK_SPEED = 0.5, 0.1, 3.0
+WORLD = ['-p', 'publish_clock:=true', '-p', 'markers.rate_hz:=0.0', '-p', 'random.count:=0',
+         '-p', 'balls.x:=[2.0, 8.0]', '-p', 'balls.y:=[2.0, 3.0]',
+         '-p', 'balls.vx:=[0.0, 0.0]', '-p', 'balls.vy:=[0.0, 0.0]',
+         '-p', 'balls.radius:=[0.3, 0.2]', '-p', f'balls.mass:=[{MASS}, {KICKER_MASS}]']
+CONTROLLER = ['-p', f'goal:=[{GOAL[0]}, {GOAL[1]}]', '-p', f'mass:={MASS}',
+              '-p', 'use_sim_time:=true']
+REACH_S = 8.0          # simulated seconds from the start to within TOLERANCE
+TOLERANCE = 0.02       # m
+HOLD_S = 3.0           # simulated seconds it must then stay within HOLD_TOLERANCE
+HOLD_TOLERANCE = 0.05  # m
+BUMP = 0.1             # m the kick must move it at least (it did get hit)
+RETURN_S = 8.0         # simulated seconds from the kick back to within TOLERANCE
+DEADLINE = 90.0        # wall seconds for any phase: a liveness limit only
+
+
+class Watch:
+    """Sees the world's poses with their simulated time, and kicks the other ball."""
+
+    def __init__(self):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node('goal_probe', context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.times, self.positions = [], []
+        qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+        self.node.create_subscription(PoseArray, 'balls', self._on_balls, qos)
+        self.kicks = self.node.create_publisher(Vector3Stamped, 'impulse', qos)
+
+    def _on_balls(self, msg):
+        self.times.append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+        self.positions.append([(p.position.x, p.position.y) for p in msg.poses])
+
+    def distance(self, index=-1):
+        return math.dist(self.positions[index][0], GOAL)
+
+    def spin_until(self, predicate, what):
+        deadline = time.monotonic() + DEADLINE
+        while not predicate():
+            assert time.monotonic() < deadline, f'timed out waiting for {what}'
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def kick_ball_1_at_ball_0(self):
+        self.spin_until(lambda: self.kicks.get_subscription_count() > 0, 'the world')
+        ball_0, ball_1 = np.array(self.positions[-1])
+        direction = (ball_0 - ball_1) / np.linalg.norm(ball_0 - ball_1)
+        msg = Vector3Stamped()
+        msg.header.frame_id = 'ball_1'
+        msg.vector.x, msg.vector.y = KICKER_MASS * KICK_SPEED * direction
+        self.kicks.publish(msg)
+        return self.times[-1]
+
+    def close(self):
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+@pytest.fixture
+def watch():
+    watcher = Watch()
+    yield watcher
+    watcher.close()
+
+
+@pytest.fixture
+def start():
+    """Starts executables with ROS arguments; stops them all at the end, checks they exit 0."""
+    started = []
+
+    def run(executable, *args):
+        started.append(subprocess.Popen(
+            [str(BIN / executable), '--ros-args', *args],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
+
+    yield run
+    for process in started:
+        process.send_signal(signal.SIGINT)
+    ends = [finish(process) for process in started]
+    for code, _, err in ends:
+        assert code == 0 and 'Traceback' not in err, err
+
+
+def test_goal_reaches_holds_and_recovers_from_a_bump(watch, start):
+    start('ball_world_goal', *CONTROLLER)
+    start('ball_world', *WORLD)  # started second: the control starts at t = 0
+    watch.spin_until(lambda: watch.positions and (
+        watch.distance() < TOLERANCE or watch.times[-1] > REACH_S), 'the goal')
+    reached = watch.times[-1]
+    assert watch.distance() < TOLERANCE, (
+        f'{watch.distance():.3f} m from the goal after {reached:.2f} s')
+
+    watch.spin_until(lambda: watch.times[-1] >= reached + HOLD_S, 'the hold')
+    held = [watch.distance(i) for i, t in enumerate(watch.times) if t >= reached]
+    assert max(held) < HOLD_TOLERANCE
+
+    kicked = watch.kick_ball_1_at_ball_0()
+    first = len(watch.times)
+
+    def excursion():
+        return max((watch.distance(i) for i in range(first, len(watch.times))), default=0)
+
+    watch.spin_until(lambda: watch.times[-1] > kicked + RETURN_S or (
+        excursion() > BUMP and watch.distance() < TOLERANCE), 'the return')
+    assert excursion() > BUMP, 'the kicked ball never hit the held one'
+    assert watch.distance() < TOLERANCE, (
+        f'{watch.distance():.3f} m from the goal {watch.times[-1] - kicked:.2f} s after '
+        f'the kick (excursion {excursion():.2f} m)')
+    print(f'reached {TOLERANCE} m at t = {reached:.2f} s, held within {max(held):.4f} m, '
+          f'knocked {excursion():.3f} m away, back {watch.times[-1] - kicked:.2f} s after '
+          'the kick')
+
+
+def run_goal(*args):
+    return finish(subprocess.Popen([str(BIN / 'ball_world_goal'), *args],
+                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
+
+
+def test_help_prints_usage_and_parameters():
+    code, out, err = run_goal('--help')
+    assert code == 0, err
+    assert out.startswith('usage: ball_world_goal')
+    for name in ('ball', 'goal', 'kp', 'kd', 'max_impulse', 'rate_hz', 'mass', 'use_sim_time'):
+        assert f'\n  {name} ' in out
+
+
+@pytest.mark.parametrize('args, problem', [
+    (('--ros-args', '-p', 'kp:=-1.0'), "parameter 'kp': expected a number >= 0, got -1.0"),
+    (('--ros-args', '-p', 'goal:=[1.0]'), "parameter 'goal': expected two numbers [x, y]"),
+    (('--ros-args', '-p', 'mass:=0'), "parameter 'mass': expected a number > 0, got 0"),
+    (('--ros-args', '-p', 'rate_hz:=fast'), "parameter 'rate_hz'"),
+    (('--ros-args', '-p', 'ball:=3'), "parameter 'ball': expected a ball name"),
+    (('--ros-args', '-p', 'max_impulse:=nan'), "parameter 'max_impulse'"),
+    (('--ros-args', '-p'), 'bad ROS arguments'),
+    (('--goal', '1', '2'), 'unrecognized arguments: --goal 1 2'),
+])
+def test_bad_start_is_one_line_and_exit_2(args, problem):
+    code, out, err = run_goal(*args)
+    assert code == 2
+    assert problem in err and len(err.strip().splitlines()) == 1, err
