@@ -1,12 +1,43 @@
-"""Test isolation for ROS: every pytest process gets its own DDS domain, on localhost only.
+"""Test isolation for ROS, and the harness's fixtures (ball_world_testing.harness).
 
-Tests that start the node as a subprocess inherit these variables, so two test runs on
-one machine (or a user's own nodes) can never hear each other.
+Every pytest process gets its own DDS domain, on localhost only. Tests that start the node as
+a subprocess inherit these variables, so two test runs on one machine (or a user's own nodes)
+can never hear each other.
 """
 import os
+
+from ball_world_testing.harness import Children, Probe
+import pytest
 
 if 'BALL_WORLD_TEST_DOMAIN' not in os.environ:
     os.environ['BALL_WORLD_TEST_DOMAIN'] = str(1 + os.getpid() % 200)
 os.environ['ROS_DOMAIN_ID'] = os.environ['BALL_WORLD_TEST_DOMAIN']
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
+
+
+@pytest.fixture
+def processes():
+    """Children (node, tools, scripts) of a test: killed if the test ends while they run."""
+    with Children() as children:
+        yield children
+
+
+@pytest.fixture
+def probes():
+    """Probe(name, ...) factory; every probe leaves the graph when the test ends."""
+    made = []
+
+    def make(name='probe', **options):
+        made.append(Probe(name, **options))
+        return made[-1]
+
+    yield make
+    for probe in made:
+        probe.close()
+
+
+@pytest.fixture
+def probe(probes):
+    """One probe named 'probe'."""
+    return probes()

@@ -11,7 +11,7 @@ import subprocess
 import sys
 import time
 
-from node_process import finish
+from ball_world_testing.harness import finish, kill, start_node
 import pytest
 
 from ball_world.recording.files import (claim_output, ClaimedSink, FileRefused,
@@ -21,8 +21,6 @@ from ball_world.recording.mcap_writer import McapSink
 from ball_world.simulation import Simulation
 from ball_world.tools import repair, to_rrd
 
-BIN = Path(sys.executable).parent
-NODE = str(BIN / 'ball_world')
 #: Generous: two noisy cores; a test fails only on a hang.
 EXIT_TIMEOUT = 120.0
 PARAMS = {'rate_hz': 20.0, 'random.count': 5, 'random.seed': 1}
@@ -118,14 +116,6 @@ def test_a_recording_closed_before_any_segment_leaves_no_file(tmp_path):
 
 # The node ----------------------------------------------------------------------------------
 
-def start_node(*parameters):
-    command = [NODE, '--ros-args']
-    for parameter in parameters:
-        command += ['-p', parameter]
-    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=os.environ.copy())
-
-
 def refusal(*parameters):
     """The one stderr line of a node that must refuse to start (exit code 2)."""
     code, out, err = finish(start_node('max_steps:=3', 'rate_hz:=0.0', 'dt:=0.01',
@@ -162,22 +152,20 @@ def test_node_refuses_one_file_for_both_recordings(tmp_path, monkeypatch):
     assert not (tmp_path / 'run.mcap').exists()  # nothing recorded, nothing left
 
 
-def test_node_refuses_a_fifo_and_a_file_another_node_records(tmp_path):
+def test_node_refuses_a_fifo_and_a_file_another_node_records(tmp_path, processes):
     fifo = tmp_path / 'fifo.mcap'
     os.mkfifo(fifo)
     assert refusal(f'record.mcap:={fifo}', 'record.overwrite:=true').endswith(
         f'{fifo}: is a FIFO, not a regular file')
     path = tmp_path / 'shared.mcap'
-    first = start_node('rate_hz:=20.0', f'record.mcap:={path}')
-    try:
-        deadline = time.monotonic() + EXIT_TIMEOUT
-        while not (path.exists() and path.stat().st_size > 0):
-            assert first.poll() is None and time.monotonic() < deadline
-            time.sleep(0.05)
-        assert refusal(f'record.mcap:={path}', 'record.overwrite:=true').endswith(
-            f'{path}: is being recorded by another process (it is locked)')
-    finally:
-        first.terminate()
+    first = processes.start_node('rate_hz:=20.0', f'record.mcap:={path}')
+    deadline = time.monotonic() + EXIT_TIMEOUT
+    while not (path.exists() and path.stat().st_size > 0):
+        assert first.poll() is None and time.monotonic() < deadline
+        time.sleep(0.05)
+    assert refusal(f'record.mcap:={path}', 'record.overwrite:=true').endswith(
+        f'{path}: is being recorded by another process (it is locked)')
+    first.terminate()
     code, _, err = finish(first, EXIT_TIMEOUT)
     assert code == 0, err
     steps = [s.step for s in Recording(path).steps()]
@@ -207,7 +195,8 @@ def test_to_rrd_never_replaces_an_existing_rrd_without_force(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ['run.mcap', 'run.rrd']
 
 
-def test_repair_refuses_an_existing_output_and_cleans_up_after_a_killed_run(tmp_path, capsys):
+def test_repair_refuses_an_existing_output_and_cleans_up_after_a_killed_run(
+        tmp_path, capsys, processes):
     source = recorded(tmp_path / 'run.mcap')
     target = tmp_path / 'run.repaired.mcap'
     target.write_bytes(OLD)
@@ -219,19 +208,16 @@ def test_repair_refuses_an_existing_output_and_cleans_up_after_a_killed_run(tmp_
     dead = subprocess.run([sys.executable, '-c', 'import os; print(os.getpid())'],
                           capture_output=True, text=True, check=True).stdout.strip()
     (tmp_path / f'run.repaired.mcap.partial-{dead}').write_bytes(b'left by a SIGKILL')
-    holder = subprocess.Popen(
+    holder = processes.start(
         [sys.executable, '-c', 'import sys, time; from ball_world.recording.files import '
          'claim_output; c = claim_output(sys.argv[1]); print(flush=True); time.sleep(60)',
-         f'{target}.partial-{os.getpid() + 100000}'], stdout=subprocess.PIPE, text=True)
-    try:
-        holder.stdout.readline()
-        assert repair.main([str(source), '--force']) == 0
-        left = sorted(p.name for p in tmp_path.iterdir())
-        assert left == ['run.mcap', 'run.repaired.mcap',
-                        f'run.repaired.mcap.partial-{os.getpid() + 100000}']
-    finally:
-        holder.kill()
-        holder.wait()
+         f'{target}.partial-{os.getpid() + 100000}'], stderr=None)
+    holder.stdout.readline()
+    assert repair.main([str(source), '--force']) == 0
+    left = sorted(p.name for p in tmp_path.iterdir())
+    assert left == ['run.mcap', 'run.repaired.mcap',
+                    f'run.repaired.mcap.partial-{os.getpid() + 100000}']
+    kill(holder)
     assert Recording(target).has_summary
     assert remove_stale_partials(str(target)) == \
         [f'{target}.partial-{os.getpid() + 100000}']

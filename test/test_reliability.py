@@ -12,34 +12,21 @@ a modest rate; once the probe hears it, max_steps and rate_hz are set through th
 service. That keeps every test free of timing assumptions about DDS discovery.
 """
 import os
-from pathlib import Path
-import resource
 import signal
-import subprocess
 import sys
 import time
 
+from ball_world_testing.harness import (finish, read_mcap, read_mcap_ros2, read_rosbags,
+                                        rerun, rrd_ball_steps, run_tool)
 from geometry_msgs.msg import PoseArray
-from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
-from node_process import finish
 import numpy as np
 import pytest
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.parameter import Parameter
-from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-import rerun as rr
-from rosbags.rosbag2 import Reader as RosbagsReader
-from rosbags.typesys import get_typestore, Stores
 
 from ball_world.recording.mcap_reader import Recording
 from ball_world.recording.mcap_writer import CHUNK_BYTES
 from ball_world.simulation import Simulation
 
-BIN = Path(sys.executable).parent
-NODE = str(BIN / 'ball_world')
 DT_NS = 10_000_000  # dt = 0.01 s in every run here
 #: Generous: the machine has two noisy cores, and a test only fails on a hang.
 EXIT_TIMEOUT = 120.0
@@ -51,119 +38,30 @@ PROBE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 RECORDING_FAILED = 'recording to McapSink stopped'
 
 
-def start_node(*parameters, limit_file_size=None):
-    """The installed node with `-p` for each 'name:=value', stdout and stderr captured."""
-    command = [NODE, '--ros-args']
-    for parameter in parameters:
-        command += ['-p', parameter]
-
-    def limit():
-        if limit_file_size is not None:
-            resource.setrlimit(resource.RLIMIT_FSIZE, (limit_file_size, limit_file_size))
-
-    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=os.environ.copy(), preexec_fn=limit)
-
-
 def step_of(msg):
     return (msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec) // DT_NS
 
 
-class Probe:
-    """A node in its own context: subscribes to `balls`, sets the node's parameters."""
-
-    def __init__(self, name='probe'):
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node(name, context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.steps = []
-        self.subscription = None
-
-    def listen(self, qos=PROBE_QOS):
-        self.subscription = self.node.create_subscription(
-            PoseArray, 'balls', lambda msg: self.steps.append(step_of(msg)), qos)
-
-    def spin_until(self, predicate, timeout=DISCOVERY_TIMEOUT, process=None):
-        deadline = time.monotonic() + timeout
-        while not predicate():
-            assert time.monotonic() < deadline, 'timed out waiting'
-            if process is not None and process.poll() is not None:
-                pytest.fail(f'the node exited early: {process.communicate()[1][-2000:]}')
-            self.executor.spin_once(timeout_sec=0.05)
-
-    def spin_until_exit(self, process):
-        """Listen while the node runs; then take what its last messages left queued."""
-        self.spin_until(lambda: process.poll() is not None, timeout=EXIT_TIMEOUT)
-        heard = None
-        while heard != len(self.steps):
-            heard = len(self.steps)
-            self.executor.spin_once(timeout_sec=0.1)
-
-    def set_node_parameters(self, **values):
-        """Set the node's parameters through its parameter service; all must be accepted."""
-        client = AsyncParameterClient(self.node, 'ball_world')
-        self.spin_until(client.services_are_ready)
-        future = client.set_parameters([Parameter(name, value=value)
-                                        for name, value in values.items()])
-        self.spin_until(future.done)
-        results = future.result().results
-        assert all(result.successful for result in results), results
-
-    def close(self):
-        """Leave the graph (a second call does nothing)."""
-        if self.context.ok():
-            self.executor.shutdown()
-            self.node.destroy_node()
-            rclpy.try_shutdown(context=self.context)
+def listen(probe, qos=PROBE_QOS):
+    """The steps of the `balls` messages the probe hears, as they arrive."""
+    return probe.listen(PoseArray, 'balls', keep=step_of, qos=qos)
 
 
-@pytest.fixture
-def probes():
-    """Probe(name) factory; every probe is shut down at the end of the test."""
-    made = []
-
-    def make(name='probe'):
-        made.append(Probe(name))
-        return made[-1]
-
-    yield make
-    for probe in made:
-        probe.close()
-
-
-@pytest.fixture
-def processes():
-    """Node processes a test started: killed if the test ends while they still run."""
-    started = []
-    yield started
-    for process in started:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
+def spin_until_exit(probe, steps, process):
+    """Listen while the node runs; then take what its last messages left queued."""
+    probe.spin_until(lambda: process.poll() is not None, 'the node to exit',
+                     timeout=EXIT_TIMEOUT)
+    probe.drain(lambda: len(steps))
 
 
 # SIGKILL ----------------------------------------------------------------------------------
 
 def read_with_every_reader(path):
-    """Open the file with mcap, mcap_ros2 and rosbags; return the /balls steps each sees."""
-    with open(path, 'rb') as stream:
-        reader = make_reader(stream)
-        assert reader.get_summary() is not None
-        mcap_steps = [message.log_time // DT_NS for _, channel, message
-                      in reader.iter_messages(topics=['/balls'])]
-    with open(path, 'rb') as stream:
-        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        ros2_steps = [step_of(msg) for _, _, _, msg
-                      in reader.iter_decoded_messages(topics=['/balls'])]
-    typestore = get_typestore(Stores.ROS2_JAZZY)
-    rosbags_steps = []
-    with RosbagsReader(path) as reader:
-        balls = [c for c in reader.connections if c.topic == '/balls']
-        for connection, _, data in reader.messages(connections=balls):
-            msg = typestore.deserialize_cdr(data, connection.msgtype)
-            rosbags_steps.append(step_of(msg))
+    """Open the file with mcap (which must find its summary), mcap_ros2 and rosbags; return
+    the /balls steps each sees."""
+    mcap_steps = [log_time // DT_NS for _, log_time, _ in read_mcap(path, ['/balls'])]
+    ros2_steps = [step_of(msg) for _, _, msg in read_mcap_ros2(path, ['/balls'])]
+    rosbags_steps = [step_of(msg) for _, _, msg in read_rosbags(path, ['/balls'])]
     return mcap_steps, ros2_steps, rosbags_steps
 
 
@@ -176,23 +74,22 @@ def test_sigkill_loses_at_most_a_flush_period_and_repair_satisfies_every_reader(
     rng = np.random.default_rng(seed)
     kill_at = 250 + int(rng.integers(0, 100))  # steps received: past two flushes
     path = tmp_path / 'killed.mcap'
-    process = start_node('rate_hz:=100.0', f'random.count:={balls}', f'random.seed:={seed}',
-                         'arena:=[0.0, 0.0, 25.0, 25.0]', 'markers.rate_hz:=0.0',
-                         f'record.mcap:={path}')
-    processes.append(process)
+    process = processes.start_node(
+        'rate_hz:=100.0', f'random.count:={balls}', f'random.seed:={seed}',
+        'arena:=[0.0, 0.0, 25.0, 25.0]', 'markers.rate_hz:=0.0', f'record.mcap:={path}')
     probe = probes()
-    probe.listen()
-    probe.spin_until(lambda: probe.steps and probe.steps[-1] >= kill_at, process=process)
+    steps = listen(probe)
+    probe.spin_until(lambda: steps and steps[-1] >= kill_at, f'step {kill_at}',
+                     DISCOVERY_TIMEOUT, process)
     process.send_signal(signal.SIGKILL)
     process.communicate(timeout=EXIT_TIMEOUT)
     assert process.returncode == -signal.SIGKILL
-    last_received = max(probe.steps)
+    last_received = max(steps)
     assert not Recording(path).has_summary
 
     repaired = tmp_path / 'repaired.mcap'
-    repair = subprocess.run([str(BIN / 'ball_world_repair'), str(path), '-o', str(repaired)],
-                            capture_output=True, text=True, timeout=EXIT_TIMEOUT)
-    assert repair.returncode == 0, repair.stderr
+    code, _, err = run_tool('ball_world_repair', path, '-o', repaired, timeout=EXIT_TIMEOUT)
+    assert code == 0, err
     recording = Recording(repaired)
     assert recording.has_summary
     steps = list(recording.steps())
@@ -206,9 +103,8 @@ def test_sigkill_loses_at_most_a_flush_period_and_repair_satisfies_every_reader(
 
     for seen in read_with_every_reader(repaired):
         assert seen == numbers
-    resim = subprocess.run([str(BIN / 'ball_world_resim'), str(repaired)],
-                           capture_output=True, text=True, timeout=EXIT_TIMEOUT)
-    assert resim.returncode == 0, resim.stdout + resim.stderr
+    code, out, err = run_tool('ball_world_resim', repaired, timeout=EXIT_TIMEOUT)
+    assert code == 0, out + err
 
 
 # A recording that cannot be written --------------------------------------------------------
@@ -219,17 +115,16 @@ def test_file_size_limit_mid_run_is_reported_once_and_stepping_goes_on(probes, p
     # Every file the node writes may hold 1.2 MB: two MCAP chunks of 500 balls (~0.5 MB each
     # after lz4), or ~300 steps of the .rrd; the next write fails with EFBIG.
     limit = 1_200_000
-    process = start_node('rate_hz:=100.0', 'dt:=0.01', 'random.count:=500',
-                         'arena:=[0.0, 0.0, 30.0, 30.0]', 'markers.rate_hz:=0.0',
-                         f'record.mcap:={path}', f'record.rerun:={rrd_path}',
-                         limit_file_size=limit)
-    processes.append(process)
+    process = processes.start_node(
+        'rate_hz:=100.0', 'dt:=0.01', 'random.count:=500', 'arena:=[0.0, 0.0, 30.0, 30.0]',
+        'markers.rate_hz:=0.0', f'record.mcap:={path}', f'record.rerun:={rrd_path}',
+        limit_file_size=limit)
     probe = probes()
-    probe.listen()
-    probe.spin_until(lambda: probe.steps, process=process)
-    max_steps = max(600, probe.steps[-1] + 500)  # the .rrd reaches the limit too
-    probe.set_node_parameters(max_steps=max_steps, rate_hz=0.0)
-    probe.spin_until_exit(process)
+    steps = listen(probe)
+    probe.spin_until(lambda: steps, 'the first step', DISCOVERY_TIMEOUT, process)
+    max_steps = max(600, steps[-1] + 500)  # the .rrd reaches the limit too
+    probe.set_parameters('ball_world', {'max_steps': max_steps, 'rate_hz': 0.0})
+    spin_until_exit(probe, steps, process)
     code, _, err = finish(process, EXIT_TIMEOUT)
     assert code == 0, err  # not killed by SIGXFSZ: Python ignores it, the write fails
     assert f'max_steps {max_steps} reached' in err
@@ -247,19 +142,21 @@ def test_file_size_limit_mid_run_is_reported_once_and_stepping_goes_on(probes, p
     # probe heard steps far beyond it, so publishing went on after the recording stopped.
     step_bytes = 500 * (56 + 32) + 400
     failed_at_most = len(numbers) + CHUNK_BYTES // step_bytes + 1
-    assert max(probe.steps) > failed_at_most + 100, (max(probe.steps), failed_at_most)
+    assert max(steps) > failed_at_most + 100, (max(steps), failed_at_most)
 
 
 @pytest.mark.parametrize('parameter, path', [
     ('record.mcap', '/dev/full'), ('record.mcap', '/proc/ball_world.mcap'),
     ('record.mcap', 'FILE/run.mcap'), ('record.rerun', 'FILE/run.rrd'),
     ('record.rerun', '/dev/full'), ('record.rerun', '/proc/ball_world.rrd')])
-def test_unwritable_recording_stops_the_start_with_one_line(parameter, path, tmp_path):
+def test_unwritable_recording_stops_the_start_with_one_line(parameter, path, processes,
+                                                            tmp_path):
     if path.startswith('FILE'):  # a path under a regular file: root cannot bypass that
         regular = tmp_path / 'a_file'
         regular.write_text('not a directory')
         path = path.replace('FILE', str(regular))
-    code, out, err = finish(start_node(f'{parameter}:={path}', 'max_steps:=5'), EXIT_TIMEOUT)
+    code, out, err = finish(processes.start_node(f'{parameter}:={path}', 'max_steps:=5'),
+                            EXIT_TIMEOUT)
     assert code != 0
     lines = [line for line in err.splitlines() if line.strip()]
     assert len(lines) == 1, err
@@ -289,32 +186,28 @@ rclpy.spin(node)
 
 def start_subscribers(count, processes):
     """SUBSCRIBER processes, returned once each has heard the node."""
-    started = [subprocess.Popen([sys.executable, '-c', SUBSCRIBER], stdout=subprocess.PIPE,
-                                text=True, env=os.environ.copy()) for _ in range(count)]
-    processes += started
+    started = [processes.start([sys.executable, '-c', SUBSCRIBER], stderr=None)
+               for _ in range(count)]
     for process in started:
         assert process.stdout.readline().strip() == 'heard'  # or it died: readline gives ''
     return started
 
 
 def test_stalled_and_vanished_subscribers_never_block_stepping(probes, processes):
-    process = start_node('rate_hz:=100.0', 'dt:=0.01', 'random.count:=2000',
-                         'arena:=[0.0, 0.0, 60.0, 60.0]', 'markers.rate_hz:=0.0')
-    processes.append(process)
+    process = processes.start_node('rate_hz:=100.0', 'dt:=0.01', 'random.count:=2000',
+                                   'arena:=[0.0, 0.0, 60.0, 60.0]', 'markers.rate_hz:=0.0')
     # Readers that never take a message: one keeps the last, one keeps all.
-    stalled = probes('stalled')
-    stalled.listen(QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
-                              reliability=ReliabilityPolicy.RELIABLE))
-    hoarding = probes('hoarding')
-    hoarding.listen(QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
-                               reliability=ReliabilityPolicy.RELIABLE))
+    stalled = listen(probes('stalled'), QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+                                                   reliability=ReliabilityPolicy.RELIABLE))
+    hoarding = listen(probes('hoarding'), QoSProfile(depth=1, history=HistoryPolicy.KEEP_ALL,
+                                                     reliability=ReliabilityPolicy.RELIABLE))
     # Readers in processes that stop answering: one frozen, one killed without a goodbye (its
     # reader stays matched until its lease runs out).
     frozen, vanished = start_subscribers(2, processes)
     vanishing = probes('vanishing')  # destroyed mid-run, the orderly way
-    vanishing.listen()
+    vanishing_steps = listen(vanishing)
     control = probes('control')
-    vanishing.spin_until(lambda: vanishing.steps, process=process)
+    vanishing.spin_until(lambda: vanishing_steps, 'the first step', DISCOVERY_TIMEOUT, process)
     deadline = time.monotonic() + DISCOVERY_TIMEOUT
     while min(stalled.subscription.get_publisher_count(),
               hoarding.subscription.get_publisher_count()) == 0:
@@ -323,11 +216,12 @@ def test_stalled_and_vanished_subscribers_never_block_stepping(probes, processes
     frozen.send_signal(signal.SIGSTOP)
     vanished.send_signal(signal.SIGKILL)
     try:
-        max_steps = vanishing.steps[-1] + 500
-        control.set_node_parameters(max_steps=max_steps, rate_hz=0.0)
-        seen = len(vanishing.steps)
-        vanishing.spin_until(lambda: len(vanishing.steps) > seen + 5, process=process)
-        vanishing.node.destroy_subscription(vanishing.subscription)
+        max_steps = vanishing_steps[-1] + 500
+        control.set_parameters('ball_world', {'max_steps': max_steps, 'rate_hz': 0.0})
+        seen = len(vanishing_steps)
+        vanishing.spin_until(lambda: len(vanishing_steps) > seen + 5, f'step {seen + 5}',
+                             DISCOVERY_TIMEOUT, process)
+        vanishing.node.destroy_subscription(vanishing_steps.subscription)
         vanishing.close()
         code, _, err = finish(process, EXIT_TIMEOUT)
     finally:
@@ -338,28 +232,15 @@ def test_stalled_and_vanished_subscribers_never_block_stepping(probes, processes
 
 # Signals while recording ------------------------------------------------------------------
 
-def rrd_steps(path):
-    """The steps whose ball positions a .rrd holds, read back with Rerun's own reader."""
-    reader = rr.chunk.RrdReader(path)
-    (store,) = reader.recordings()
-    steps = []
-    for chunk in reader.stream(store=store):
-        batch = chunk.to_record_batch()
-        if chunk.entity_path == '/arena/balls' and 'Points2D:positions' in batch.schema.names:
-            steps += batch.column('step').to_pylist()
-    return sorted(steps)
-
-
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
 def test_signal_while_recording_finishes_mcap_and_rrd(sig, probes, processes, tmp_path):
     mcap_path, rrd_path = tmp_path / 'run.mcap', tmp_path / 'run.rrd'
-    process = start_node('rate_hz:=100.0', 'random.count:=100', 'markers.rate_hz:=0.0',
-                         'arena:=[0.0, 0.0, 20.0, 20.0]', f'record.mcap:={mcap_path}',
-                         f'record.rerun:={rrd_path}')
-    processes.append(process)
+    process = processes.start_node(
+        'rate_hz:=100.0', 'random.count:=100', 'markers.rate_hz:=0.0',
+        'arena:=[0.0, 0.0, 20.0, 20.0]', f'record.mcap:={mcap_path}', f'record.rerun:={rrd_path}')
     probe = probes()
-    probe.listen()
-    probe.spin_until(lambda: probe.steps and probe.steps[-1] >= 150, process=process)
+    steps = listen(probe)
+    probe.spin_until(lambda: steps and steps[-1] >= 150, 'step 150', DISCOVERY_TIMEOUT, process)
     process.send_signal(sig)
     code, out, err = finish(process, EXIT_TIMEOUT)
     assert code == 0, err
@@ -368,11 +249,11 @@ def test_signal_while_recording_finishes_mcap_and_rrd(sig, probes, processes, tm
     recording = Recording(mcap_path)
     assert recording.has_summary
     numbers = [step.step for step in recording.steps()]
-    assert numbers == list(range(len(numbers))) and numbers[-1] >= max(probe.steps)
-    verify = subprocess.run([str(BIN / 'rerun'), 'rrd', 'verify', str(rrd_path)],
-                            capture_output=True, text=True, timeout=EXIT_TIMEOUT)
+    assert numbers == list(range(len(numbers))) and numbers[-1] >= max(steps)
+    verify = rerun('rrd', 'verify', rrd_path, timeout=EXIT_TIMEOUT)
     assert verify.returncode == 0, verify.stdout + verify.stderr
-    assert rrd_steps(rrd_path) == numbers  # the .rrd ends on the same step as the MCAP
+    (rrd_steps,) = rrd_ball_steps(rrd_path)  # one recording
+    assert rrd_steps == numbers  # the .rrd ends on the same step as the MCAP
 
 
 # The core over a long run -------------------------------------------------------------------
