@@ -1,11 +1,9 @@
 """The node in-process: topics, stamps, impulses, services, parameters, determinism."""
-import time
-
+from ball_world_testing.harness import DEADLINE, Probe, RECEIVE_QOS
 from geometry_msgs.msg import PoseArray, Vector3Stamped
 import numpy as np
 import pytest
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -23,36 +21,23 @@ ONE_BALL = {'random.count': 0, 'balls.x': [5.0], 'balls.y': [5.0], 'balls.vx': [
 
 
 class Harness:
-    """A BallWorld and a probe node in one context, spun by one executor."""
+    """A BallWorld spun in-process with a probe: in the probe's context, by its executor."""
 
     def __init__(self, **parameters):
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
+        self.probe = Probe()
         overrides = [Parameter(name, value=value) for name, value in parameters.items()]
-        self.node = BallWorld(context=self.context, parameter_overrides=overrides)
-        self.probe = rclpy.create_node('probe', context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.executor.add_node(self.probe)
-        self.balls = []
-        self.states = []
-        qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-        self.probe.create_subscription(PoseArray, 'balls', self.balls.append, qos)
-        self.probe.create_subscription(Float64MultiArray, 'state', self.states.append, qos)
-        self.impulses = self.probe.create_publisher(Vector3Stamped, 'impulse', qos)
+        self.node = self.probe.add_node(BallWorld(context=self.probe.context,
+                                                  parameter_overrides=overrides))
+        self.executor = self.probe.executor
+        self.balls = self.probe.listen(PoseArray, 'balls')
+        self.states = self.probe.listen(Float64MultiArray, 'state')
+        self.impulses = self.probe.node.create_publisher(Vector3Stamped, 'impulse', RECEIVE_QOS)
 
-    def spin_until(self, predicate, timeout=10.0):
-        deadline = time.monotonic() + timeout
-        while not predicate():
-            assert time.monotonic() < deadline, 'timed out waiting'
-            self.executor.spin_once(timeout_sec=0.05)
+    def spin_until(self, predicate, timeout=DEADLINE):
+        self.probe.spin_until(predicate, timeout=timeout)
 
     def call(self, srv_type, name, request):
-        client = self.probe.create_client(srv_type, name)
-        self.spin_until(lambda: client.service_is_ready())
-        future = client.call_async(request)
-        self.spin_until(future.done)
-        return future.result()
+        return self.probe.call(srv_type, name, request)
 
     def impulse(self, frame_id, x, y, z=0.0):
         msg = Vector3Stamped()
@@ -63,10 +48,7 @@ class Harness:
 
     def close(self):
         self.node.close()
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.probe.destroy_node()
-        rclpy.try_shutdown(context=self.context)
+        self.probe.close()
 
 
 @pytest.fixture
@@ -200,7 +182,7 @@ def test_markers_hold_a_sphere_per_ball_and_the_walls(harness_factory):
     # Transient local: a late subscriber still gets the last array.
     qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    h.probe.create_subscription(MarkerArray, 'markers', got.append, qos)
+    h.probe.node.create_subscription(MarkerArray, 'markers', got.append, qos)
     h.spin_until(lambda: got)
     markers = [m for msg in got for m in msg.markers if m.ns == 'balls']
     spheres = {m.id: m for m in markers}
@@ -293,7 +275,7 @@ def test_world_parameters_can_be_set_one_by_one_and_are_checked_at_reset(harness
 
 def test_every_parameter_reads_back_typed_and_integers_convert(harness_factory):
     h = harness_factory()
-    client = AsyncParameterClient(h.probe, 'ball_world')
+    client = AsyncParameterClient(h.probe.node, 'ball_world')
     h.spin_until(client.services_are_ready)
     names = [parameter.name for parameter in table.PARAMETERS]
     future = client.get_parameters(names)
@@ -347,7 +329,7 @@ def test_a_large_reset_builds_while_the_old_world_keeps_publishing(harness_facto
     h = harness_factory(rate_hz=100.0, **{'random.count': 5})
     h.node.set_parameters([Parameter('random.count', value=60_000),
                            Parameter('arena', value=[0.0, 0.0, 500.0, 500.0])])
-    client = h.probe.create_client(Trigger, '/ball_world/reset')
+    client = h.probe.node.create_client(Trigger, '/ball_world/reset')
     h.spin_until(client.service_is_ready)
     steps_while_building = []
     step_once = h.node.step_once

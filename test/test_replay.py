@@ -1,23 +1,20 @@
 """ball_world_replay across processes: what a subscriber receives, when, and how it stops.
 
-The replay runs as a child process in a DDS domain of its own (random, 100-200); this test
-subscribes in-process in the same domain through a separate rclpy context, and waits with
+The replay runs as a child process in the test run's own DDS domain (conftest); this test
+subscribes in-process through a probe with an rclpy context of its own, and waits with
 deadlines, never fixed sleeps. Timing is checked loosely: median spacing within 0.5x-2x.
 """
 import os
 from pathlib import Path
-import random
 import signal
 import subprocess
 import sys
 import time
 
+from ball_world_testing.harness import finish
 import numpy as np
 import pytest
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from visualization_msgs.msg import MarkerArray
 
@@ -28,10 +25,8 @@ from ball_world.simulation import Simulation
 from ball_world.tools.replay import argument_parser, message_class, played_topics, qos_profile
 
 ROOT = Path(__file__).resolve().parents[1]
-DOMAIN = random.randint(100, 200)
 DT = 0.05  # 20 Hz
 TOPICS = ('/balls', '/state', '/stats', '/impulse', '/markers')
-RECEIVE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
 
 @pytest.fixture(scope='module')
@@ -48,73 +43,39 @@ def recording_path(tmp_path_factory):
     return path
 
 
-@pytest.fixture
-def ros():
-    """An rclpy context, node and executor in the test's own domain."""
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=DOMAIN)
-    node = Node('replay_test', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    yield node, executor
-    executor.shutdown(timeout_sec=0)
-    node.destroy_node()
-    rclpy.shutdown(context=context)
-
-
-def start_replay(path, *args):
-    env = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+def start_replay(processes, path, *args):
+    """The replay of this source tree (not an installed one) in a child process."""
+    env = dict(os.environ,
                PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get('PYTHONPATH', ''))
-    return subprocess.Popen([sys.executable, '-m', 'ball_world.tools.replay', str(path),
-                             '--wait-for-subscribers', '--delay', '0.3', *args],
-                            cwd=ROOT, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    return processes.start([sys.executable, '-m', 'ball_world.tools.replay', str(path),
+                            '--wait-for-subscribers', '--delay', '0.3', *args],
+                           cwd=ROOT, env=env)
 
 
-def subscribe(node, topics_types):
+def subscribe(probe, topics_types):
     """Raw subscriptions; returns {topic: [(arrival monotonic time, bytes)]}."""
-    received = {topic: [] for topic in topics_types}
-    for topic, type_name in topics_types.items():
-        node.create_subscription(
-            message_class(type_name), topic,
-            lambda data, topic=topic: received[topic].append((time.monotonic(), data)),
-            RECEIVE_QOS, raw=True)
-    return received
-
-
-def spin_until(executor, done, timeout):
-    deadline = time.monotonic() + timeout
-    while not done() and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
-    return done()
-
-
-def stop(child):
-    if child.poll() is None:
-        child.kill()
-    return child.communicate(timeout=10)
+    return {topic: probe.listen(message_class(type_name), topic,
+                                keep=lambda data: (time.monotonic(), data), raw=True)
+            for topic, type_name in topics_types.items()}
 
 
 def test_replay_publishes_the_recording_in_order_with_its_timing_and_clock(
-        recording_path, ros):
-    node, executor = ros
+        recording_path, probe, processes):
     recording = Recording(recording_path)
     recorded = {topic: [] for topic in TOPICS}
     for message in recording.messages(TOPICS):
         recorded[message.topic].append(message)
     # markers: a DELETEALL at the start, then every 0.1 s of simulated time (0 to 2.5 s)
     assert [len(recorded[t]) for t in TOPICS] == [51, 51, 51, 2, 1 + 26]
-    received = subscribe(node, {**{t: recording.topics[t].type for t in TOPICS},
-                                '/clock': 'rosgraph_msgs/msg/Clock'})
-    child = start_replay(recording_path, '--clock')
-    try:
-        assert spin_until(executor, lambda: all(
-            len(received[t]) >= len(recorded[t]) for t in TOPICS), timeout=30), \
-            {t: len(v) for t, v in received.items()}
-        assert child.wait(timeout=15) == 0
-        spin_until(executor, lambda: len(received['/clock']) >= 51, timeout=2)
-    finally:
-        out, err = stop(child)
+    received = subscribe(probe, {**{t: recording.topics[t].type for t in TOPICS},
+                                 '/clock': 'rosgraph_msgs/msg/Clock'})
+    child = start_replay(processes, recording_path, '--clock')
+    assert probe.wait_for(lambda: all(
+        len(received[t]) >= len(recorded[t]) for t in TOPICS), timeout=30), \
+        {t: len(v) for t, v in received.items()}
+    code, _, err = finish(child, timeout=15)
+    assert code == 0, err
+    probe.wait_for(lambda: len(received['/clock']) >= 51, timeout=2)
     for topic in TOPICS[:-1]:
         assert [data for _, data in received[topic]] == \
             [message.data for message in recorded[topic]], topic
@@ -134,20 +95,16 @@ def test_replay_publishes_the_recording_in_order_with_its_timing_and_clock(
     assert 0.5 * DT <= spacing <= 2 * DT, spacing
 
 
-def test_replay_loops_filters_remaps_and_stops_cleanly_on_sigterm(recording_path, ros):
-    node, executor = ros
-    received = subscribe(node, {'/replay/balls': 'geometry_msgs/msg/PoseArray',
-                                '/replay/state': 'std_msgs/msg/Float64MultiArray'})
-    child = start_replay(recording_path, '--topics', '/balls', '--loop', '--rate', '5',
-                         '--start-offset', '2.0', '--remap-prefix', '/replay')
-    try:
-        # from 2.0 s on: steps 40-50, 11 per pass; more than 11 proves it loops
-        assert spin_until(executor, lambda: len(received['/replay/balls']) >= 25,
-                          timeout=30)
-        child.send_signal(signal.SIGTERM)
-        code = child.wait(timeout=15)
-    finally:
-        out, err = stop(child)
+def test_replay_loops_filters_remaps_and_stops_cleanly_on_sigterm(recording_path, probe,
+                                                                  processes):
+    received = subscribe(probe, {'/replay/balls': 'geometry_msgs/msg/PoseArray',
+                                 '/replay/state': 'std_msgs/msg/Float64MultiArray'})
+    child = start_replay(processes, recording_path, '--topics', '/balls', '--loop', '--rate',
+                         '5', '--start-offset', '2.0', '--remap-prefix', '/replay')
+    # from 2.0 s on: steps 40-50, 11 per pass; more than 11 proves it loops
+    assert probe.wait_for(lambda: len(received['/replay/balls']) >= 25, timeout=30)
+    child.send_signal(signal.SIGTERM)
+    code, _, err = finish(child, timeout=15)
     assert code == 0, err
     stamps = [decode_pose_array(data)[0] for _, data in received['/replay/balls']]
     assert stamps[:22] == [round(k * DT * 1e9) for k in range(40, 51)] * 2
