@@ -415,7 +415,7 @@ def rewrite_recording(source, target, metadata=None, data=None, message=None, sc
 
 # Rerun ----------------------------------------------------------------------------------------
 
-def rerun(*args, timeout=DEADLINE):
+def run_rerun(*args, timeout=DEADLINE):
     """Run the Rerun CLI; the CompletedProcess, with its output as text."""
     return subprocess.run([str(RERUN), *map(str, args)], capture_output=True, text=True,
                           timeout=timeout)

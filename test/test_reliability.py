@@ -17,7 +17,7 @@ import sys
 import time
 
 from ball_world_testing.harness import (finish, read_mcap, read_mcap_ros2, read_rosbags,
-                                        rerun, rrd_ball_steps, run_tool)
+                                        rrd_ball_steps, run_rerun, run_tool)
 from geometry_msgs.msg import PoseArray
 import numpy as np
 import pytest
@@ -250,7 +250,7 @@ def test_signal_while_recording_finishes_mcap_and_rrd(sig, probes, processes, tm
     assert recording.has_summary
     numbers = [step.step for step in recording.steps()]
     assert numbers == list(range(len(numbers))) and numbers[-1] >= max(steps)
-    verify = rerun('rrd', 'verify', rrd_path, timeout=EXIT_TIMEOUT)
+    verify = run_rerun('rrd', 'verify', rrd_path, timeout=EXIT_TIMEOUT)
     assert verify.returncode == 0, verify.stdout + verify.stderr
     (rrd_steps,) = rrd_ball_steps(rrd_path)  # one recording
     assert rrd_steps == numbers  # the .rrd ends on the same step as the MCAP

@@ -6,7 +6,6 @@ viewer shows at a step is the latest value logged at or before it (Rerun's lates
 `shown_at` answers "what is on screen at step k" from the chunks.
 """
 from dataclasses import replace
-from pathlib import Path
 import signal
 import socket
 import subprocess
@@ -14,12 +13,11 @@ import sys
 import threading
 import time
 from types import SimpleNamespace
-import warnings
 
+from ball_world_testing.harness import finish, open_rrd, RERUN, run_rerun, start_node, Truth
 import numpy as np
 import pytest
 import rerun as rr
-import rerun_cli
 
 from ball_world.recording import rerun_outlet
 from ball_world.recording.mcap_writer import McapSink
@@ -32,10 +30,6 @@ from ball_world.recording.rerun_outlet import Outlet, OutletFailed, parse_view
 from ball_world.simulation import Simulation
 from ball_world.tools import to_rrd
 
-RERUN_CLI = Path(sys.executable).parent / 'rerun'
-#: The viewer binary itself: the `rerun` script runs it as a child, so killing the script
-#: would leave the viewer running.
-RERUN_BINARY = Path(rerun_cli.__file__).parent / 'rerun'
 IMPULSES_AT = {1: (0, 0.1, 0.0), 10: (3, 0.0, -0.2)}  # before step k: ball, jx, jy
 STEPS_PER_SECOND = 60  # the default world: dt = 1/60 s
 HALF_SECOND = STEPS_PER_SECOND // 2
@@ -43,30 +37,10 @@ HALF_SECOND = STEPS_PER_SECOND // 2
 LIVENESS_SECONDS = 20.0
 
 
-class Collector:
-    """A sink keeping every StepRecord, to compare the file with."""
-
-    def __init__(self):
-        self.records = []
-        self.worlds = []
-
-    def start_segment(self, world, info):
-        self.worlds.append(world)
-
-    def write_step(self, record):
-        self.records.append(record)
-
-    def flush(self):
-        pass
-
-    def close(self):
-        pass
-
-
 def run(sinks, steps=30, parameters=None, reset_at=None, reset_parameters=None,
         impulses=IMPULSES_AT):
-    """The default world with a couple of impulses; returns the Collector."""
-    collector = Collector()
+    """The default world with a couple of impulses; returns its Truth."""
+    collector = Truth()
     simulation = Simulation(parameters or {}, sinks=[*sinks, collector])
     for k in range(1, steps + 1):
         if k in impulses:
@@ -79,20 +53,13 @@ def run(sinks, steps=30, parameters=None, reset_at=None, reset_parameters=None,
     return collector
 
 
-def rerun_cli(*args):
-    return subprocess.run([str(RERUN_CLI), *args], capture_output=True, text=True, timeout=60)
-
-
 def read(path):
     """The recording's content: {(entity, component): {step: value}}, static ones at None.
 
     Also returns the timelines seen and the sim_time of every step, from the chunks of
     the file's (only) recording store.
     """
-    with warnings.catch_warnings():
-        # `rerun --save` (what a viewer received) writes no footer; the reader then scans.
-        warnings.filterwarnings('ignore', 'RRD file has no footer')
-        reader = rr.chunk.RrdReader(path)
+    reader = open_rrd(path)  # also what `rerun --save` (a viewer) wrote: it has no footer
     (store,) = reader.recordings()
     content = {}
     timelines = set()
@@ -140,15 +107,15 @@ def percent_change(energy, energy0):
 def test_recording_verifies_and_reads_back_exactly(tmp_path):
     path = tmp_path / 'run.rrd'
     collected = run([RerunSink(path)])
-    result = rerun_cli('rrd', 'verify', str(path))
+    result = run_rerun('rrd', 'verify', str(path))
     assert result.returncode == 0, result.stdout + result.stderr
 
     store, content, timelines, sim_time = read(path)
     assert store.application_id == 'ball_world'
     assert timelines == {SIM_TIME, STEP}  # no wall-clock log_time, no log_tick
-    assert rr.chunk.RrdReader(path).blueprints(), 'the blueprint travels with the file'
+    assert open_rrd(path).blueprints(), 'the blueprint travels with the file'
     records = collected.records
-    world = collected.worlds[0]
+    world = collected.segments[0][0]
     assert [r.step for r in records] == list(range(31))
 
     positions = content[(f'/{BALLS}', 'Points2D:positions')]
@@ -211,7 +178,7 @@ def test_impulse_stays_half_a_second_in_white_with_the_ball_name(tmp_path):
     path = tmp_path / 'run.rrd'
     collected = run([RerunSink(path)], steps=60)
     records = collected.records
-    world = collected.worlds[0]
+    world = collected.segments[0][0]
     xmin, ymin, xmax, ymax = scene_bounds(world)
     span = max(xmax - xmin, ymax - ymin)
     _, content, _, _ = read(path)
@@ -291,9 +258,9 @@ def test_balls_named_by_the_record_may_come_and_go(tmp_path):
     """Records naming their balls: labels, radii and colours follow the names."""
     path = tmp_path / 'named.rrd'
     sink = RerunSink(path)
-    collector = Collector()
+    collector = Truth()
     simulation = Simulation({'random.count': 3}, sinks=[collector])
-    world = collector.worlds[0]
+    world, _ = collector.segments[0]
     info = SimpleNamespace(parameters={}, log_offset_ns=0)
     sink.start_segment(world, info)
     initial = collector.records[0]
@@ -332,7 +299,7 @@ def test_identical_runs_give_identical_content(tmp_path):
     assert store_a.recording_id == store_b.recording_id
     assert content_a == content_b
     # Chunk boundaries and row ids may differ between runs; the data may not.
-    result = rerun_cli('rrd', 'compare', '--unordered', str(first), str(second))
+    result = run_rerun('rrd', 'compare', '--unordered', str(first), str(second))
     assert result.returncode == 0, result.stdout + result.stderr
 
 
@@ -341,7 +308,7 @@ def test_mcap_converts_to_the_same_positions(tmp_path, capsys):
     run([RerunSink(live), McapSink(mcap)])
     assert to_rrd.main([str(mcap), '-o', str(converted)]) == 0
     assert '31/31 steps' in capsys.readouterr().err
-    result = rerun_cli('rrd', 'verify', str(converted))
+    result = run_rerun('rrd', 'verify', str(converted))
     assert result.returncode == 0, result.stdout + result.stderr
     _, live_content, _, live_times = read(live)
     _, converted_content, _, converted_times = read(converted)
@@ -377,11 +344,11 @@ def test_real_time_factor_is_over_the_last_second_and_shows_a_stall(tmp_path):
     wall_per_step = {k: dt for k in range(1, 241)}
     wall_per_step[100] = 3.0
 
-    class Ticking(Collector):
+    class Ticking(Truth):
         def write_step(self, record):
             clock.now += wall_per_step.get(record.step, 0.0)
 
-    collector = Collector()
+    collector = Truth()
     simulation = Simulation({}, sinks=[Ticking(), RerunSink(path, clock=clock), collector])
     for _ in range(240):
         simulation.step(real_time_factor=1.0)  # the node's value is ignored with a clock
@@ -528,17 +495,15 @@ def free_port():
 
 
 @pytest.fixture
-def listener(tmp_path):
+def listener(tmp_path, processes):
     """A `rerun --save` gRPC server on a free port: what a viewer would receive."""
-    started = []
 
     def start(name='received.rrd'):
         port = free_port()
         path = tmp_path / name
-        process = subprocess.Popen(
-            [str(RERUN_BINARY), '--bind', '127.0.0.1', '--port', str(port), '--save', str(path)],
+        process = processes.start(
+            [RERUN, '--bind', '127.0.0.1', '--port', str(port), '--save', str(path)],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        started.append(process)
         deadline = time.monotonic() + LIVENESS_SECONDS
         while True:
             try:
@@ -549,11 +514,7 @@ def listener(tmp_path):
                 time.sleep(0.1)
         return process, f'rerun+http://127.0.0.1:{port}/proxy', path
 
-    yield start
-    for process in started:
-        if process.poll() is None:
-            process.kill()
-        process.wait()
+    return start
 
 
 def stop_listener(process):
@@ -574,9 +535,7 @@ def test_live_view_receives_the_same_recording_as_the_file(tmp_path, listener):
     store_view, content_view, _, _ = read(received)
     assert store_view.recording_id == store_file.recording_id  # one recording
     assert content_view == content_file
-    with warnings.catch_warnings():
-        warnings.filterwarnings('ignore', 'RRD file has no footer')
-        assert rr.chunk.RrdReader(received).blueprints(), 'the blueprint reached the viewer'
+    assert open_rrd(received).blueprints(), 'the blueprint reached the viewer'
 
 
 def test_absent_viewer_is_reported_once_and_the_file_goes_on(tmp_path):
@@ -598,7 +557,7 @@ def test_absent_viewer_is_reported_once_and_the_file_goes_on(tmp_path):
     simulation.close()
     assert reports == [f'live view at {url}: no viewer listens there (Connection refused); '
                        'going on without it']
-    result = rerun_cli('rrd', 'verify', str(path))
+    result = run_rerun('rrd', 'verify', str(path))
     assert result.returncode == 0, result.stdout + result.stderr
     _, content, _, _ = read(path)
     assert len(content[(f'/{BALLS}', 'Points2D:positions')]) == simulation.step_index + 1
@@ -625,7 +584,7 @@ def test_killed_viewer_is_reported_once(tmp_path, listener):
     # The SDK notices the broken connection, or else the probe finds the port closed.
     (report,) = reports
     assert report.startswith(f'live view at {url}: ') and report.endswith('; going on without it')
-    result = rerun_cli('rrd', 'verify', str(path))
+    result = run_rerun('rrd', 'verify', str(path))
     assert result.returncode == 0, result.stdout + result.stderr
 
 
@@ -640,14 +599,9 @@ def test_view_alone_without_a_file(listener):
 
 # The node ------------------------------------------------------------------------------------
 
-NODE = str(Path(sys.executable).parent / 'ball_world')
-
-
 def run_node(*parameters, timeout=LIVENESS_SECONDS * 3):
-    command = [NODE, '--ros-args']
-    for parameter in parameters:
-        command += ['-p', parameter]
-    return subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+    process = start_node(*parameters)
+    return subprocess.CompletedProcess(process.args, *finish(process, timeout))
 
 
 def test_node_streams_to_a_viewer_and_records_one_recording(tmp_path, listener):
