@@ -375,42 +375,47 @@ class Truth:
         self.closed = True
 
 
-def rewrite_recording(source, target, metadata=None, data=None, message=None, schema=None):
-    """Copy an MCAP record by record through mcap's Writer (zstd), editing on the way: how a
-    test makes a bad recording from a good one. Returns target.
+def rewrite_recording(source, target, metadata=None, data=None, edit=None):
+    """Copy an MCAP record by record through mcap's Writer (zstd), changing it on the way: how
+    a test makes a bad recording from a good one. Returns target.
 
-    metadata(values) gives a metadata record's new values; schema(name) a schema's new name;
-    data(topic, log_time, data) a message's new bytes; message(topic, record) the Message
-    record to write instead, or None to leave it out.
+    metadata(values) gives each metadata record's new values, data(topic, log_time, data) each
+    message's new bytes; edit(record), for any other change, the record to write in place of
+    any record (dataclasses.replace of it), or None to leave the record out.
     """
     with open(source, 'rb') as stream, open(target, 'wb') as out:
         writer = Writer(out, compression=CompressionType.ZSTD)
         topics = {}
         for item in Scan(stream, os.path.getsize(source)).records():
             kind = type(item).__name__
-            if kind == 'Header':
-                writer.start(item.profile, item.library)
-            elif kind == 'Schema':
-                writer.register_schema(item.name if schema is None else schema(item.name),
-                                       item.encoding, item.data)
-            elif kind == 'Channel':
+            if kind == 'Channel':
                 topics[item.id] = item.topic
-                writer.register_channel(item.topic, item.message_encoding, item.schema_id,
-                                        item.metadata)
-            elif kind == 'Metadata':
-                values = dict(item.metadata)
-                writer.add_metadata(item.name, values if metadata is None else metadata(values))
-            elif kind == 'Message':
-                topic = topics[item.channel_id]
-                if data is not None:
-                    item = dataclasses.replace(item, data=data(topic, item.log_time, item.data))
-                if message is not None:
-                    item = message(topic, item)
-                if item is not None:
-                    writer.add_message(item.channel_id, item.log_time, item.data,
-                                       item.publish_time, item.sequence)
+            elif kind == 'Metadata' and metadata is not None:
+                item = dataclasses.replace(item, metadata=metadata(dict(item.metadata)))
+            elif kind == 'Message' and data is not None:
+                item = dataclasses.replace(
+                    item, data=data(topics[item.channel_id], item.log_time, item.data))
+            if edit is not None:
+                item = edit(item)
+            _write_record(writer, item)
         writer.finish()
     return target
+
+
+def _write_record(writer, item):
+    kind = type(item).__name__
+    if kind == 'Header':
+        writer.start(item.profile, item.library)
+    elif kind == 'Schema':
+        writer.register_schema(item.name, item.encoding, item.data)
+    elif kind == 'Channel':
+        writer.register_channel(item.topic, item.message_encoding, item.schema_id,
+                                item.metadata)
+    elif kind == 'Metadata':
+        writer.add_metadata(item.name, item.metadata)
+    elif kind == 'Message':
+        writer.add_message(item.channel_id, item.log_time, item.data, item.publish_time,
+                           item.sequence)
 
 
 # Rerun ----------------------------------------------------------------------------------------

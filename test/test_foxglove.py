@@ -9,12 +9,10 @@ names only topics a recording holds and stats fields by their real index.
 import json
 from pathlib import Path
 
-from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
+from ball_world_testing.harness import read_mcap_ros2, ROSBAGS_TYPES, Truth
 import numpy as np
 import pytest
 from rosbags.rosbag2 import Reader as RosbagsReader
-from rosbags.typesys import get_typestore, Stores
 
 from ball_world.recording.mcap_reader import Recording
 from ball_world.recording.mcap_writer import MARKERS_PERIOD_NS, McapSink
@@ -28,26 +26,6 @@ SECOND = {'rate_hz': 40.0, 'random.count': 7, 'random.seed': 9,
           'arena': [0.0, 0.0, 6.0, 5.0], 'walls': [1.0, 4.0, 5.0, 4.5]}
 DELETEALL = 3  # visualization_msgs/Marker action
 SPHERE, LINE_LIST = 2, 5
-
-
-class Truth:
-    """A Sink keeping the worlds and records the simulation produced."""
-
-    def __init__(self):
-        self.worlds = []  # (WorldSnapshot, RunInfo)
-        self.records = []
-
-    def start_segment(self, world, info):
-        self.worlds.append((world, info))
-
-    def write_step(self, record):
-        self.records.append(record)
-
-    def flush(self):
-        pass
-
-    def close(self):
-        pass
 
 
 def record(path, first=FIRST, second=SECOND, steps=(30, 25)):
@@ -64,10 +42,7 @@ def record(path, first=FIRST, second=SECOND, steps=(30, 25)):
 
 def decoded(path, topic):
     """(log time, decoded message) of every message on a topic, via mcap_ros2."""
-    with open(path, 'rb') as stream:
-        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        return [(item.message.log_time, item.decoded_message)
-                for item in reader.iter_decoded_messages(topics=[topic])]
+    return [(log_time, msg) for _, log_time, msg in read_mcap_ros2(path, [topic])]
 
 
 def is_delete_all(msg):
@@ -75,7 +50,7 @@ def is_delete_all(msg):
 
 
 def segment_of(truth, log_time):
-    starts = [info.log_offset_ns for _, info in truth.worlds]
+    starts = [info.log_offset_ns for _, info in truth.segments]
     return max(i for i, start in enumerate(starts) if start <= log_time)
 
 
@@ -91,9 +66,9 @@ def test_markers_show_sized_balls_at_their_positions_and_walls_in_every_segment(
     by_log_time = {r.log_time_ns: r for r in truth.records}
     deletes = [log_time for log_time, msg in markers if is_delete_all(msg)]
     # each segment starts by clearing the previous world, at its first log time
-    assert deletes == [info.log_offset_ns for _, info in truth.worlds]
+    assert deletes == [info.log_offset_ns for _, info in truth.segments]
     full = [(log_time, msg) for log_time, msg in markers if not is_delete_all(msg)]
-    for segment, (world, info) in enumerate(truth.worlds):
+    for segment, (world, info) in enumerate(truth.segments):
         mine = [(t, msg) for t, msg in full if segment_of(truth, t) == segment]
         last = max(r.stamp_ns for r in truth.records
                    if segment_of(truth, r.log_time_ns) == segment)
@@ -117,7 +92,6 @@ def test_markers_show_sized_balls_at_their_positions_and_walls_in_every_segment(
 
 def test_markers_decode_in_rosbags_with_the_counts_and_qos_ros2_bag_info_shows(recorded):
     path, truth = recorded
-    typestore = get_typestore(Stores.ROS2_JAZZY)
     with RosbagsReader(path) as reader:
         connections = {c.topic: c for c in reader.connections}
         marker = connections['/markers']
@@ -125,11 +99,11 @@ def test_markers_decode_in_rosbags_with_the_counts_and_qos_ros2_bag_info_shows(r
         qos = marker.ext.offered_qos_profiles[0]
         assert (qos.reliability.name, qos.durability.name, qos.depth) == \
             ('RELIABLE', 'TRANSIENT_LOCAL', 1)
-        arrays = [typestore.deserialize_cdr(raw, marker.msgtype)
+        arrays = [ROSBAGS_TYPES.deserialize_cdr(raw, marker.msgtype)
                   for _, _, raw in reader.messages([marker])]
         assert connections['/balls'].msgcount == len(truth.records)
     assert marker.msgcount == len(arrays) == len(decoded(path, '/markers'))
-    sizes = {len(world.radii) + 1 for world, _ in truth.worlds}  # spheres and the walls
+    sizes = {len(world.radii) + 1 for world, _ in truth.segments}  # spheres and the walls
     assert {len(array.markers) for array in arrays} == sizes | {1}  # and the DELETEALLs
 
 
@@ -138,7 +112,7 @@ def test_markers_follow_reset_worlds_of_other_sizes(tmp_path):
     truth = record(tmp_path / 'run.mcap', first={**FIRST, 'random.count': 30},
                    second={**FIRST, 'random.count': 4}, steps=(3, 3))
     markers = decoded(tmp_path / 'run.mcap', '/markers')
-    second_start = truth.worlds[1][1].log_offset_ns
+    second_start = truth.segments[1][1].log_offset_ns
     at_reset = [msg for t, msg in markers if t == second_start]
     assert [len(msg.markers) for msg in at_reset] == [1, 4 + 1]
     assert at_reset[0].markers[0].action == DELETEALL

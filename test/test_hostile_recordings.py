@@ -7,6 +7,7 @@ every offline tool and checks the contract: exit 0, or a non-zero exit with exac
 on stderr, never a traceback and never a hang (each run has a deadline).
 """
 import contextlib
+from dataclasses import replace
 import io
 import json
 import os
@@ -17,11 +18,12 @@ import signal
 import subprocess
 import sys
 
+from ball_world_testing.harness import rewrite_recording
 from mcap.data_stream import RecordBuilder
 from mcap.reader import make_reader
-from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Metadata,
-                          MetadataIndex, Schema, Statistics)
-from mcap.writer import CompressionType, Writer
+from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message,
+                          Metadata, MetadataIndex, Schema, Statistics)
+from mcap.writer import Writer
 import pytest
 from rclpy.qos import ReliabilityPolicy
 
@@ -33,7 +35,6 @@ from ball_world.recording.mcap_writer import McapSink
 from ball_world.simulation import Simulation
 from ball_world.tools import info, repair, replay, resim, to_rrd
 
-BIN = Path(sys.executable).parent
 MAGIC = b'\x89MCAP0\r\n'
 PARAMS = {'rate_hz': 20.0, 'random.count': 12, 'random.seed': 3}
 GIB = 1 << 30
@@ -97,35 +98,6 @@ def source(tmp_path_factory):
     return path
 
 
-def rewrite(source, target, metadata=None, data=None):
-    """Copy a recording through mcap's Writer, editing metadata values and message data."""
-    with open(source, 'rb') as stream, open(target, 'wb') as out:
-        writer = Writer(out, compression=CompressionType.ZSTD)
-        topics = {}
-        for item in Scan(stream, os.path.getsize(source)).records():
-            kind = type(item).__name__
-            if kind == 'Header':
-                writer.start(item.profile, item.library)
-            elif kind == 'Schema':
-                writer.register_schema(item.name, item.encoding, item.data)
-            elif kind == 'Channel':
-                topics[item.id] = item.topic
-                writer.register_channel(item.topic, item.message_encoding, item.schema_id,
-                                        item.metadata)
-            elif kind == 'Metadata':
-                values = dict(item.metadata)
-                if metadata is not None:
-                    values = metadata(values)
-                writer.add_metadata(item.name, values)
-            elif kind == 'Message':
-                payload = item.data if data is None else data(topics[item.channel_id],
-                                                              item.log_time, item.data)
-                writer.add_message(item.channel_id, item.log_time, payload, item.publish_time,
-                                   item.sequence)
-        writer.finish()
-    return target
-
-
 def with_parameters(source, target, **changes):
     """The recording with changed parameters in its metadata (JSON and YAML alike)."""
     def edit(values):
@@ -139,7 +111,7 @@ def with_parameters(source, target, **changes):
             node[leaf] = value
         text = json.dumps(document)
         return {**values, 'parameters_json': text, 'parameters': text}
-    return rewrite(source, target, metadata=edit)
+    return rewrite_recording(source, target, metadata=edit)
 
 
 # Metadata --------------------------------------------------------------------------------
@@ -147,15 +119,15 @@ def with_parameters(source, target, **changes):
 @pytest.mark.parametrize('dt_ns', ['0', '-50000000', '1e9', '', 'fifty', '9' * 5000,
                                    '3600000000001'])
 def test_bad_dt_ns_is_one_line_in_every_tool(source, tmp_path, dt_ns):
-    path = rewrite(source, tmp_path / 'bad.mcap',
-                   metadata=lambda values: {**values, 'dt_ns': dt_ns})
+    path = rewrite_recording(source, tmp_path / 'bad.mcap',
+                             metadata=lambda values: {**values, 'dt_ns': dt_ns})
     for name in TOOLS:
         assert "'dt_ns'" in refused(name, path, tmp_path)
 
 
 def test_dt_ns_must_be_what_the_parameters_give(source, tmp_path):
-    path = rewrite(source, tmp_path / 'bad.mcap',
-                   metadata=lambda values: {**values, 'dt_ns': '40000000'})
+    path = rewrite_recording(source, tmp_path / 'bad.mcap',
+                             metadata=lambda values: {**values, 'dt_ns': '40000000'})
     assert refused('resim', path, tmp_path).endswith(
         "'dt_ns' is 40000000 but the parameters give 50000000")
 
@@ -163,8 +135,8 @@ def test_dt_ns_must_be_what_the_parameters_give(source, tmp_path):
 @pytest.mark.parametrize('depth', [100, 10_000, 1_000_000])
 def test_deeply_nested_parameters_are_refused_without_recursion(source, tmp_path, depth):
     nested = '[' * depth + ']' * depth
-    path = rewrite(source, tmp_path / 'deep.mcap',
-                   metadata=lambda values: {**values, 'parameters_json': nested})
+    path = rewrite_recording(source, tmp_path / 'deep.mcap',
+                             metadata=lambda values: {**values, 'parameters_json': nested})
     line = refused('info', path, tmp_path)
     assert ("not a 'ball_world: ros__parameters:' document" if depth == 100
             else "'parameters_json' nests too deeply") in line, line
@@ -182,7 +154,7 @@ def test_yaml_alias_bombs_are_refused_not_expanded(source, tmp_path, levels):
     lines += [f'a{k}: &a{k} [' + ', '.join([f'*a{k - 1}'] * 10) + ']'
               for k in range(1, levels)]
     bomb = '\n'.join(lines) + '\n'
-    path = rewrite(source, tmp_path / 'bomb.mcap', metadata=lambda values: {
+    path = rewrite_recording(source, tmp_path / 'bomb.mcap', metadata=lambda values: {
         key: value for key, value in {**values, 'parameters': bomb}.items()
         if key != 'parameters_json'})
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -199,8 +171,8 @@ def test_metadata_with_wrong_shapes_is_refused(source, tmp_path):
         'segment': ({'segment': '-1'}, "'segment' is -1"),
     }
     for name, (changes, complaint) in cases.items():
-        path = rewrite(source, tmp_path / 'bad.mcap',
-                       metadata=lambda values: {**values, **changes})
+        path = rewrite_recording(source, tmp_path / 'bad.mcap',
+                                 metadata=lambda values: {**values, **changes})
         assert complaint in refused('info', path, tmp_path), name
 
 
@@ -359,7 +331,7 @@ def test_messages_that_do_not_decode_or_do_not_agree_are_refused(source, tmp_pat
             if topic == '/stats' else data, 'stats ball_ball is nan, not a count'),
     }
     for name, (edit, complaint) in cases.items():
-        path = rewrite(source, tmp_path / 'bad.mcap', data=edit)
+        path = rewrite_recording(source, tmp_path / 'bad.mcap', data=edit)
         assert complaint in refused('to_rrd', path, tmp_path), name
 
 
@@ -373,49 +345,23 @@ def _drop_pose(data):
 def test_resim_refuses_a_gap_instead_of_simulating_it(source, tmp_path, jump):
     # the last step's messages moved far ahead: a crafted gap must not be re-simulated
     last = 19 * 50_000_000
-    path = tmp_path / 'gap.mcap'
-    with open(source, 'rb') as stream, open(path, 'wb') as out:
-        writer = Writer(out)
-        for item in Scan(stream, os.path.getsize(source)).records():
-            kind = type(item).__name__
-            if kind == 'Header':
-                writer.start(item.profile, item.library)
-            elif kind == 'Schema':
-                writer.register_schema(item.name, item.encoding, item.data)
-            elif kind == 'Channel':
-                writer.register_channel(item.topic, item.message_encoding, item.schema_id,
-                                        item.metadata)
-            elif kind == 'Metadata':
-                writer.add_metadata(item.name, item.metadata)
-            elif kind == 'Message' and item.log_time >= last:
-                moved = last + (jump - 1) * 50_000_000
-                writer.add_message(item.channel_id, moved, item.data, moved, item.sequence)
-            elif kind == 'Message':
-                writer.add_message(item.channel_id, item.log_time, item.data,
-                                   item.publish_time, item.sequence)
-        writer.finish()
+    moved = last + (jump - 1) * 50_000_000
+    path = rewrite_recording(
+        source, tmp_path / 'gap.mcap',
+        edit=lambda item: replace(item, log_time=moved, publish_time=moved)
+        if isinstance(item, Message) and item.log_time >= last else item)
     line = refused('resim', path, tmp_path)
     assert f'jumps from step 18 to step {18 + jump}' in line, line
 
 
 def test_replay_refuses_types_it_would_have_to_import_and_survives_a_qos_bomb(
         source, tmp_path):
-    path = tmp_path / 'types.mcap'
-    with open(source, 'rb') as stream, open(path, 'wb') as out:
-        writer = Writer(out)
-        for item in Scan(stream, os.path.getsize(source)).records():
-            kind = type(item).__name__
-            if kind == 'Header':
-                writer.start(item.profile, item.library)
-            elif kind == 'Schema':
-                name = 'antigravity/msg/Fly' if item.name.endswith('PoseArray') else item.name
-                writer.register_schema(name, item.encoding, item.data)
-            elif kind == 'Channel':
-                writer.register_channel(item.topic, item.message_encoding, item.schema_id,
-                                        item.metadata)
-            elif kind == 'Metadata':
-                writer.add_metadata(item.name, item.metadata)
-        writer.finish()
+    def edit(item):  # no messages; PoseArray's schema renamed
+        if isinstance(item, Schema) and item.name.endswith('PoseArray'):
+            return replace(item, name='antigravity/msg/Fly')
+        return None if isinstance(item, Message) else item
+
+    path = rewrite_recording(source, tmp_path / 'types.mcap', edit=edit)
     assert 'antigravity' not in sys.modules
     line = refused('replay', path, tmp_path)
     assert "'antigravity/msg/Fly' is not an installed ROS message type" in line
@@ -518,22 +464,14 @@ def test_fuzzed_recordings_get_an_answer_from_every_tool(tmp_path, compression):
 
 
 def test_info_escapes_control_characters_from_the_file(source, tmp_path, capsys):
-    path = tmp_path / 'escapes.mcap'
-    with open(source, 'rb') as stream, open(path, 'wb') as out:
-        writer = Writer(out)
-        for item in Scan(stream, os.path.getsize(source)).records():
-            kind = type(item).__name__
-            if kind == 'Header':
-                writer.start(item.profile, 'lib\x1b]0;title\x07')
-            elif kind == 'Schema':
-                writer.register_schema(item.name, item.encoding, item.data)
-            elif kind == 'Channel':
-                topic = '/imp\x1b[2J' if item.topic == '/impulse' else item.topic
-                writer.register_channel(topic, item.message_encoding, item.schema_id,
-                                        item.metadata)
-            elif kind == 'Metadata':
-                writer.add_metadata(item.name, item.metadata)
-        writer.finish()
+    def edit(item):  # no messages; control characters in the library and a topic
+        if isinstance(item, Header):
+            return replace(item, library='lib\x1b]0;title\x07')
+        if isinstance(item, Channel) and item.topic == '/impulse':
+            return replace(item, topic='/imp\x1b[2J')
+        return None if isinstance(item, Message) else item
+
+    path = rewrite_recording(source, tmp_path / 'escapes.mcap', edit=edit)
     assert info.main([str(path)]) == 0
     out = capsys.readouterr().out
     assert '\x1b' not in out and "'/imp\\x1b[2J'" in out and "'lib\\x1b]0;title\\x07'" in out

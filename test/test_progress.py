@@ -4,20 +4,18 @@ The terminal case runs the real console tool with stderr on a pseudo-terminal (p
 what matters is that the tool asks the stream it writes to; the other case pipes stderr.
 """
 import os
-from pathlib import Path
 import pty
 import select
 import subprocess
-import sys
 import time
 
+from ball_world_testing.harness import executable, finish, start
 import pytest
 
 from ball_world.recording.mcap_writer import McapSink
 from ball_world.simulation import Simulation
 from ball_world.tools.progress import Progress
 
-BIN = Path(sys.executable).parent
 #: Generous: a tool that has not finished in this long is hanging.
 DEADLINE = 120.0
 
@@ -34,11 +32,11 @@ def recording(tmp_path_factory):
     return path
 
 
-def on_a_terminal(command):
+def on_a_terminal(processes, command):
     """(exit code, what the tool wrote to its stderr), with stderr a pseudo-terminal."""
     controller, terminal = pty.openpty()
-    process = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                               stderr=terminal)
+    process = processes.start(command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                              stderr=terminal)
     os.close(terminal)
     written = b''
     deadline = time.monotonic() + DEADLINE
@@ -63,9 +61,10 @@ def on_a_terminal(command):
     ('ball_world_to_rrd', ['-o', '{dir}/out.rrd']),
     ('ball_world_resim', []),
 ])
-def test_on_a_terminal_the_bar_redraws_in_place(recording, tmp_path, tool, arguments):
-    command = [str(BIN / tool), str(recording)] + [a.format(dir=tmp_path) for a in arguments]
-    code, written = on_a_terminal(command)
+def test_on_a_terminal_the_bar_redraws_in_place(recording, tmp_path, processes, tool,
+                                                arguments):
+    command = [executable(tool), str(recording)] + [a.format(dir=tmp_path) for a in arguments]
+    code, written = on_a_terminal(processes, command)
     assert code == 0, written
     written = written.replace('\r\n', '\n')  # the terminal's own line ends (onlcr)
     bar = [line for line in written.split('\n') if '1,501 steps' in line or '/1,501' in line]
@@ -81,11 +80,11 @@ def test_on_a_terminal_the_bar_redraws_in_place(recording, tmp_path, tool, argum
     ('ball_world_repair', ['-o', '{dir}/out.mcap']),
 ])
 def test_elsewhere_the_bar_is_one_final_line(recording, tmp_path, tool, arguments):
-    command = [str(BIN / tool), str(recording)] + [a.format(dir=tmp_path) for a in arguments]
-    result = subprocess.run(command, capture_output=True, text=True, timeout=DEADLINE)
-    assert result.returncode == 0, result.stderr
-    progress = [line for line in result.stderr.splitlines() if line.startswith(tool + ': [')]
-    assert len(progress) == 1 and '\r' not in result.stderr, result.stderr
+    command = [executable(tool), str(recording)] + [a.format(dir=tmp_path) for a in arguments]
+    code, _, err = finish(start(command), DEADLINE)
+    assert code == 0, err
+    progress = [line for line in err.splitlines() if line.startswith(tool + ': [')]
+    assert len(progress) == 1 and '\r' not in err, err
     assert '100% ' in progress[0]
 
 

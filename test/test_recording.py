@@ -11,12 +11,11 @@ import os
 from pathlib import Path
 import shutil
 import signal
-import subprocess
 import sys
 import textwrap
 
+from ball_world_testing.harness import rewrite_recording, ROSBAGS_TYPES, Truth
 from mcap.reader import make_reader, SeekingReader
-from mcap.writer import Writer
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
@@ -24,7 +23,6 @@ import rclpy
 from rclpy.node import Node
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.rosbag2.errors import ReaderError
-from rosbags.typesys import get_typestore, Stores
 import yaml
 
 from ball_world.msgs.cdr import decode_pose_array, encode_pose_array
@@ -58,28 +56,6 @@ MARKERS_QOS = JAZZY_QOS.replace('depth: 10', 'depth: 1').replace(
     'durability: volatile', 'durability: transient_local')
 
 
-class Collect:
-    """A Sink that keeps what it is given: the truth recordings are checked against."""
-
-    def __init__(self):
-        self.segments = []
-        self.records = []
-        self.flushes = 0
-        self.closed = False
-
-    def start_segment(self, world, info):
-        self.segments.append((world, info))
-
-    def write_step(self, record):
-        self.records.append(record)
-
-    def flush(self):
-        self.flushes += 1
-
-    def close(self):
-        self.closed = True
-
-
 def run(simulation, steps, impulses=None):
     for k in range(1, steps + 1):
         for ball, jx, jy in (impulses or {}).get(simulation.step_index + 1, ()):
@@ -88,8 +64,8 @@ def run(simulation, steps, impulses=None):
 
 
 def record(path, steps=30, reset_steps=12, compression='lz4', chunk_bytes=None):
-    """A recording with impulses and (if reset_steps) a reset; returns the Collect truth."""
-    truth = Collect()
+    """A recording with impulses and (if reset_steps) a reset; returns its Truth."""
+    truth = Truth()
     options = {} if chunk_bytes is None else {'chunk_bytes': chunk_bytes}
     simulation = Simulation(PARAMS, sinks=[McapSink(path, compression, **options), truth])
     run(simulation, steps, IMPULSES)
@@ -165,7 +141,6 @@ def test_mcap_ros2_reads_back_exactly_what_the_simulation_produced(tmp_path, com
 
 def test_rosbags_reads_the_bare_mcap_with_rosbag2_qos_and_schemas(recorded):
     path, truth = recorded
-    typestore = get_typestore(Stores.ROS2_JAZZY)
     with RosbagsReader(path) as reader:
         connections = {c.topic: c for c in reader.connections}
         assert {t: c.msgtype for t, c in connections.items()} == {**TYPES, **MARKERS}
@@ -176,7 +151,7 @@ def test_rosbags_reads_the_bare_mcap_with_rosbag2_qos_and_schemas(recorded):
                                              if topic == '/markers' else
                                              ('KEEP_LAST', 10, 'RELIABLE', 'VOLATILE'))
             assert connection.msgdef.data == message_definition({**TYPES, **MARKERS}[topic])
-        balls = [typestore.deserialize_cdr(raw, 'geometry_msgs/msg/PoseArray')
+        balls = [ROSBAGS_TYPES.deserialize_cdr(raw, 'geometry_msgs/msg/PoseArray')
                  for _, _, raw in reader.messages([connections['/balls']])]
         markers = connections['/markers'].msgcount
         assert reader.message_count == len(expected_messages(truth)) + markers
@@ -249,7 +224,7 @@ def test_recording_steps_and_feed_sinks_rebuild_every_record(recorded):
     assert recording.has_summary and recording.problem is None
     assert [(s.index, s.log_offset_ns) for s in recording.segments] == \
         [(info.segment, info.log_offset_ns) for _, info in truth.segments]
-    fed = Collect()
+    fed = Truth()
     assert feed_sinks(path, [fed]) == len(truth.records)
     assert fed.closed and fed.flushes == 1
     for (world, run_info), (got_world, got_info) in zip(truth.segments, fed.segments):
@@ -302,30 +277,6 @@ def test_resim_is_bit_identical_across_impulses_and_a_reset(recorded, capsys):
     assert 'all 44 recorded steps re-simulate bit-identically' in out
 
 
-def rewrite(source, target, edit):
-    """Copy an MCAP record by record, passing each message's data through edit()."""
-    with open(source, 'rb') as stream, open(target, 'wb') as out:
-        writer = Writer(out)
-        channels = {}
-        for item in Scan(stream, os.path.getsize(source)).records():
-            kind = type(item).__name__
-            if kind == 'Header':
-                writer.start(item.profile, item.library)
-            elif kind == 'Schema':
-                writer.register_schema(item.name, item.encoding, item.data)
-            elif kind == 'Channel':
-                channels[item.id] = item.topic
-                writer.register_channel(item.topic, item.message_encoding, item.schema_id,
-                                        item.metadata)
-            elif kind == 'Metadata':
-                writer.add_metadata(item.name, item.metadata)
-            elif kind == 'Message':
-                data = edit(channels[item.channel_id], item.log_time, item.data)
-                writer.add_message(item.channel_id, item.log_time, data, item.publish_time,
-                                   item.sequence)
-        writer.finish()
-
-
 def test_resim_reports_a_pose_changed_by_one_ulp(recorded, tmp_path, capsys):
     path, truth = recorded
     target = truth.records[17]
@@ -337,7 +288,7 @@ def test_resim_reports_a_pose_changed_by_one_ulp(recorded, tmp_path, capsys):
         positions[4, 0] = np.nextafter(positions[4, 0], np.inf)
         return encode_pose_array(positions, stamp, frame_id)
 
-    rewrite(path, tmp_path / 'tampered.mcap', nudge)
+    rewrite_recording(path, tmp_path / 'tampered.mcap', data=nudge)
     assert resim.main([str(tmp_path / 'tampered.mcap')]) == 1
     out = capsys.readouterr().out
     assert 'segment 0: 31 steps compared (last step 30), 3 impulses: 1 steps differ' in out
@@ -348,9 +299,10 @@ def test_resim_reports_a_pose_changed_by_one_ulp(recorded, tmp_path, capsys):
 
 def test_resim_notices_an_impulse_moved_to_another_ball(recorded, tmp_path, capsys):
     path, _ = recorded
-    rewrite(path, tmp_path / 'no_impulse.mcap',
-            lambda topic, log_time, data: data if topic != '/impulse' or log_time != 250_000_000
-            else data.replace(b'ball_2', b'ball_3'))
+    rewrite_recording(
+        path, tmp_path / 'no_impulse.mcap',
+        data=lambda topic, log_time, data: data if topic != '/impulse' or log_time != 250_000_000
+        else data.replace(b'ball_2', b'ball_3'))
     assert resim.main([str(tmp_path / 'no_impulse.mcap')]) == 1
     out = capsys.readouterr().out
     assert 'first difference: segment 0 step 5 ' in out
@@ -377,10 +329,9 @@ WRITER = textwrap.dedent("""
 """)
 
 
-def test_sigkilled_recording_is_repaired_up_to_the_last_flush(tmp_path, capsys):
+def test_sigkilled_recording_is_repaired_up_to_the_last_flush(tmp_path, capsys, processes):
     path = tmp_path / 'killed.mcap'
-    child = subprocess.Popen([sys.executable, '-c', WRITER, str(path)], cwd=ROOT,
-                             stdout=subprocess.PIPE, text=True)
+    child = processes.start([sys.executable, '-c', WRITER, str(path)], cwd=ROOT, stderr=None)
     try:
         flushed = [int(child.stdout.readline()) for _ in range(3)]
     finally:
@@ -405,7 +356,7 @@ def test_sigkilled_recording_is_repaired_up_to_the_last_flush(tmp_path, capsys):
 
 def test_unfinished_file_is_read_without_summary_up_to_the_last_flush(tmp_path):
     path = tmp_path / 'open.mcap'
-    truth = Collect()
+    truth = Truth()
     simulation = Simulation(PARAMS, sinks=[McapSink(path), truth])
     run(simulation, 20, IMPULSES)
     simulation.flush()
