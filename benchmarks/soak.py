@@ -7,9 +7,11 @@ minutes of recording. Every case prints progress to stderr and one Markdown tabl
 (case | what happened | figure) to stdout, and exits 0 when its checks held, 1 when one
 failed, 2 when it could not run.
 
-The node runs as a subprocess (the `ball_world` beside this Python), in its own namespace
-/soak_<pid>, so a soak never hears another ball_world on the same ROS domain. ROS, the
-readers and Rerun are imported by the cases that use them, so `steps` runs without ROS.
+The node runs as a subprocess (the installed `ball_world`, found as the tests find it), in its
+own namespace /soak_<pid>, so a soak never hears another ball_world on the same ROS domain.
+The node process, the listener, the readers and the Rerun CLI are the test harness's
+(ball_world_testing.harness), imported by the cases that use them with ROS and Rerun, so
+`steps` runs without ROS.
 """
 import argparse
 import contextlib
@@ -20,11 +22,9 @@ import os
 from pathlib import Path
 import shutil
 import signal
-import subprocess
 import sys
 import tempfile
 import time
-import warnings
 
 import numpy as np
 
@@ -64,14 +64,10 @@ def rss_mb(pid=None):
 
 # The node as a subprocess ---------------------------------------------------------------------
 
-def node_executable():
-    beside = Path(sys.executable).parent / 'ball_world'
-    if beside.exists():
-        return str(beside)
-    found = shutil.which('ball_world')
-    if found is None:
-        raise SoakError('the ball_world executable is neither beside this Python nor on PATH')
-    return found
+def _harness():
+    """The test harness, imported by the cases that use it: with it come ROS and Rerun."""
+    from ball_world_testing import harness
+    return harness
 
 
 class NodeProcess:
@@ -79,39 +75,25 @@ class NodeProcess:
 
     def __init__(self, workdir, namespace, name, parameters):
         self.log_path = Path(workdir) / f'{name}.log'
-        command = [node_executable(), '--ros-args', '-r', f'__ns:={namespace}']
-        for key, value in parameters.items():
-            command += ['-p', f'{key}:={value}']
-        with open(self.log_path, 'w') as log:
-            self.process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
+        self.process = _harness().start_node(
+            *(f'{key}:={value}' for key, value in parameters.items()),
+            ros_args=['-r', f'__ns:={namespace}'], log=self.log_path)
         self.pid = self.process.pid
 
     def log(self):
         return self.log_path.read_text(errors='replace')
 
-    def alive(self):
-        return self.process.poll() is None
-
     def check_alive(self):
-        if not self.alive():
-            raise SoakError(f'the node exited with {self.process.returncode}: '
-                            f'{self.log()[-1500:]}')
+        _harness().check_running(self.process)
 
     def stop(self, sig=signal.SIGINT):
-        """Send sig and wait for the exit code (SIGKILL after DEADLINE)."""
-        if self.alive():
+        """Send sig and wait for the exit code (SIGKILL and a failure after DEADLINE)."""
+        if self.process.poll() is None:
             self.process.send_signal(sig)
-        try:
-            return self.process.wait(timeout=DEADLINE)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            self.process.wait()
-            raise SoakError(f'the node did not exit within {DEADLINE:g} s of signal {sig}')
+        return _harness().finish(self.process, DEADLINE)[0]
 
     def kill(self):
-        if self.alive():
-            self.process.kill()
-        self.process.wait()
+        _harness().kill(self.process)
 
     def real_time_factors(self):
         """The real-time factors of the node's 10 s progress lines."""
@@ -139,7 +121,7 @@ def arena_side(balls):
 
 
 class Listener:
-    """A node in its own context that hears the soaked node's `balls` (and `stats`).
+    """A probe (a node in its own context) that hears the soaked node's `balls` and `stats`.
 
     It takes the messages as CDR bytes and decodes only what it needs with ball_world.msgs.cdr:
     rclpy's conversion of a 1,000-pose PoseArray would cost this process a whole core at
@@ -148,25 +130,18 @@ class Listener:
 
     def __init__(self, namespace, stats=False):
         from geometry_msgs.msg import PoseArray
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile, ReliabilityPolicy
         from std_msgs.msg import Float64MultiArray
-        self._rclpy = rclpy
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node('soak_listener', context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+        self.probe = _harness().Probe('soak_listener')
         self.last_step = -1
         self.heard = 0
         self.real_time_factor = math.nan
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-        self.node.create_subscription(PoseArray, f'{namespace}/balls', self._on_balls, qos,
-                                      raw=True)
+        self.probe.node.create_subscription(PoseArray, f'{namespace}/balls', self._on_balls,
+                                            qos, raw=True)
         if stats:
-            self.node.create_subscription(Float64MultiArray, f'{namespace}/stats',
-                                          self._on_stats, qos, raw=True)
+            self.probe.node.create_subscription(Float64MultiArray, f'{namespace}/stats',
+                                                self._on_stats, qos, raw=True)
 
     def _on_balls(self, data):
         stamp_ns = decode_pose_array(data)[0]
@@ -177,28 +152,18 @@ class Listener:
         self.real_time_factor = float(decode_state_layout(data)[2][-1])
 
     def spin(self, seconds=0.05):
-        self.executor.spin_once(timeout_sec=seconds)
+        self.probe.executor.spin_once(timeout_sec=seconds)
 
-    def spin_until(self, predicate, node=None, timeout=DEADLINE):
-        deadline = time.monotonic() + timeout
-        while not predicate():
-            if time.monotonic() > deadline:
-                raise SoakError(f'timed out after {timeout:g} s')
-            if node is not None:
-                node.check_alive()
-            self.spin()
+    def spin_until(self, predicate, what, node):
+        """Spin until predicate() holds; fail after DEADLINE or if the node exits first."""
+        self.probe.spin_until(predicate, what, DEADLINE, node.process)
 
     def drain(self):
         """Take what is already queued: messages the node sent just before it died."""
-        heard = None
-        while heard != self.heard:
-            heard = self.heard
-            self.spin(0.1)
+        self.probe.drain(lambda: self.heard)
 
     def close(self):
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self._rclpy.try_shutdown(context=self.context)
+        self.probe.close()
 
 
 def namespace():
@@ -207,45 +172,23 @@ def namespace():
 
 # kill -----------------------------------------------------------------------------------------
 
-def check_readers(path):
-    """Open a repaired file with mcap, mcap_ros2 and rosbags; {reader: /balls count or error}."""
-    from mcap.reader import make_reader
-    from mcap_ros2.decoder import DecoderFactory
-    from rosbags.rosbag2 import Reader as RosbagsReader
-    from rosbags.typesys import get_typestore, Stores
+def check_readers(path, topic):
+    """Open a repaired file with mcap, mcap_ros2 and rosbags; {reader: `topic` count or error}.
+
+    Each reader decodes what it reads (but mcap, which gives bytes and must find the summary).
+    """
     seen = {}
-    try:
-        with open(path, 'rb') as stream:
-            reader = make_reader(stream)
-            if reader.get_summary() is None:
-                raise ValueError('no summary')
-            seen['mcap'] = sum(1 for _, channel, _ in reader.iter_messages()
-                               if channel.topic.endswith('/balls'))
-    except Exception as error:  # noqa: B902 - any reader failure is the finding
-        seen['mcap'] = f'{type(error).__name__}: {error}'
-    try:
-        with open(path, 'rb') as stream:
-            reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-            seen['mcap_ros2'] = sum(1 for _, channel, _, msg in reader.iter_decoded_messages()
-                                    if channel.topic.endswith('/balls') and msg.poses)
-    except Exception as error:  # noqa: B902
-        seen['mcap_ros2'] = f'{type(error).__name__}: {error}'
-    try:
-        typestore = get_typestore(Stores.ROS2_JAZZY)
-        with RosbagsReader(path) as reader:
-            balls = [c for c in reader.connections if c.topic.endswith('/balls')]
-            seen['rosbags'] = sum(
-                1 for connection, _, data in reader.messages(connections=balls)
-                if typestore.deserialize_cdr(data, connection.msgtype).poses is not None)
-    except Exception as error:  # noqa: B902
-        seen['rosbags'] = f'{type(error).__name__}: {error}'
+    for name, read in _harness().READERS.items():
+        try:
+            seen[name] = len(read(path, [topic]))
+        except Exception as error:  # noqa: B902 - any reader failure is the finding
+            seen[name] = f'{type(error).__name__}: {error}'
     return seen
 
 
 def rerun_cli(*args):
-    """Run the `rerun` CLI beside this Python: (exit code, what it said, files as <file>)."""
-    done = subprocess.run([str(Path(sys.executable).parent / 'rerun'), *map(str, args)],
-                          capture_output=True, text=True, timeout=DEADLINE)
+    """Run the Rerun CLI: (exit code, what it said, files as <file>)."""
+    done = _harness().run_rerun(*args, timeout=DEADLINE)
     text = done.stdout + done.stderr
     for arg in args:
         if isinstance(arg, Path):
@@ -255,22 +198,11 @@ def rerun_cli(*args):
 
 
 def rrd_steps(path):
-    """The steps of `arena/balls` positions Rerun's Python reader reads, or its error."""
-    import rerun as rr
-    steps = []
+    """The steps of ball positions Rerun's Python reader reads (all recordings), or its error."""
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter('ignore')  # 'no footer: legacy format, whole-file scan'
-            reader = rr.chunk.RrdReader(path)
-            for store in reader.recordings():
-                for chunk in reader.stream(store=store):
-                    batch = chunk.to_record_batch()
-                    if (chunk.entity_path == '/arena/balls'
-                            and 'Points2D:positions' in batch.schema.names):
-                        steps += batch.column('step').to_pylist()
+        return sorted(step for steps in _harness().rrd_ball_steps(path) for step in steps)
     except Exception as error:  # noqa: B902 - what the reader does is the finding
         return f'{type(error).__name__}: {error}'.replace(str(path), '<file>')
-    return sorted(steps)
 
 
 def rrd_findings(path, last_mcap_step):
@@ -337,9 +269,9 @@ def run_kill(args, workdir):
         node = NodeProcess(workdir, ns, f'kill{attempt}', parameters)
         listener = Listener(ns)
         try:
-            listener.spin_until(lambda: listener.heard > 0, node)
+            listener.spin_until(lambda: listener.heard > 0, 'the first step', node)
             kill_at = listener.last_step + int(rng.integers(150, 450))  # 1.5-4.5 s on
-            listener.spin_until(lambda: listener.last_step >= kill_at, node)
+            listener.spin_until(lambda: listener.last_step >= kill_at, f'step {kill_at}', node)
             time.sleep(rng.uniform(0.0, 1.0 / args.rate))  # anywhere within a step
             node.kill()
             listener.drain()
@@ -360,7 +292,7 @@ def run_kill(args, workdir):
         last = steps[-1] if steps else -1
         lost = heard - last
         losses.append(lost)
-        readers = check_readers(repaired)
+        readers = check_readers(repaired, Recording(repaired).topic_of('balls'))
         with contextlib.redirect_stdout(io.StringIO()) as out, \
                 contextlib.redirect_stderr(io.StringIO()):
             resim_code = resim.main([str(repaired)])
@@ -473,7 +405,7 @@ def run_flood(args, workdir):
     try:
         for sender in senders:
             sender.start()
-        listener.spin_until(lambda: listener.heard > 0, node)
+        listener.spin_until(lambda: listener.heard > 0, 'the first step', node)
         ready = 0
         while ready < args.senders:
             kind, seed, detail = _next_result(results, listener, node)
@@ -500,7 +432,7 @@ def run_flood(args, workdir):
                 raise SoakError(f'sender {seed}: {detail}')
         # Every impulse is acknowledged by the node's reader; the next steps apply them.
         settled = listener.last_step + 5
-        listener.spin_until(lambda: listener.last_step >= settled, node)
+        listener.spin_until(lambda: listener.last_step >= settled, f'step {settled}', node)
         stats_rtf = listener.real_time_factor
         code = node.stop(signal.SIGINT)
     finally:
@@ -616,7 +548,7 @@ def run_memory(args, workdir):
     listener = Listener(ns)
     samples = []
     try:
-        listener.spin_until(lambda: listener.heard > 0, node)
+        listener.spin_until(lambda: listener.heard > 0, 'the first step', node)
         began = time.monotonic()
         end = began + args.minutes * 60.0
         next_sample = began + args.every
@@ -720,7 +652,7 @@ def main(argv=None):
     os.makedirs(workdir, exist_ok=True)
     try:
         return runs[args.case](args, workdir)
-    except SoakError as error:
+    except (SoakError, AssertionError) as error:  # AssertionError: the harness's HarnessError
         print(f'ball_world_soak {args.case}: {error}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:
