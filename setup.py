@@ -8,7 +8,8 @@ package_name = 'ball_world'
 setup(
     name=package_name,
     version='0.1.0',
-    packages=find_packages(exclude=['test', 'test.*', 'benchmarks']),
+    # ball_world only: not benchmarks/ nor the test harness ball_world_testing/.
+    packages=find_packages(include=['ball_world', 'ball_world.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -22,7 +23,9 @@ setup(
     maintainer_email='ball_world@example.com',
     description='An exact 2D elastic-collision world as a ROS 2 node, with MCAP and Rerun output.',
     license='Apache-2.0',
-    tests_require=['pytest'],
+    # What colcon test reads (setuptools dropped tests_require); the full test environment is
+    # requirements/base.txt and benchmarks/requirements.txt.
+    extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
             'ball_world = ball_world.ros.node:main',

@@ -7,7 +7,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_flake8_is_clean():
-    targets = [t for t in ('ball_world', 'test', 'benchmarks', 'launch', 'setup.py')
+    targets = [t for t in ('ball_world', 'ball_world_testing', 'test', 'benchmarks', 'launch',
+                           'setup.py')
                if (ROOT / t).exists()]
     result = subprocess.run(
         [sys.executable, '-m', 'flake8', *targets], cwd=ROOT, capture_output=True, text=True)
