@@ -262,12 +262,6 @@ class Probe:
                 check_running(process)
             self.executor.spin_once(timeout_sec=0.05)
 
-    def spin_for(self, seconds):
-        """Spin for this long, whatever arrives."""
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=0.05)
-
     def drain(self, heard):
         """Spin until a pass takes nothing more (`heard()` counts what arrived so far): the
         messages a node sent just before it exited, still queued here."""
