@@ -6,7 +6,7 @@ can never hear each other.
 """
 import os
 
-from ball_world_testing.harness import Children, Probe, run_tool
+from ball_world_testing.harness import Children, Probe
 import pytest
 
 if 'BALL_WORLD_TEST_DOMAIN' not in os.environ:
@@ -16,19 +16,8 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
 
 
-@pytest.fixture(scope='session')
-def compiled_kernels():
-    """The installed ball_world's numba kernels, compiled before a test starts (and times) it.
-
-    numba compiles them at the first start of a fresh install, for seconds (10 s on two cores
-    after colcon build), and caches them beside the installed code for every later start.
-    """
-    code, out, err = run_tool('ball_world_sim', '--steps', '1', timeout=300.0)
-    assert code == 0, out + err
-
-
 @pytest.fixture
-def processes(compiled_kernels):
+def processes():
     """Children (node, tools, scripts) of a test: killed if the test ends while they run."""
     with Children() as children:
         yield children
