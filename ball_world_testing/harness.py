@@ -46,7 +46,7 @@ from ball_world.recording.rerun_log import BALLS, STEP
 PACKAGE = 'ball_world'
 #: Seconds to wait for anything that must happen (discovery, an answer, an exit): generous,
 #: since two noisy shared cores may be slow; only a hang takes this long.
-DEADLINE = 60.0
+DEADLINE = 120.0
 #: How a probe subscribes unless told otherwise: reliable and deep, so that it misses nothing.
 RECEIVE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 #: The Rerun CLI itself. The `rerun` console script only runs this binary as its child, and a
@@ -220,10 +220,12 @@ class Probe:
 
     Its own context gives it its own DDS participant: it discovers the node under test and is
     discovered by it as a separate process would be. add_node() spins another node of the
-    same context along with it (a node under test in this process).
+    same context along with it (a node under test in this process). `timeout` is how long it
+    waits for anything unless told otherwise.
     """
 
-    def __init__(self, name='probe', namespace=None, domain_id=None):
+    def __init__(self, name='probe', namespace=None, domain_id=None, timeout=DEADLINE):
+        self.timeout = timeout
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=domain_id)
         self.node = rclpy.create_node(name, namespace=namespace, context=self.context)
@@ -245,21 +247,28 @@ class Probe:
             qos, raw=raw)
         return heard
 
-    def wait_for(self, predicate, timeout=DEADLINE):
+    def wait_for(self, predicate, timeout=None):
         """Spin until predicate() holds or the timeout passes; returns predicate()."""
-        deadline = time.monotonic() + timeout
+        deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
         while not predicate() and time.monotonic() < deadline:
             self.executor.spin_once(timeout_sec=0.05)
         return predicate()
 
-    def spin_until(self, predicate, what='the condition', timeout=DEADLINE, process=None):
+    def spin_until(self, predicate, what='the condition', timeout=None, process=None):
         """Spin until predicate() holds; fail if the timeout passes or `process` exits first."""
+        timeout = self.timeout if timeout is None else timeout
         deadline = time.monotonic() + timeout
         while not predicate():
             if time.monotonic() > deadline:
                 raise HarnessError(f'timed out after {timeout:g} s waiting for {what}')
             if process is not None:
                 check_running(process)
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def spin_for(self, seconds):
+        """Spin for this long, whatever arrives: to see that something does not happen."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
             self.executor.spin_once(timeout_sec=0.05)
 
     def drain(self, heard):
@@ -270,26 +279,28 @@ class Probe:
             before = heard()
             self.executor.spin_once(timeout_sec=0.1)
 
-    def call(self, srv_type, name, request, timeout=DEADLINE):
+    def result(self, future, what='the answer', timeout=None):
+        """The result of a future (a service call, an action goal) once it is done."""
+        self.spin_until(future.done, what, timeout)
+        return future.result()
+
+    def call(self, srv_type, name, request, timeout=None):
         """The response of service `name` to `request`, once it is offered and has answered."""
         client = self.node.create_client(srv_type, name)
         try:
             self.spin_until(client.service_is_ready, f'the service {name}', timeout)
-            future = client.call_async(request)
-            self.spin_until(future.done, f'the answer of {name}', timeout)
-            return future.result()
+            return self.result(client.call_async(request), f'the answer of {name}', timeout)
         finally:
             self.node.destroy_client(client)
 
-    def set_parameters(self, node_name, values, timeout=DEADLINE):
+    def set_parameters(self, node_name, values, timeout=None):
         """Set parameters of node `node_name` through its parameter service; all must succeed."""
         client = AsyncParameterClient(self.node, node_name)
         self.spin_until(client.services_are_ready, f'the parameter services of {node_name}',
                         timeout)
         future = client.set_parameters([Parameter(name, value=value)
                                         for name, value in values.items()])
-        self.spin_until(future.done, f'{node_name} to set its parameters', timeout)
-        results = future.result().results
+        results = self.result(future, f'{node_name} to set its parameters', timeout).results
         if not all(result.successful for result in results):
             raise HarnessError(f'{node_name} refused parameters {values}: {results}')
 

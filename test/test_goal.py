@@ -11,21 +11,13 @@ later. Both processes run on simulated time (publish_clock / use_sim_time), so t
 load cannot change these figures; the limits below leave about a factor of two.
 """
 import math
-from pathlib import Path
 import signal
-import subprocess
-import sys
-import time
 
+from ball_world_testing.harness import executable, finish, Probe, RECEIVE_QOS, run_tool
 from geometry_msgs.msg import PoseArray, Vector3Stamped
-from node_process import finish
 import numpy as np
 import pytest
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-BIN = Path(sys.executable).parent
 GOAL = (6.0, 7.0)
 MASS, KICKER_MASS, KICK_SPEED = 0.5, 0.1, 3.0
 WORLD = ['-p', 'publish_clock:=true', '-p', 'markers.rate_hz:=0.0', '-p', 'random.count:=0',
@@ -43,19 +35,14 @@ RETURN_S = 8.0         # simulated seconds from the kick back to within TOLERANC
 DEADLINE = 90.0        # wall seconds for any phase: a liveness limit only
 
 
-class Watch:
+class Watch(Probe):
     """Sees the world's poses with their simulated time, and kicks the other ball."""
 
     def __init__(self):
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node('goal_probe', context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+        super().__init__('goal_probe', timeout=DEADLINE)
         self.times, self.positions = [], []
-        qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-        self.node.create_subscription(PoseArray, 'balls', self._on_balls, qos)
-        self.kicks = self.node.create_publisher(Vector3Stamped, 'impulse', qos)
+        self.node.create_subscription(PoseArray, 'balls', self._on_balls, RECEIVE_QOS)
+        self.kicks = self.node.create_publisher(Vector3Stamped, 'impulse', RECEIVE_QOS)
 
     def _on_balls(self, msg):
         self.times.append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
@@ -63,12 +50,6 @@ class Watch:
 
     def distance(self, index=-1):
         return math.dist(self.positions[index][0], GOAL)
-
-    def spin_until(self, predicate, what):
-        deadline = time.monotonic() + DEADLINE
-        while not predicate():
-            assert time.monotonic() < deadline, f'timed out waiting for {what}'
-            self.executor.spin_once(timeout_sec=0.05)
 
     def kick_ball_1_at_ball_0(self):
         self.spin_until(lambda: self.kicks.get_subscription_count() > 0, 'the world')
@@ -80,11 +61,6 @@ class Watch:
         self.kicks.publish(msg)
         return self.times[-1]
 
-    def close(self):
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-
 
 @pytest.fixture
 def watch():
@@ -94,19 +70,16 @@ def watch():
 
 
 @pytest.fixture
-def start():
+def start(processes):
     """Starts executables with ROS arguments; stops them all at the end, checks they exit 0."""
-    started = []
 
-    def run(executable, *args):
-        started.append(subprocess.Popen(
-            [str(BIN / executable), '--ros-args', *args],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
+    def run(name, *args):
+        processes.start([executable(name), '--ros-args', *args])
 
     yield run
-    for process in started:
+    for process in processes.started:
         process.send_signal(signal.SIGINT)
-    ends = [finish(process) for process in started]
+    ends = [finish(process) for process in processes.started]
     for code, _, err in ends:
         assert code == 0 and 'Traceback' not in err, err
 
@@ -142,8 +115,7 @@ def test_goal_reaches_holds_and_recovers_from_a_bump(watch, start):
 
 
 def run_goal(*args):
-    return finish(subprocess.Popen([str(BIN / 'ball_world_goal'), *args],
-                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
+    return run_tool('ball_world_goal', *args)
 
 
 def test_help_prints_usage_and_parameters():

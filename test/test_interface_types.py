@@ -8,12 +8,8 @@ equal the one the standard published (interfaces/simulation_interfaces-jazzy-1.5
 import json
 from pathlib import Path
 import re
-import time
 
-import pytest
-import rclpy
 from rclpy.action import ActionClient, ActionServer
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile
 import simulation_interfaces
 from simulation_interfaces.action import SimulateSteps
@@ -76,30 +72,8 @@ def test_every_generated_type_hash_equals_the_standards():
     assert differing == {}
 
 
-@pytest.fixture
-def context():
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    node = rclpy.create_node('interface_types_probe', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    yield node, executor
-    executor.shutdown()
-    node.destroy_node()
-    rclpy.shutdown(context=context)
-
-
-def spin_until_done(executor, future, timeout=10.0):
-    """Spins until the future completes; the deadline only guards against a hang."""
-    deadline = time.monotonic() + timeout
-    while not future.done():
-        assert time.monotonic() < deadline, 'timed out waiting'
-        executor.spin_once(timeout_sec=0.05)
-    return future.result()
-
-
-def test_compiled_message_typesupport_announces_the_standard_hash(context):
-    node, executor = context
+def test_compiled_message_typesupport_announces_the_standard_hash(probe):
+    node = probe.node
     message_types = [getattr(simulation_interfaces.msg, name) for name in dir(
         simulation_interfaces.msg) if not name.startswith('_')]
     assert len(message_types) == 15
@@ -111,8 +85,8 @@ def test_compiled_message_typesupport_announces_the_standard_hash(context):
         assert str(endpoint.topic_type_hash) == STANDARD['rihs01'][name], name
 
 
-def test_service_round_trips_a_request_in_process(context):
-    node, executor = context
+def test_service_round_trips_a_request_in_process(probe):
+    node = probe.node
 
     def answer(request, response):
         response.features.features = [SimulatorFeatures.SPAWNING,
@@ -124,14 +98,14 @@ def test_service_round_trips_a_request_in_process(context):
     node.create_service(GetSimulatorFeatures, 'get_simulator_features', answer)
     client = node.create_client(GetSimulatorFeatures, 'get_simulator_features')
     assert client.wait_for_service(timeout_sec=10.0)
-    features = spin_until_done(executor, client.call_async(GetSimulatorFeatures.Request()))
+    features = probe.result(client.call_async(GetSimulatorFeatures.Request()))
     assert list(features.features.features) == [0, 33]
     assert features.features.spawn_formats == ['yaml']
     assert features.features.custom_info == 'ball_world'
 
 
-def test_action_round_trips_a_goal_in_process(context):
-    node, executor = context
+def test_action_round_trips_a_goal_in_process(probe):
+    node = probe.node
 
     def simulate(goal_handle):
         steps = goal_handle.request.steps
@@ -144,9 +118,9 @@ def test_action_round_trips_a_goal_in_process(context):
     server = ActionServer(node, SimulateSteps, 'simulate_steps', simulate)
     client = ActionClient(node, SimulateSteps, 'simulate_steps')
     assert client.wait_for_server(timeout_sec=10.0)
-    goal = spin_until_done(executor, client.send_goal_async(SimulateSteps.Goal(steps=3)))
+    goal = probe.result(client.send_goal_async(SimulateSteps.Goal(steps=3)))
     assert goal.accepted
-    outcome = spin_until_done(executor, goal.get_result_async())
+    outcome = probe.result(goal.get_result_async())
     assert outcome.result.result.result == Result.RESULT_OK
     client.destroy()
     server.destroy()

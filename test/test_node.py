@@ -1,5 +1,5 @@
 """The node in-process: topics, stamps, impulses, services, parameters, determinism."""
-from ball_world_testing.harness import DEADLINE, Probe, RECEIVE_QOS
+from ball_world_testing.harness import Probe, RECEIVE_QOS
 from geometry_msgs.msg import PoseArray, Vector3Stamped
 import numpy as np
 import pytest
@@ -33,7 +33,7 @@ class Harness:
         self.states = self.probe.listen(Float64MultiArray, 'state')
         self.impulses = self.probe.node.create_publisher(Vector3Stamped, 'impulse', RECEIVE_QOS)
 
-    def spin_until(self, predicate, timeout=DEADLINE):
+    def spin_until(self, predicate, timeout=None):
         self.probe.spin_until(predicate, timeout=timeout)
 
     def call(self, srv_type, name, request):

@@ -8,25 +8,21 @@ import select
 import shutil
 import signal
 import subprocess
-import sys
 import termios
 import time
 
+from ball_world_testing.harness import (executable, finish, node_command, Probe, RECEIVE_QOS,
+                                        start)
 from geometry_msgs.msg import PoseArray, Vector3Stamped
-from node_process import finish
 import numpy as np
 import pytest
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool
 
 from ball_world.tools import teleop
 from ball_world.tools.keyboard import KeyDecoder, RawKeys
 
-BIN = Path(sys.executable).parent
-TELEOP = str(BIN / 'ball_world_teleop')
 NAMESPACE = '/sim2'
 #: Three balls of 4 kg at rest, 3 m apart: an impulse J gives exactly v = J / 4 (a power of
 #: two), and at the speeds the keys give nothing touches anything for over a minute.
@@ -80,9 +76,7 @@ def test_selection_keeps_a_name_cycles_and_picks_by_position():
 
 
 def run_teleop(*args, stdin=subprocess.DEVNULL):
-    process = subprocess.Popen([TELEOP, *args], stdin=stdin, stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True)
-    return finish(process)
+    return finish(start([executable('ball_world_teleop'), *args], stdin=stdin))
 
 
 def test_help_prints_usage_keys_and_parameters():
@@ -169,7 +163,7 @@ class Tmux:
         environment = [f'-e{name}={os.environ[name]}' for name in
                        ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')]
         self.tmux('new-session', '-d', '-s', 'teleop', '-x', '100', '-y', '24', *environment,
-                  'sh', str(script), TELEOP, *teleop_args)
+                  'sh', str(script), executable('ball_world_teleop'), *teleop_args)
 
     def keys(self, *keys):
         self.tmux('send-keys', '-t', 'teleop', *keys)
@@ -240,22 +234,16 @@ def _state(pid):
         return b'Z'
 
 
-class Probe:
+class WorldProbe(Probe):
     """Watches the world's topics in its namespace: impulses, step stamps, velocities."""
 
     def __init__(self, namespace):
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node('teleop_probe', namespace=namespace,
-                                      context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+        super().__init__('teleop_probe', namespace=namespace, timeout=DEADLINE)
         self.impulses, self.stamps, self.velocities = [], [], None
-        qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
         self.impulse_sub = self.node.create_subscription(
-            Vector3Stamped, 'impulse', self._on_impulse, qos)
-        self.node.create_subscription(PoseArray, 'balls', self._on_balls, qos)
-        self.node.create_subscription(Float64MultiArray, 'state', self._on_state, qos)
+            Vector3Stamped, 'impulse', self._on_impulse, RECEIVE_QOS)
+        self.node.create_subscription(PoseArray, 'balls', self._on_balls, RECEIVE_QOS)
+        self.node.create_subscription(Float64MultiArray, 'state', self._on_state, RECEIVE_QOS)
 
     def _on_impulse(self, msg):
         self.impulses.append((msg.header.frame_id, msg.vector.x, msg.vector.y, msg.vector.z))
@@ -266,57 +254,34 @@ class Probe:
     def _on_state(self, msg):
         self.velocities = np.asarray(msg.data).reshape(-1, 4)[:, 2:]
 
-    def spin_until(self, predicate, what, timeout=DEADLINE):
-        deadline = time.monotonic() + timeout
-        while not predicate():
-            assert time.monotonic() < deadline, f'timed out waiting for {what}'
-            self.executor.spin_once(timeout_sec=0.05)
-
     def pause(self, paused):
-        client = self.node.create_client(SetBool, 'ball_world/pause')
-        self.spin_until(client.service_is_ready, 'the pause service')
-        future = client.call_async(SetBool.Request(data=paused))
-        self.spin_until(future.done, 'the pause answer')
-        assert future.result().success
-
-    def spin_for(self, seconds):
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=0.05)
-
-    def close(self):
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
+        assert self.call(SetBool, 'ball_world/pause', SetBool.Request(data=paused)).success
 
 
 @pytest.fixture
-def probe():
-    watcher = Probe(NAMESPACE)
+def world():
+    watcher = WorldProbe(NAMESPACE)
     yield watcher
     watcher.close()
 
 
 @pytest.fixture
-def start_world():
-    started = []
+def start_world(processes):
 
-    def start():
-        started.append(subprocess.Popen(
-            [str(BIN / 'ball_world'), '--ros-args', '-r', f'__ns:={NAMESPACE}', '-p',
-             f'rate_hz:={RATE_HZ}.0', '-p', 'markers.rate_hz:=0.0', *WORLD],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
+    def start_node():
+        processes.start(node_command(ros_args=[
+            '-r', f'__ns:={NAMESPACE}', '-p', f'rate_hz:={RATE_HZ}.0', '-p',
+            'markers.rate_hz:=0.0', *WORLD]))
 
-    yield start
-    for node in started:
+    yield start_node
+    for node in processes.started:
         node.send_signal(signal.SIGINT)
-    ends = [finish(node) for node in started]
+    ends = [finish(node) for node in processes.started]
     for code, _, err in ends:
         assert code == 0, err
 
 
-def test_keys_drive_the_world_in_a_terminal(terminal, probe, start_world):
-    world = probe
+def test_keys_drive_the_world_in_a_terminal(terminal, world, start_world):
     # The teleop starts before the world, as it may for a user. By the time the world is
     # up, the teleop and the probe have long discovered each other, so the probe hears
     # every impulse (a volatile publisher sends only to the readers it already knows).
