@@ -1,13 +1,30 @@
-"""Candidate pairs from positions and radii: a uniform grid (cell list), plus Verlet lists.
+"""Candidate pairs from positions and radii: a hierarchical grid, plus Verlet lists (numpy).
 
 The broadphase knows nothing of collision responses. It answers one question: which pairs
-of balls, and which ball-wall pairs, can possibly be touching? It answers it in O(N):
+of balls, and which ball-wall pairs, can possibly be touching? It answers it in O(N) time
+and memory for every world inside `core.limits`, without a Python loop over balls:
 
-- `grid_pairs` sorts balls by grid cell (cells at least as large as the interaction range)
-  and pairs every ball with the balls of its own cell and four neighbouring cells (a half
-  stencil, so each pair appears once), without a Python loop.
-- `NeighbourLists` keeps those pairs, widened by a skin, for as long as no ball can have
-  moved far enough to close the skin: the grid is rebuilt every few steps, not every step.
+- Radius classes (levels): balls whose radii lie within a factor LEVEL_RATIO of each other
+  share a uniform grid whose cells are one largest diameter (plus the margin) wide. A
+  single grid sized by the largest ball would put thousands of small balls in one cell
+  when radii differ by 100x; per level, a cell holds a bounded number of balls.
+- Within a level, every ball is paired with the balls of its own cell and four neighbour
+  cells (a half stencil, so each pair appears once). Across levels, each ball of a smaller
+  level looks at the 3 x 3 cells around it in every larger level's grid, whose cells are at
+  least as wide as any reach between the two.
+- Grids never have more than CELLS_PER_BALL cells per ball (plus CELLS_SLACK): when the
+  balls spread far apart (no arena), cells grow instead, so keys cannot overflow and
+  memory stays linear however large the coordinates.
+- Walls are rasterised into the cells of each level they pass within reach of, column by
+  column; each ball then meets only the walls of its own cell. A thousand walls cost the
+  cells they cross, not N x M distance tests.
+- `NeighbourLists` keeps the candidates, widened by a skin, for as long as no ball can have
+  moved far enough to close the skin, so the grids are rebuilt every few substeps.
+
+Candidates are returned in the canonical order (pairs sorted by (a, b) with a < b, ball-wall
+pairs by (ball, wall)), so whatever filters them keeps that order. `numba_backend` builds
+the same kind of grid in compiled loops; the two may offer different candidates, but both
+offer every touching pair.
 
 Speed notes (numpy 2.5, measured here): `np.take(a, i, axis=0)` gathers rows ten times
 faster than `a[i]` on (N, 2) arrays, and explicit x*x + y*y beats einsum; both are used on
@@ -15,9 +32,19 @@ every hot path.
 """
 import numpy as np
 
+from ball_world.core import rules
+
 _EMPTY = np.empty(0, dtype=np.intp)
-#: Use a dense cell table (O(1) look-ups) while it has at most this many cells per ball.
-_DENSE_CELLS_PER_BALL = 8
+#: Largest radius over smallest radius within one level of the hierarchical grid.
+LEVEL_RATIO = 4.0
+#: A grid has at most CELLS_PER_BALL cells per ball plus CELLS_SLACK; its cells grow past it.
+CELLS_PER_BALL = 4
+CELLS_SLACK = 1024
+#: Empty columns and rows around each grid, so that neighbour look-ups stay in the table.
+PAD = 2
+#: Relative widening of cells and reaches, far above the rounding of cell coordinates, so
+#: that a pair exactly at its reach is never lost to rounding.
+SLACK = 1e-9
 
 
 def take_rows(array, index):
@@ -30,109 +57,254 @@ def dot_rows(a, b):
     return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]
 
 
-def _cell_ranges(sorted_keys, offsets):
-    """For each ball and each key offset: [low, high) of the balls in that neighbour cell."""
-    top = int(sorted_keys[-1]) + max(offsets) + 2
-    if top <= _DENSE_CELLS_PER_BALL * len(sorted_keys) + 1024:
-        # starts[k]: first ball (in sorted order) whose key is >= k.
-        starts = np.zeros(top + 1, dtype=np.intp)
-        np.cumsum(np.bincount(sorted_keys, minlength=top), out=starts[1:])
-        return ([np.take(starts, sorted_keys + offset) for offset in offsets],
-                [np.take(starts, sorted_keys + offset + 1) for offset in offsets])
-    lows = [np.searchsorted(sorted_keys, sorted_keys + offset, side='left')
-            for offset in offsets]
-    highs = [np.searchsorted(sorted_keys, sorted_keys + offset, side='right')
-             for offset in offsets]
-    return lows, highs
+def radius_levels(radii):
+    """Level of each ball (0 for the smallest radii) and the number of levels.
 
-
-def grid_pairs(positions, radii, margin, previous_order=None):
-    """Pairs (i, j) with |x_i - x_j| < r_i + r_j + margin, and the cell order of the balls.
-
-    Passing the order returned last time makes the sort nearly free: balls move little
-    between builds, so the keys arrive almost sorted.
+    Level k holds radii in [r_min LEVEL_RATIO^k, r_min LEVEL_RATIO^(k+1)); the thresholds
+    are compared, never logarithms taken, so a larger radius never gets a smaller level.
     """
-    n = len(positions)
-    if n < 2:
-        return _EMPTY, _EMPTY, None
-    cell = 2.0 * float(radii.max()) + margin
-    cells = np.floor((positions - positions.min(axis=0)) / cell).astype(np.intp)
-    # Column stride leaves a free row on both sides, so key +- 1 never wraps into a
-    # neighbouring column.
-    stride = int(cells[:, 1].max()) + 3
-    keys = cells[:, 0] * stride + cells[:, 1] + 1
-    if previous_order is not None and len(previous_order) == n:
-        order = np.take(previous_order,
-                        np.argsort(np.take(keys, previous_order), kind='stable'))
-    else:
-        order = np.argsort(keys, kind='stable')
-    sorted_keys = np.take(keys, order)
+    thresholds = []
+    threshold = float(radii.min()) * LEVEL_RATIO
+    largest = float(radii.max())
+    while threshold <= largest:
+        thresholds.append(threshold)
+        threshold *= LEVEL_RATIO
+    return np.searchsorted(np.array(thresholds), radii, side='right'), len(thresholds) + 1
 
-    # Half stencil: the rest of the own cell, then (0,+1), (+1,-1), (+1,0), (+1,+1).
-    lows, highs = _cell_ranges(sorted_keys, (0, 1, stride - 1, stride, stride + 1))
-    lows[0] = np.arange(1, n + 1)
-    low = np.concatenate(lows)
-    counts = np.concatenate(highs) - low
+
+def widened(length, scale):
+    """`length` plus SLACK of itself and of the coordinates' magnitude `scale`."""
+    return length + SLACK * (length + scale)
+
+
+def grid_shape(extent_x, extent_y, cell, count):
+    """(cell, columns, rows) of a grid over the extent: cells at least `cell` wide, doubled
+    until the grid has at most CELLS_PER_BALL * count + CELLS_SLACK cells."""
+    if not (np.isfinite(extent_x) and np.isfinite(extent_y)):
+        raise ValueError('ball positions span a non-finite extent; cannot grid them')
+    budget = CELLS_PER_BALL * count + CELLS_SLACK
+    while (extent_x / cell + 1.0) * (extent_y / cell + 1.0) > budget:
+        cell *= 2.0
+    return cell, int(extent_x / cell) + 1, int(extent_y / cell) + 1
+
+
+def _expand(owners, low, high):
+    """For each owner k and each i in [low[k], high[k]): the pair (owner, i), as two arrays."""
+    counts = high - low
     total = int(counts.sum())
     if total == 0:
-        return _EMPTY, _EMPTY, order
-    first = np.repeat(np.tile(np.arange(n), 5), counts)
-    starts = np.cumsum(counts) - counts
-    second = np.repeat(low - starts, counts) + np.arange(total)
-    a = np.take(order, first)
-    b = np.take(order, second)
-
-    delta = take_rows(positions, a) - take_rows(positions, b)
-    reach = np.take(radii, a) + np.take(radii, b) + margin
-    near = dot_rows(delta, delta) < reach * reach
-    a = a[near]
-    b = b[near]
-    return np.minimum(a, b), np.maximum(a, b), order
+        return _EMPTY, _EMPTY
+    first = np.repeat(owners, counts)
+    offsets = np.cumsum(counts) - counts
+    second = np.repeat(low - offsets, counts) + np.arange(total)
+    return first, second
 
 
-def segment_offsets(points, starts, directions, lengths, ends):
-    """Offset from the nearest point of each segment to each point, and whether it is inside.
+class LevelGrid:
+    """One level's uniform grid: its balls sorted by cell, and a dense table of cell starts.
 
-    Inside the segment the offset is the seed's s = r - (r.w) w, perpendicular to the wall;
-    beyond an end it is the vector from that end point to the point.
+    Cell (i, j) of the grid has key (i + PAD) * stride + (j + PAD); the balls in it are
+    balls[starts[key]:starts[key + 1]].
     """
-    r = points - starts
-    along = dot_rows(r, directions)
-    interior = (along > 0.0) & (along < lengths)
-    offsets = r - along[:, None] * directions
-    before = along <= 0.0
-    if before.any():
-        offsets[before] = r[before]
-    after = along >= lengths
-    if after.any():
-        offsets[after] = points[after] - ends[after]
-    return offsets, interior
+
+    def __init__(self, positions, members, cell, scale, previous=None):
+        points = take_rows(positions, members)
+        self.origin = points.min(axis=0)
+        extent = points.max(axis=0) - self.origin
+        self.cell, self.nx, self.ny = grid_shape(extent[0], extent[1], cell, len(members))
+        self.scale = scale
+        self.stride = self.ny + 2 * PAD
+        fx, fy = self.coordinates(points)
+        cx = np.minimum(fx.astype(np.intp), self.nx - 1)
+        cy = np.minimum(fy.astype(np.intp), self.ny - 1)
+        keys = (cx + PAD) * self.stride + (cy + PAD)
+        if previous is not None and len(previous.order) == len(members):
+            # Balls move little between builds: the previous order is nearly sorted.
+            self.order = np.take(previous.order,
+                                 np.argsort(np.take(keys, previous.order), kind='stable'))
+        else:
+            self.order = np.argsort(keys, kind='stable')
+        self.balls = np.take(members, self.order)
+        self.keys = np.take(keys, self.order)
+        size = (self.nx + 2 * PAD) * self.stride
+        self.starts = np.zeros(size + 1, dtype=np.intp)
+        np.cumsum(np.bincount(self.keys, minlength=size), out=self.starts[1:])
+
+    def coordinates(self, points):
+        """Cell coordinates of points as floats (points outside the grid fall outside)."""
+        return ((points[:, 0] - self.origin[0]) / self.cell,
+                (points[:, 1] - self.origin[1]) / self.cell)
+
+    def own_pairs(self):
+        """Pairs of this level's balls in the same or neighbouring cells (half stencil)."""
+        n = len(self.balls)
+        keys = self.keys
+        stride = self.stride
+        # The rest of the own cell, then (0, +1), (+1, -1), (+1, 0), (+1, +1).
+        lows = [np.arange(1, n + 1)] + [np.take(self.starts, keys + k)
+                                        for k in (1, stride - 1, stride, stride + 1)]
+        highs = [np.take(self.starts, keys + k) for k in (1, 2, stride, stride + 1, stride + 2)]
+        first, second = _expand(np.tile(np.arange(n), 5), np.concatenate(lows),
+                                np.concatenate(highs))
+        return np.take(self.balls, first), np.take(self.balls, second)
+
+    def pairs_with(self, positions, queries):
+        """Pairs (query ball, ball of this grid) in the 3 x 3 cells around each query.
+
+        For queries from a smaller level: this grid's cells are at least as wide as the
+        reach between any of its balls and a smaller ball, so 3 x 3 cells hold them all.
+        """
+        fx, fy = self.coordinates(take_rows(positions, queries))
+        near = np.flatnonzero((fx >= -1.0) & (fx < self.nx + 1.0)
+                              & (fy >= -1.0) & (fy < self.ny + 1.0))
+        if len(near) == 0:
+            return _EMPTY, _EMPTY
+        cx = np.floor(np.take(fx, near)).astype(np.intp)
+        cy = np.floor(np.take(fy, near)).astype(np.intp)
+        centre = (cx + PAD) * self.stride + (cy + PAD)
+        keys = np.concatenate([centre + dx * self.stride + dy
+                               for dx in (-1, 0, 1) for dy in (-1, 0, 1)])
+        first, second = _expand(np.tile(np.take(queries, near), 9),
+                                np.take(self.starts, keys), np.take(self.starts, keys + 1))
+        return first, np.take(self.balls, second)
+
+    def wall_cells(self, walls, reach):
+        """(wall, cell key) for every cell of this grid within `reach` of a wall segment.
+
+        Column by column: the part of the segment whose x lies within reach of the column
+        gives the rows, widened by reach. Conservative: it may name a cell slightly out of
+        reach, never miss one within it.
+        """
+        reach = widened(reach, self.scale)
+        ox, oy = self.origin
+        cell = self.cell
+        x0 = walls.starts[:, 0]
+        y0 = walls.starts[:, 1]
+        x1 = walls.ends[:, 0]
+        y1 = walls.ends[:, 1]
+        first_col = np.floor(np.clip((np.minimum(x0, x1) - reach - ox) / cell, -1, self.nx))
+        last_col = np.floor(np.clip((np.maximum(x0, x1) + reach - ox) / cell, -1, self.nx))
+        first_col = np.maximum(first_col.astype(np.intp), 0)
+        last_col = np.minimum(last_col.astype(np.intp), self.nx - 1)
+        wall, col = _expand(np.arange(len(walls)), first_col,
+                            np.maximum(last_col + 1, first_col))
+        if len(wall) == 0:
+            return _EMPTY, _EMPTY
+        x0 = np.take(x0, wall)
+        y0 = np.take(y0, wall)
+        dx = np.take(x1, wall) - x0
+        dy = np.take(y1, wall) - y0
+        # Segment parameters where it enters and leaves the column's x-interval.
+        left = ox + col * cell - reach - x0
+        right = ox + (col + 1) * cell + reach - x0
+        vertical = dx == 0.0
+        safe_dx = np.where(vertical, 1.0, dx)
+        ta = left / safe_dx
+        tb = right / safe_dx
+        t_low = np.where(vertical, 0.0, np.clip(np.minimum(ta, tb), 0.0, 1.0))
+        t_high = np.where(vertical, 1.0, np.clip(np.maximum(ta, tb), 0.0, 1.0))
+        ya = y0 + t_low * dy
+        yb = y0 + t_high * dy
+        first_row = np.floor(np.clip((np.minimum(ya, yb) - reach - oy) / cell, -1, self.ny))
+        last_row = np.floor(np.clip((np.maximum(ya, yb) + reach - oy) / cell, -1, self.ny))
+        first_row = np.maximum(first_row.astype(np.intp), 0)
+        last_row = np.minimum(last_row.astype(np.intp), self.ny - 1)
+        entry, row = _expand(np.arange(len(wall)), first_row,
+                             np.maximum(last_row + 1, first_row))
+        keys = (np.take(col, entry) + PAD) * self.stride + row + PAD
+        return np.take(wall, entry), keys
+
+
+class HierarchicalGrid:
+    """The balls in one grid per radius level, built for one margin; see the module doc."""
+
+    def __init__(self, positions, radii, margin, previous=None):
+        self.positions = positions
+        self.radii = radii
+        self.margin = float(margin)
+        self.scale = float(np.abs(positions).max()) if len(positions) else 0.0
+        if previous is not None:
+            self.members = previous.members
+        else:
+            level, count = radius_levels(radii)
+            by_level = np.argsort(level, kind='stable')
+            bounds = np.searchsorted(np.take(level, by_level), np.arange(count + 1))
+            self.members = [by_level[bounds[k]:bounds[k + 1]] for k in range(count)
+                            if bounds[k + 1] > bounds[k]]
+        self.largest = [float(np.take(radii, members).max()) for members in self.members]
+        self.levels = [
+            LevelGrid(positions, members,
+                      widened(2.0 * largest + self.margin, self.scale), self.scale,
+                      previous.levels[k] if previous is not None else None)
+            for k, (members, largest) in enumerate(zip(self.members, self.largest))]
+
+    def pairs(self):
+        """Ball pairs with |x_a - x_b| < r_a + r_b + margin, a < b, sorted by (a, b)."""
+        firsts = []
+        seconds = []
+        for k, grid in enumerate(self.levels):
+            first, second = grid.own_pairs()
+            firsts.append(first)
+            seconds.append(second)
+            for larger in self.levels[k + 1:]:
+                first, second = larger.pairs_with(self.positions, grid.balls)
+                firsts.append(first)
+                seconds.append(second)
+        if not firsts:
+            return _EMPTY, _EMPTY
+        first = np.concatenate(firsts)
+        second = np.concatenate(seconds)
+        delta = take_rows(self.positions, first) - take_rows(self.positions, second)
+        reach = np.take(self.radii, first) + np.take(self.radii, second) + self.margin
+        near = np.flatnonzero(dot_rows(delta, delta) < reach * reach)
+        first = np.take(first, near)
+        second = np.take(second, near)
+        a = np.minimum(first, second)
+        b = np.maximum(first, second)
+        order = np.argsort(a * len(self.positions) + b)
+        return np.take(a, order), np.take(b, order)
+
+    def wall_pairs(self, walls):
+        """(ball, wall) with the ball closer than r + margin to the segment, sorted."""
+        balls_out = []
+        walls_out = []
+        for grid, largest in zip(self.levels, self.largest):
+            wall, keys = grid.wall_cells(walls, largest + self.margin)
+            entry, position = _expand(np.arange(len(wall)), np.take(grid.starts, keys),
+                                      np.take(grid.starts, keys + 1))
+            balls_out.append(np.take(grid.balls, position))
+            walls_out.append(np.take(wall, entry))
+        if not balls_out:
+            return _EMPTY, _EMPTY
+        ball = np.concatenate(balls_out)
+        wall = np.concatenate(walls_out)
+        points = take_rows(self.positions, ball)
+        sx, sy, _ = rules.wall_offset(points[:, 0], points[:, 1],
+                                      np.take(walls.starts[:, 0], wall),
+                                      np.take(walls.starts[:, 1], wall),
+                                      np.take(walls.directions[:, 0], wall),
+                                      np.take(walls.directions[:, 1], wall),
+                                      np.take(walls.lengths, wall))
+        reach = np.take(self.radii, ball) + self.margin
+        near = np.flatnonzero(sx * sx + sy * sy < reach * reach)
+        ball = np.take(ball, near)
+        wall = np.take(wall, near)
+        order = np.argsort(ball * len(walls) + wall)
+        return np.take(ball, order), np.take(wall, order)
+
+
+def grid_pairs(positions, radii, margin):
+    """Pairs (a, b), a < b, sorted, with |x_a - x_b| < r_a + r_b + margin. O(N)."""
+    if len(positions) < 2:
+        return _EMPTY, _EMPTY
+    return HierarchicalGrid(positions, radii, margin).pairs()
 
 
 def wall_pairs(positions, radii, walls, margin):
-    """Return (ball, wall) index arrays of every ball within r + margin of a wall segment."""
-    n = len(positions)
-    m = len(walls.starts)
-    if n == 0 or m == 0:
+    """(ball, wall) index arrays, sorted, of every ball within r + margin of a wall."""
+    if len(positions) == 0 or len(walls) == 0:
         return _EMPTY, _EMPTY
-    balls_out = []
-    walls_out = []
-    reach = radii + margin
-    reach2 = (reach * reach)[:, None]
-    # Blocks of walls keep memory near 4 million distances however many walls there are.
-    block = max(1, 4_000_000 // n)
-    for first in range(0, m, block):
-        sl = slice(first, first + block)
-        rx = positions[:, 0:1] - walls.starts[None, sl, 0]
-        ry = positions[:, 1:2] - walls.starts[None, sl, 1]
-        along = np.clip(rx * walls.directions[None, sl, 0] + ry * walls.directions[None, sl, 1],
-                        0.0, walls.lengths[None, sl])
-        dx = rx - along * walls.directions[None, sl, 0]
-        dy = ry - along * walls.directions[None, sl, 1]
-        ball, wall = np.nonzero(dx * dx + dy * dy < reach2)
-        balls_out.append(ball)
-        walls_out.append(wall + first)
-    return np.concatenate(balls_out), np.concatenate(walls_out)
+    return HierarchicalGrid(positions, radii, margin).wall_pairs(walls)
 
 
 class NeighbourLists:
@@ -140,36 +312,34 @@ class NeighbourLists:
 
     A pair left out was at least r_i + r_j + skin apart when the lists were built; if no ball
     has moved more than `skin / 2` since, it is still further apart than r_i + r_j and cannot
-    be touching. The World reports an upper bound of the distance moved; the lists rebuild
-    themselves when it reaches half the skin. Per-pair constants (reach squared, the wall's
-    geometry) are gathered once per build, not once per substep.
+    be touching (a wall does not move, so a ball-wall pair keeps half the skin spare). The
+    stepper reports an upper bound of the distance moved; the lists rebuild themselves when
+    it reaches half the skin. Per-pair constants (reach squared, the wall's geometry) are
+    gathered once per build, not once per substep. The lists stay in canonical order.
     """
 
     def __init__(self, skin):
         self.skin = float(skin)
         self.moved = np.inf  # forces a build on first use
         self.builds = 0
-        self._order = None
-        self.ball_a = self.ball_b = _EMPTY
-        self.reach2 = np.empty(0)
-        self.wall_ball = self.wall_index = _EMPTY
+        self._grid = None
 
     def update(self, positions, radii, walls, moved):
         """Account for `moved` metres of travel; rebuild if the skin may be closed."""
         self.moved += moved
         if 2.0 * self.moved < self.skin:
             return False
-        self.ball_a, self.ball_b, self._order = grid_pairs(
-            positions, radii, self.skin, self._order)
-        reach = np.take(radii, self.ball_a) + np.take(radii, self.ball_b)
-        self.reach2 = reach * reach
-        self.wall_ball, self.wall_index = wall_pairs(positions, radii, walls, self.skin)
-        wall = self.wall_index
-        self.wall_starts = take_rows(walls.starts, wall)
-        self.wall_ends = take_rows(walls.ends, wall)
-        self.wall_directions = take_rows(walls.directions, wall)
-        self.wall_lengths = np.take(walls.lengths, wall)
-        self.wall_radius2 = np.square(np.take(radii, self.wall_ball))
+        grid = HierarchicalGrid(positions, radii, self.skin, self._grid)
+        self._grid = grid
+        self.ball_a, self.ball_b = grid.pairs()
+        self.reach2 = rules.reach_squared(np.take(radii, self.ball_a),
+                                          np.take(radii, self.ball_b))
+        self.wall_ball, wall = grid.wall_pairs(walls) if len(walls) else (_EMPTY, _EMPTY)
+        self.wall_index = wall
+        self.wall_radius = np.take(radii, self.wall_ball)
+        self.wall_start = take_rows(walls.starts, wall)
+        self.wall_direction = take_rows(walls.directions, wall)
+        self.wall_length = np.take(walls.lengths, wall)
         self.moved = 0.0
         self.builds += 1
         return True

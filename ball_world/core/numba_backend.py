@@ -1,26 +1,52 @@
-"""The optional compiled backend: the same rules as physics.py, as numba kernels.
+"""The compiled backend: the seed-mode step (`core.stepping`) as numba loops, bit for bit.
 
-Why it exists: a numpy step pays about 1-2 us per numpy call and needs over a hundred calls
-per substep, so below a few thousand balls the fixed cost dominates (about 250 us per
-substep, measured here). Compiled loops have no such floor. The rules are the seed's, as in
-the numpy path: a posteriori detection (touching AND approaching), the seed's responses,
-substeps of at most MAX_TRAVEL of the smallest radius. What differs is the order in which
-simultaneous contacts are resolved: here sequentially, in passes over the contact list until
-none is approaching (each response still exactly the seed's pairwise one, so energy is
-conserved). The two backends therefore give different, equally valid, trajectories; each is
-deterministic, and the backend is part of the recorded parameters.
+Why it exists: a numpy step pays 1-2 us per numpy call and needs about a hundred calls per
+substep, so below a few thousand balls that fixed cost dominates. Compiled loops have no
+such floor. What it computes is exactly the numpy backend's: the same stages under the same
+names (`move`, `find_contacts`, `resolve`, `respond_pair`, `respond_wall`), the formulas
+compiled from the same source (`core.rules`), the same plan and re-split (`core.stepping`),
+the same canonical contact order and the same rounds, with no fastmath (no fused
+multiply-adds, no re-association). Its trajectories are therefore bit-identical to the
+numpy backend's, and a recording made with one re-simulates exactly with the other.
+
+What may differ is only the broadphase: here a hierarchical grid (as in `broadphase`) is
+rebuilt at every substep with no skin, and it yields the touching contacts directly.
+
+Compiled kernels are cached on disk (numba's cache=True, next to this file or in the
+user's cache directory). numba only notices changes to this file, not to the modules its
+kernels inline (`rules`, `stepping`, `broadphase`, `limits`), so `ensure_fresh_cache`
+compares a fingerprint of those with the one the cached kernels were built with, and
+rebuilds them if they differ. `python -m ball_world.core.numba_backend --warm` compiles and
+caches everything once (a set-up step), so no run pays the compilation.
 
 numba is in requirements/base.txt; without it the numpy backend still works, and
 `available()` says whether this one can.
 """
-import math
+import argparse
+import hashlib
+import sys
+import time
 
 import numpy as np
 
+from ball_world.core import broadphase, limits, rules, stepping
+from ball_world.core.broadphase import (CELLS_PER_BALL, CELLS_SLACK, grid_shape, LEVEL_RATIO,
+                                        PAD, SLACK, widened)
+from ball_world.core.rules import (advance, pair_approaching, pair_response, pair_touching,
+                                   reach_squared, reflect_off_end, reflect_off_wall,
+                                   speed_squared, wall_approaching, wall_offset, wall_touching)
+from ball_world.core.stepping import (BALL_BALL, BALL_WALL, MAX_ROUNDS, over_budget,
+                                      plan_substeps, replan, ROUNDS, STEP_DONE, STEP_REFUSED,
+                                      SUBSTEPS, UNRESOLVED)
+
 try:
     from numba import njit
+    from numba.extending import register_jitable
 except ImportError:  # the numpy backend needs nothing more
     njit = None
+
+#: Columns of the packed wall array the kernels take.
+WALL_COLUMNS = ('start_x', 'start_y', 'end_x', 'end_y', 'w_x', 'w_y', 'length')
 
 
 def available():
@@ -28,259 +54,530 @@ def available():
     return njit is not None
 
 
+_KERNELS = []
+
+
 def _compile(function):
-    return njit(cache=True, nogil=True)(function) if njit is not None else function
+    """njit with an on-disk cache, no fastmath, numpy's division semantics (inf, not raise)."""
+    if njit is None:
+        return function
+    kernel = njit(cache=True, nogil=True, error_model='numpy')(function)
+    _KERNELS.append(kernel)
+    return kernel
+
+
+def _hash_code(digest, code):
+    """Feed a code object's bytecode, names and constants (nested code too) to `digest`."""
+    digest.update(code.co_code + repr(code.co_names).encode())
+    for constant in code.co_consts:
+        if hasattr(constant, 'co_code'):
+            _hash_code(digest, constant)
+        else:
+            digest.update(repr(constant).encode())
+
+
+def _fingerprint():
+    """A number that changes whenever code or constants the kernels inline change."""
+    digest = hashlib.sha256()
+    for module in (rules, stepping, broadphase):
+        for name, value in sorted(vars(module).items()):
+            if getattr(value, '__module__', None) == module.__name__ and hasattr(
+                    value, '__code__'):
+                digest.update(name.encode())
+                _hash_code(digest, value.__code__)
+    constants = (limits.MAX_SUBSTEPS, MAX_ROUNDS, LEVEL_RATIO, CELLS_PER_BALL, CELLS_SLACK,
+                 PAD, SLACK, STEP_DONE, STEP_REFUSED)
+    digest.update(repr(constants).encode())
+    return int.from_bytes(digest.digest()[:7], 'big')
+
+
+FINGERPRINT = _fingerprint()
+
+# The shared formulas and plan ---------------------------------------------------------
+
+#: Plain functions of `rules`, `stepping` and `broadphase` that the kernels call. numba
+#: compiles them where they are called (also from one another), with the kernels' options.
+SHARED = (advance, speed_squared, reach_squared, pair_touching, pair_approaching,
+          pair_response, wall_offset, wall_touching, wall_approaching, reflect_off_wall,
+          reflect_off_end, plan_substeps, replan, over_budget, grid_shape, widened)
+
+if njit is not None:
+    for _function in SHARED:
+        register_jitable(error_model='numpy')(_function)
 
 
 @_compile
-def _cells(x, cell, n):
-    """Counting sort of balls into a grid: (order, starts, keys, rows).
+def built_against():
+    """The FINGERPRINT these kernels were compiled with (frozen into the cached code)."""
+    return FINGERPRINT
 
-    order lists the balls cell by cell; the balls of cell k are order[starts[k]:starts[k+1]];
-    keys[i] is ball i's cell, rows the number of cells in a column (key = column * rows + row).
+
+# Stage 1 ------------------------------------------------------------------------------
+
+@_compile
+def move(x, v, h):
+    """Every ball moves for h seconds."""
+    for i in range(x.shape[0]):
+        x[i, 0] = advance(x[i, 0], v[i, 0], h)
+        x[i, 1] = advance(x[i, 1], v[i, 1], h)
+
+
+# Stage 2: the hierarchical grid and the touching contacts ------------------------------
+
+@_compile
+def build_grids(x, members, level_starts, level_largest):
+    """Counting sort of each level's balls into its own grid.
+
+    Returns (origin, cell, shape, starts, cell_balls, cell_keys, scale): level k's balls in
+    cell order are cell_balls[level_starts[k]:level_starts[k + 1]]; shape[k] holds columns,
+    rows, the key stride and where its table begins in `starts`; the balls of cell `key`
+    are cell_balls[starts[base + key]:starts[base + key + 1]].
     """
-    minx = x[0, 0]
-    miny = x[0, 1]
-    maxx = minx
-    maxy = miny
-    for i in range(n):
-        minx = min(minx, x[i, 0])
-        maxx = max(maxx, x[i, 0])
-        miny = min(miny, x[i, 1])
-        maxy = max(maxy, x[i, 1])
-    # Balls that fly far apart (no arena) would need a huge grid: grow the cells instead.
-    while ((maxx - minx) / cell + 1.0) * ((maxy - miny) / cell + 1.0) > 4.0 * n + 1024.0:
-        cell *= 2.0
-    inverse = 1.0 / cell
-    columns = int((maxx - minx) * inverse) + 1
-    rows = int((maxy - miny) * inverse) + 1
+    levels = level_largest.shape[0]
+    n = members.shape[0]
+    low = np.empty((levels, 2))
+    extent = np.empty((levels, 2))
+    scale = 0.0
+    for k in range(levels):
+        first = members[level_starts[k]]
+        min_x = max_x = x[first, 0]
+        min_y = max_y = x[first, 1]
+        for p in range(level_starts[k] + 1, level_starts[k + 1]):
+            i = members[p]
+            min_x = min(min_x, x[i, 0])
+            max_x = max(max_x, x[i, 0])
+            min_y = min(min_y, x[i, 1])
+            max_y = max(max_y, x[i, 1])
+        low[k, 0] = min_x
+        low[k, 1] = min_y
+        extent[k, 0] = max_x - min_x
+        extent[k, 1] = max_y - min_y
+        scale = max(scale, abs(min_x), abs(max_x), abs(min_y), abs(max_y))
+    cell = np.empty(levels)
+    shape = np.empty((levels, 4), dtype=np.int64)
+    table = 0
+    for k in range(levels):
+        size, nx, ny = grid_shape(extent[k, 0], extent[k, 1],
+                                  widened(2.0 * level_largest[k], scale),
+                                  level_starts[k + 1] - level_starts[k])
+        cell[k] = size
+        stride = ny + 2 * PAD
+        shape[k, 0] = nx
+        shape[k, 1] = ny
+        shape[k, 2] = stride
+        shape[k, 3] = table
+        table += (nx + 2 * PAD) * stride + 1
+    starts = np.zeros(table, dtype=np.int64)
     keys = np.empty(n, dtype=np.int64)
-    starts = np.zeros(columns * rows + 1, dtype=np.int64)
-    for i in range(n):
-        cx = min(int((x[i, 0] - minx) * inverse), columns - 1)
-        cy = min(int((x[i, 1] - miny) * inverse), rows - 1)
-        keys[i] = cx * rows + cy
-        starts[keys[i] + 1] += 1
-    for k in range(columns * rows):
-        starts[k + 1] += starts[k]
-    fill = starts[:-1].copy()
-    order = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        order[fill[keys[i]]] = i
-        fill[keys[i]] += 1
-    return order, starts, keys, columns, rows
+    for k in range(levels):
+        nx, ny, stride, base = shape[k, 0], shape[k, 1], shape[k, 2], shape[k, 3]
+        for p in range(level_starts[k], level_starts[k + 1]):
+            i = members[p]
+            cx = min(int((x[i, 0] - low[k, 0]) / cell[k]), nx - 1)
+            cy = min(int((x[i, 1] - low[k, 1]) / cell[k]), ny - 1)
+            keys[p] = (cx + PAD) * stride + cy + PAD
+            starts[base + keys[p]] += 1
+        # Inclusive prefix sums from the level's first slot, then a backward fill that
+        # leaves starts[base + key] at the first ball of each cell.
+        size = (nx + 2 * PAD) * stride
+        running = level_starts[k]
+        for key in range(size):
+            running += starts[base + key]
+            starts[base + key] = running
+        starts[base + size] = level_starts[k + 1]
+    cell_balls = np.empty(n, dtype=np.int64)
+    cell_keys = np.empty(n, dtype=np.int64)
+    for k in range(levels):
+        base = shape[k, 3]
+        for p in range(level_starts[k + 1] - 1, level_starts[k] - 1, -1):
+            key = keys[p]
+            starts[base + key] -= 1
+            cell_balls[starts[base + key]] = members[p]
+            cell_keys[starts[base + key]] = key
+    return low, cell, shape, starts, cell_balls, cell_keys, scale
 
 
 @_compile
-def _add_pair(pairs, count, i, j):
-    if count == pairs.shape[0]:
-        grown = np.empty((2 * pairs.shape[0], 2), dtype=np.int64)
-        grown[:count] = pairs[:count]
-        pairs = grown
-    pairs[count, 0] = min(i, j)
-    pairs[count, 1] = max(i, j)
-    return pairs
+def _append(found, count, first, second):
+    """Write (first, second) as row `count` of `found`, doubled when full; returns it."""
+    if count == found.shape[0]:
+        bigger = np.empty((2 * found.shape[0], 2), dtype=found.dtype)
+        bigger[:count] = found[:count]
+        found = bigger
+    found[count, 0] = first
+    found[count, 1] = second
+    return found
 
 
 @_compile
-def _pair_contacts(x, radii, n):
-    """Touching ball pairs, through a grid of cells one diameter wide and a half stencil."""
-    rmax = 0.0
-    for i in range(n):
-        rmax = max(rmax, radii[i])
-    order, starts, keys, columns, rows = _cells(x, 2.0 * rmax, n)
-    pairs = np.empty((4 * n + 16, 2), dtype=np.int64)
+def _touching(x, radii, i, j):
+    """Whether balls i and j touch, tested exactly as the numpy backend does (a < b)."""
+    a = min(i, j)
+    b = max(i, j)
+    return pair_touching(x[a, 0] - x[b, 0], x[a, 1] - x[b, 1], reach_squared(radii[a], radii[b]))
+
+
+@_compile
+def _touching_pairs(x, radii, level_starts, low, cell, shape, starts, cell_balls, cell_keys):
+    """Every touching pair, unsorted: half stencil within a level, 3 x 3 into larger ones."""
+    found = np.empty((x.shape[0] + 16, 2), dtype=np.int64)
     count = 0
-    for first in range(n):
-        i = order[first]
-        key = keys[i]
-        cx = key // rows
-        cy = key - cx * rows
-        xi = x[i, 0]
-        yi = x[i, 1]
-        ri = radii[i]
-        # The rest of the own cell, then the cells above, and right-below/right/right-above.
-        for neighbour in range(5):
-            if neighbour == 0:
-                low = first + 1
-                high = starts[key + 1]
-            else:
-                gx = cx + (0 if neighbour == 1 else 1)
-                gy = cy + (1 if neighbour == 1 else neighbour - 3)
-                if gx >= columns or gy < 0 or gy >= rows:
-                    continue
-                other = gx * rows + gy
-                low = starts[other]
-                high = starts[other + 1]
-            for s in range(low, high):
-                j = order[s]
-                dx = xi - x[j, 0]
-                dy = yi - x[j, 1]
-                reach = ri + radii[j]
-                if dx * dx + dy * dy < reach * reach:
-                    pairs = _add_pair(pairs, count, i, j)
+    levels = cell.shape[0]
+    for k in range(levels):
+        stride = shape[k, 2]
+        base = shape[k, 3]
+        for p in range(level_starts[k], level_starts[k + 1]):
+            i = cell_balls[p]
+            key = cell_keys[p]
+            for s in range(p + 1, starts[base + key + 1]):
+                j = cell_balls[s]
+                if _touching(x, radii, i, j):
+                    found = _append(found, count, min(i, j), max(i, j))
                     count += 1
-    return pairs[:count]
+            for offset in (1, stride - 1, stride, stride + 1):
+                other = base + key + offset
+                for s in range(starts[other], starts[other + 1]):
+                    j = cell_balls[s]
+                    if _touching(x, radii, i, j):
+                        found = _append(found, count, min(i, j), max(i, j))
+                        count += 1
+        for larger in range(k + 1, levels):
+            nx, ny, stride, base = shape[larger, 0], shape[larger, 1], shape[larger, 2], \
+                shape[larger, 3]
+            for p in range(level_starts[k], level_starts[k + 1]):
+                i = cell_balls[p]
+                fx = (x[i, 0] - low[larger, 0]) / cell[larger]
+                fy = (x[i, 1] - low[larger, 1]) / cell[larger]
+                if not (fx >= -1.0 and fx < nx + 1.0 and fy >= -1.0 and fy < ny + 1.0):
+                    continue
+                centre = (int(np.floor(fx)) + PAD) * stride + int(np.floor(fy)) + PAD
+                for dx in range(-1, 2):
+                    for dy in range(-1, 2):
+                        other = base + centre + dx * stride + dy
+                        for s in range(starts[other], starts[other + 1]):
+                            j = cell_balls[s]
+                            if _touching(x, radii, i, j):
+                                found = _append(found, count, min(i, j), max(i, j))
+                                count += 1
+    return found[:count]
 
 
 @_compile
-def _wall_contacts(x, radii, n, starts, ends, directions, lengths):
-    """Touching ball-wall pairs with the offset s (the seed's, or from the end point)."""
-    m = starts.shape[0]
-    capacity = n + 16
-    balls = np.empty(capacity, dtype=np.int64)
-    walls = np.empty(capacity, dtype=np.int64)
-    offsets = np.empty((capacity, 2))
-    interior = np.empty(capacity, dtype=np.bool_)
+def _cell_range(low, high, reach, origin, cell, cells):
+    """First and last cell index within reach of [low, high], clipped to the grid."""
+    first = int(np.floor(min(max((low - reach - origin) / cell, -1.0), float(cells))))
+    last = int(np.floor(min(max((high + reach - origin) / cell, -1.0), float(cells))))
+    return max(first, 0), min(last, cells - 1)
+
+
+@_compile
+def _touching_walls(x, radii, walls, wall_scale, level_starts, level_largest, low, cell,
+                    shape, starts, cell_balls, scale):
+    """Every touching ball-wall pair, unsorted: each wall rasterised into each level's grid."""
+    found = np.empty((64, 2), dtype=np.int64)
     count = 0
-    for i in range(n):
-        for k in range(m):
-            rx = x[i, 0] - starts[k, 0]
-            ry = x[i, 1] - starts[k, 1]
-            # Cheap reject first: further from the wall's line than the radius.
-            across = rx * directions[k, 1] - ry * directions[k, 0]
-            if across >= radii[i] or -across >= radii[i]:
-                continue
-            along = rx * directions[k, 0] + ry * directions[k, 1]
-            inside = along > 0.0 and along < lengths[k]
-            if along <= 0.0:
-                sx, sy = rx, ry
-            elif along >= lengths[k]:
-                sx = x[i, 0] - ends[k, 0]
-                sy = x[i, 1] - ends[k, 1]
-            else:
-                sx = rx - along * directions[k, 0]
-                sy = ry - along * directions[k, 1]
-            if sx * sx + sy * sy < radii[i] * radii[i]:
-                if count == capacity:
-                    capacity *= 2
-                    balls = np.concatenate((balls, np.empty_like(balls)))
-                    walls = np.concatenate((walls, np.empty_like(walls)))
-                    offsets = np.concatenate((offsets, np.empty_like(offsets)))
-                    interior = np.concatenate((interior, np.empty_like(interior)))
-                balls[count] = i
-                walls[count] = k
-                offsets[count, 0] = sx
-                offsets[count, 1] = sy
-                interior[count] = inside
-                count += 1
-    return balls[:count], walls[:count], offsets[:count], interior[:count]
+    for k in range(cell.shape[0]):
+        nx, ny, stride, base = shape[k, 0], shape[k, 1], shape[k, 2], shape[k, 3]
+        reach = widened(level_largest[k], max(scale, wall_scale))
+        size = cell[k]
+        for w in range(walls.shape[0]):
+            x0, y0, x1, y1 = walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3]
+            first_col, last_col = _cell_range(min(x0, x1), max(x0, x1), reach, low[k, 0], size,
+                                              nx)
+            dx = x1 - x0
+            dy = y1 - y0
+            for col in range(first_col, last_col + 1):
+                left = low[k, 0] + col * size - reach - x0
+                right = low[k, 0] + (col + 1) * size + reach - x0
+                if dx == 0.0:
+                    t_low = 0.0
+                    t_high = 1.0
+                else:
+                    t_low = min(max(min(left / dx, right / dx), 0.0), 1.0)
+                    t_high = min(max(max(left / dx, right / dx), 0.0), 1.0)
+                ya = y0 + t_low * dy
+                yb = y0 + t_high * dy
+                first_row, last_row = _cell_range(min(ya, yb), max(ya, yb), reach, low[k, 1],
+                                                  size, ny)
+                for row in range(first_row, last_row + 1):
+                    key = base + (col + PAD) * stride + row + PAD
+                    for s in range(starts[key], starts[key + 1]):
+                        i = cell_balls[s]
+                        sx, sy, _ = wall_offset(x[i, 0], x[i, 1], walls[w, 0], walls[w, 1],
+                                                walls[w, 4], walls[w, 5], walls[w, 6])
+                        if wall_touching(sx, sy, radii[i]):
+                            found = _append(found, count, i, w)
+                            count += 1
+    return found[:count]
 
 
 @_compile
-def _substep(x, v, radii, masses, h, starts, ends, directions, lengths, max_rounds, totals):
-    """Move, detect, resolve in passes. Returns the fastest speed of a ball that collided."""
-    n = x.shape[0]
-    for i in range(n):
-        x[i, 0] += v[i, 0] * h
-        x[i, 1] += v[i, 1] * h
-    totals[2] += 1
-    pairs = _pair_contacts(x, radii, n)
-    balls, walls, offsets, interior = _wall_contacts(
-        x, radii, n, starts, ends, directions, lengths)
-    if pairs.shape[0] == 0 and balls.shape[0] == 0:
+def _canonical(found):
+    """Rows (first, second) sorted by first, then second, in place: the canonical order.
+
+    A handful of rows (the usual case) are insertion-sorted without allocating.
+    """
+    count = found.shape[0]
+    if count > 32:
+        order = np.argsort(found[:, 0] * (found[:, 1].max() + 1) + found[:, 1])
+        found[:] = found[order]
+        return found
+    for i in range(1, count):
+        first = found[i, 0]
+        second = found[i, 1]
+        j = i - 1
+        while j >= 0 and (found[j, 0] > first or (found[j, 0] == first and found[j, 1] > second)):
+            found[j + 1, 0] = found[j, 0]
+            found[j + 1, 1] = found[j, 1]
+            j -= 1
+        found[j + 1, 0] = first
+        found[j + 1, 1] = second
+    return found
+
+
+@_compile
+def find_contacts(x, radii, walls, wall_scale, members, level_starts, level_largest):
+    """The touching contacts in canonical order, with their geometry.
+
+    Returns pairs (P, 2) with a < b, rel (P, 2) = r_a - r_b, wall contacts (W, 2) as
+    (ball, wall), offsets (W, 2) and interior (W,).
+    """
+    low, cell, shape, starts, cell_balls, cell_keys, scale = build_grids(
+        x, members, level_starts, level_largest)
+    pairs = _canonical(_touching_pairs(x, radii, level_starts, low, cell, shape, starts,
+                                       cell_balls, cell_keys))
+    rel = np.empty((pairs.shape[0], 2))
+    for c in range(pairs.shape[0]):
+        rel[c, 0] = x[pairs[c, 0], 0] - x[pairs[c, 1], 0]
+        rel[c, 1] = x[pairs[c, 0], 1] - x[pairs[c, 1], 1]
+    contacts = _canonical(_touching_walls(x, radii, walls, wall_scale, level_starts,
+                                          level_largest, low, cell, shape, starts, cell_balls,
+                                          scale))
+    offsets = np.empty((contacts.shape[0], 2))
+    interior = np.empty(contacts.shape[0], dtype=np.bool_)
+    for c in range(contacts.shape[0]):
+        i = contacts[c, 0]
+        w = contacts[c, 1]
+        offsets[c, 0], offsets[c, 1], interior[c] = wall_offset(
+            x[i, 0], x[i, 1], walls[w, 0], walls[w, 1], walls[w, 4], walls[w, 5], walls[w, 6])
+    return pairs, rel, contacts, offsets, interior
+
+
+# Stages 3 and 4 -----------------------------------------------------------------------
+
+@_compile
+def respond_pair(v, masses, a, b, rx, ry):
+    """The seed's ball-ball response for one pair; returns the larger |v|^2 after it."""
+    v[a, 0], v[a, 1], v[b, 0], v[b, 1] = pair_response(
+        v[a, 0], v[a, 1], v[b, 0], v[b, 1], rx, ry, masses[a], masses[b])
+    return max(speed_squared(v[a, 0], v[a, 1]), speed_squared(v[b, 0], v[b, 1]))
+
+
+@_compile
+def respond_wall(v, i, walls, w, sx, sy, inside):
+    """Reflect ball i off wall w (or off its end point); returns |v|^2 after it."""
+    if inside:
+        v[i, 0], v[i, 1] = reflect_off_wall(v[i, 0], v[i, 1], walls[w, 4], walls[w, 5])
+    else:
+        v[i, 0], v[i, 1] = reflect_off_end(v[i, 0], v[i, 1], sx, sy)
+    return speed_squared(v[i, 0], v[i, 1])
+
+
+@_compile
+def resolve(v, masses, walls, pairs, rel, contacts, offsets, interior, best, totals):
+    """Rounds of conflict-free approaching contacts, numbered pairs first, then walls.
+
+    `best` (one entry per ball, -1 between calls) holds the lowest approaching contact of
+    each ball in the current round. Returns the largest speed right after a response.
+    """
+    n_pairs = pairs.shape[0]
+    n_walls = contacts.shape[0]
+    if n_pairs == 0 and n_walls == 0:
         return 0.0
+    flags = np.empty(n_pairs + n_walls, dtype=np.bool_)
     fastest2 = 0.0
-    left = 0
-    for _ in range(max_rounds):
-        changed = 0
-        for c in range(pairs.shape[0]):
+    for round_index in range(MAX_ROUNDS + 1):
+        approaching = 0
+        for c in range(n_pairs):
             a = pairs[c, 0]
             b = pairs[c, 1]
-            rx = x[a, 0] - x[b, 0]
-            ry = x[a, 1] - x[b, 1]
-            if rx * (v[a, 0] - v[b, 0]) + ry * (v[a, 1] - v[b, 1]) >= 0.0:
-                continue
-            # The seed's ball-ball response, written as in physics.World._collide_pairs.
-            dist2 = rx * rx + ry * ry
-            ma = masses[a]
-            mb = masses[b]
-            dvx = v[a, 0] - v[b, 0]
-            dvy = v[a, 1] - v[b, 1]
-            k_a = 2.0 * mb / (ma + mb) * (dvx * rx + dvy * ry) / dist2
-            k_b = 2.0 * ma / (ma + mb) * ((-dvx) * (-rx) + (-dvy) * (-ry)) / dist2
-            v[a, 0] = v[a, 0] - k_a * rx
-            v[a, 1] = v[a, 1] - k_a * ry
-            v[b, 0] = v[b, 0] - k_b * -rx
-            v[b, 1] = v[b, 1] - k_b * -ry
-            totals[0] += 1
-            changed += 1
-            fastest2 = max(fastest2, v[a, 0] * v[a, 0] + v[a, 1] * v[a, 1],
-                           v[b, 0] * v[b, 0] + v[b, 1] * v[b, 1])
-        for c in range(balls.shape[0]):
-            i = balls[c]
-            sx = offsets[c, 0]
-            sy = offsets[c, 1]
-            vx = v[i, 0]
-            vy = v[i, 1]
-            if sx * vx + sy * vy >= 0.0:
-                continue
-            if interior[c]:
-                # v' = 2 (v.w) w - v
-                wx = directions[walls[c], 0]
-                wy = directions[walls[c], 1]
-                along = vx * wx + vy * wy
-                v[i, 0] = 2.0 * along * wx - vx
-                v[i, 1] = 2.0 * along * wy - vy
-            else:
-                # Beyond an end point: reflect about n = s / |s|.
-                norm = math.sqrt(sx * sx + sy * sy)
-                nx = sx / norm
-                ny = sy / norm
-                vn = vx * nx + vy * ny
-                v[i, 0] = vx - 2.0 * vn * nx
-                v[i, 1] = vy - 2.0 * vn * ny
-            totals[1] += 1
-            changed += 1
-            fastest2 = max(fastest2, v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1])
-        if changed == 0:
+            flags[c] = pair_approaching(rel[c, 0], rel[c, 1], v[a, 0], v[a, 1], v[b, 0], v[b, 1])
+            if flags[c]:
+                approaching += 1
+                if best[a] < 0:
+                    best[a] = c
+                if best[b] < 0:
+                    best[b] = c
+        for c in range(n_walls):
+            i = contacts[c, 0]
+            flags[n_pairs + c] = wall_approaching(offsets[c, 0], offsets[c, 1], v[i, 0], v[i, 1])
+            if flags[n_pairs + c]:
+                approaching += 1
+                if best[i] < 0:
+                    best[i] = n_pairs + c
+        if approaching == 0:
             break
-        totals[3] += 1
-        left = changed
-    else:
-        totals[4] += left
-    return math.sqrt(fastest2)
+        last = round_index == MAX_ROUNDS
+        if last:
+            totals[UNRESOLVED] += approaching
+        else:
+            totals[ROUNDS] += 1
+        for c in range(n_pairs):
+            if flags[c]:
+                a = pairs[c, 0]
+                b = pairs[c, 1]
+                if not last and best[a] == c and best[b] == c:
+                    fastest2 = max(fastest2, respond_pair(v, masses, a, b, rel[c, 0], rel[c, 1]))
+                    totals[BALL_BALL] += 1
+        for c in range(n_walls):
+            if flags[n_pairs + c]:
+                i = contacts[c, 0]
+                if not last and best[i] == n_pairs + c:
+                    fastest2 = max(fastest2, respond_wall(v, i, walls, contacts[c, 1],
+                                                          offsets[c, 0], offsets[c, 1],
+                                                          interior[c]))
+                    totals[BALL_WALL] += 1
+        for c in range(n_pairs):
+            if flags[c]:
+                best[pairs[c, 0]] = -1
+                best[pairs[c, 1]] = -1
+        for c in range(n_walls):
+            if flags[n_pairs + c]:
+                best[contacts[c, 0]] = -1
+        if last:
+            break
+    return np.sqrt(fastest2)
+
+
+# The step -----------------------------------------------------------------------------
+
+@_compile
+def max_speed(v):
+    """Speed of the fastest ball, m/s."""
+    fastest2 = 0.0
+    for i in range(v.shape[0]):
+        fastest2 = max(fastest2, speed_squared(v[i, 0], v[i, 1]))
+    return np.sqrt(fastest2)
 
 
 @_compile
-def _plan(speed, duration, min_radius, max_travel):
-    """Substeps so that no ball travels more than max_travel * min_radius (as World._plan)."""
-    if speed == 0.0 or min_radius == 0.0:
-        return 1
-    return max(1, int(math.ceil(speed * duration / (max_travel * min_radius))))
+def seed_step(x, v, radii, masses, dt, travel, walls, wall_scale, members, level_starts,
+              level_largest, best, totals):
+    """One seed-mode step, planned and split exactly as numpy_backend.NumpyStepper.step.
 
-
-@_compile
-def _step(x, v, radii, masses, dt, min_radius, max_travel, starts, ends, directions, lengths,
-          max_rounds, totals):
-    """A whole step, planned and split into substeps exactly as World.step does."""
-    n = x.shape[0]
-    speed2 = 0.0
-    for i in range(n):
-        speed2 = max(speed2, v[i, 0] * v[i, 0] + v[i, 1] * v[i, 1])
-    speed = math.sqrt(speed2)
-    count = _plan(speed, dt, min_radius, max_travel)
+    Counts into `totals` (zeroed first). A step refused part-way (STEP_REFUSED) puts
+    positions and velocities back as they were.
+    """
+    totals[:] = 0
+    speed = max_speed(v)
+    count = plan_substeps(speed, dt, travel)
+    if over_budget(0, count, 0):
+        return STEP_REFUSED
+    saved_x = x.copy()
+    saved_v = v.copy()
     h = dt / count
     done = 0
     while done < count:
-        new_speed = _substep(x, v, radii, masses, h, starts, ends, directions, lengths,
-                             max_rounds, totals)
+        move(x, v, h)
+        pairs, rel, contacts, offsets, interior = find_contacts(
+            x, radii, walls, wall_scale, members, level_starts, level_largest)
+        fastest = resolve(v, masses, walls, pairs, rel, contacts, offsets, interior, best,
+                          totals)
         done += 1
-        if new_speed > speed:
-            speed = new_speed
-            if done < count and _plan(speed, h, min_radius, max_travel) > 1:
-                rest = (count - done) * h
-                count = _plan(speed, rest, min_radius, max_travel)
-                h = rest / count
-                done = 0
+        totals[SUBSTEPS] += 1
+        count, done, h, speed = replan(count, done, h, speed, fastest, travel)
+        if over_budget(totals[SUBSTEPS], count, done):
+            x[:] = saved_x
+            v[:] = saved_v
+            return STEP_REFUSED
+    return STEP_DONE
 
 
-def step(world, dt, max_travel):
-    """One step of `world` by the compiled kernel; returns the five StepStats counters."""
-    walls = world.walls
-    from ball_world.core.world import MAX_ROUNDS
-    counters = np.zeros(5, dtype=np.int64)
-    _step(world.positions, world.velocities, world.radii, world.masses, dt, world.min_radius,
-          max_travel, walls.starts, walls.ends, walls.directions, walls.lengths, MAX_ROUNDS,
-          counters)
-    return counters.tolist()
+def ensure_fresh_cache():
+    """Rebuild the cached kernels if they were compiled against other shared code.
+
+    Returns True when they had to be rebuilt. Uses numba's cache object of each kernel
+    (`_cache`, stable across numba releases) because numba offers no public flush.
+    """
+    if built_against() == FINGERPRINT:
+        return False
+    for kernel in _KERNELS:
+        kernel._cache.flush()
+    built_against.recompile()
+    return True
+
+
+def pack_walls(walls):
+    """The walls as one (M, 7) array in WALL_COLUMNS order, and the largest |coordinate|."""
+    packed = np.column_stack((walls.starts, walls.ends, walls.directions, walls.lengths))
+    scale = float(np.abs(walls.segments).max()) if len(walls) else 0.0
+    return np.ascontiguousarray(packed, dtype=np.float64).reshape(-1, 7), scale
+
+
+def radius_classes(radii):
+    """(members, level_starts, level_largest): ball indices grouped by radius level."""
+    level, count = broadphase.radius_levels(radii)
+    members = np.argsort(level, kind='stable').astype(np.int64)
+    starts = np.searchsorted(np.take(level, members), np.arange(count + 1)).astype(np.int64)
+    used = np.flatnonzero(np.diff(starts) > 0)
+    level_starts = np.append(np.take(starts, used), starts[-1]).astype(np.int64)
+    largest = np.array([float(np.take(radii, members[level_starts[k]:level_starts[k + 1]]).max())
+                        for k in range(len(used))])
+    return members, level_starts, largest
+
+
+class NumbaStepper:
+    """Steps a World with the compiled stages; holds what depends only on radii and walls."""
+
+    def __init__(self):
+        ensure_fresh_cache()
+        self.invalidate()
+
+    def invalidate(self):
+        """Forget everything derived from the balls (after the World was edited)."""
+        self._prepared = None
+
+    def step(self, world, dt, travel, totals):
+        """One seed-mode step; counts into `totals` (zeroed first); STEP_DONE or STEP_REFUSED."""
+        if self._prepared is None:
+            walls, wall_scale = pack_walls(world.walls)
+            self._prepared = (walls, wall_scale, *radius_classes(world.radii),
+                              np.full(len(world), -1, dtype=np.int64))
+        walls, wall_scale, members, level_starts, largest, best = self._prepared
+        return seed_step(world.positions, world.velocities, world.radii, world.masses, dt,
+                         travel, walls, wall_scale, members, level_starts, largest, best,
+                         totals)
+
+
+def warm():
+    """Compile (or load) every kernel by stepping a small world; returns seconds taken."""
+    began = time.perf_counter()
+    ensure_fresh_cache()
+    x = np.array([[1.0, 1.0], [1.9, 1.0], [3.0, 3.0]])
+    v = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 5.0]])
+    radii = np.array([0.5, 0.4, 0.05])
+    masses = np.ones(3)
+    members, level_starts, largest = radius_classes(radii)
+    walls = np.array([[0.0, 0.0, 10.0, 0.0, 1.0, 0.0, 10.0], [0.0, 4.0, 4.0, 4.0, 1.0, 0.0, 4.0]])
+    totals = np.zeros(5, dtype=np.int64)
+    seed_step(x, v, radii, masses, 0.1, stepping.travel_per_substep(0.05), walls, 10.0,
+              members, level_starts, largest, np.full(3, -1, dtype=np.int64), totals)
+    return time.perf_counter() - began
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(
+        prog='python -m ball_world.core.numba_backend',
+        description='Compile and cache the numba kernels, so that no run waits for them.')
+    parser.add_argument('--warm', action='store_true', required=True,
+                        help='compile (or load from the cache) every kernel once')
+    parser.parse_args(argv)
+    if not available():
+        print('numba is not installed: nothing to compile (the numpy backend needs nothing)')
+        return 0
+    print(f'numba kernels ready in {warm():.1f} s')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,15 +1,15 @@
-"""The exact elastic-collision core: the World as arrays, and its step. No ROS, no I/O.
+"""The World: balls and walls as numpy arrays, their edits, invariants and step. No I/O.
 
 The rules are the seed's (`shared/seed/RULES.md`), applied a posteriori: balls move first,
 then every pair that is touching AND approaching collides, with the seed's response.
+`core.stepping` defines the seed-mode step once (stages, canonical contact order, rounds,
+substep plan); `numpy_backend` and `numba_backend` compute it bit for bit alike.
 
 Choices the seed leaves open, made here:
 
-- Several contacts of one ball in one step are resolved in rounds. Each round takes a
-  conflict-free set of approaching contacts (every ball in at most one of them, chosen by
-  lowest contact index, so the result is deterministic) and applies the seed's pairwise
-  response to each. Rounds repeat until no touching pair is approaching. Each response
-  conserves momentum and kinetic energy exactly, so the whole step does too (to rounding).
+- Several contacts of one ball in one substep are resolved in rounds of conflict-free
+  contacts (see `core.stepping`). Each response conserves momentum and kinetic energy
+  exactly, so the whole step does too (to rounding).
 - Segment walls: inside a segment the seed's wall rule applies as written; beyond an end
   point the contact normal is the direction from that end point to the ball's centre, and
   the velocity is reflected about it.
@@ -20,98 +20,145 @@ Choices the seed leaves open, made here:
   posteriori detection can still miss is a graze shallower than 1 - sqrt(15/16) (3.2%)
   of the sum of the radii, entered and left within one substep. If a collision speeds a
   ball up, the rest of the step is split again.
+
+Every World holds only what `core.limits` allows (ball count, radii, masses, coordinates,
+walls): the constructor and the edit methods refuse anything else with a ValueError.
 """
-from dataclasses import dataclass
-import importlib.util
 import math
 
 import numpy as np
 
-from ball_world.core.broadphase import dot_rows, NeighbourLists, segment_offsets, take_rows
+from ball_world.core import limits
+from ball_world.core.broadphase import dot_rows
+from ball_world.core.stepping import (BACKENDS, numba_installed, reachable_speed,
+                                      resolve_backend, speed_limit, STEP_REFUSED, StepStats,
+                                      SubstepLimitExceeded, travel_per_substep)
 
-#: Largest distance a ball may travel in one substep, as a fraction of the smallest radius.
-MAX_TRAVEL = 0.5
-#: The ways a World can step: 'numpy' (pure numpy, the default) or 'numba' (kernels.py).
-BACKENDS = ('numpy', 'numba')
-#: Substeps per step that a commanded speed may demand at most (see World.speed_limit).
-SPEED_LIMIT_SUBSTEPS = 1000
-#: Safety cap on resolution rounds per substep; contacts left approaching (never seen in
-#: practice) are resolved at the end of the next substep, and counted.
-MAX_ROUNDS = 10_000
-
-
-@dataclass(frozen=True)
-class StepStats:
-    """What happened in one step: collisions resolved, substeps taken, lists rebuilt."""
-
-    ball_ball: int = 0
-    ball_wall: int = 0
-    substeps: int = 0
-    rounds: int = 0
-    unresolved: int = 0
-
-
-def numba_installed():
-    """Whether the 'numba' backend can run, without importing numba (half a second)."""
-    return importlib.util.find_spec('numba') is not None
+__all__ = ['BACKENDS', 'numba_installed', 'StepStats', 'SubstepLimitExceeded',
+           'Walls', 'World']
 
 
 class Walls:
-    """Wall segments (M, 4) and the per-segment values every step needs."""
+    """Wall segments (M, 4) and the per-segment values every step needs.
+
+    Refuses segments that are not finite, shorter than MIN_WALL_LENGTH (a segment whose
+    end points round together has no direction) or outside COORDINATE_LIMIT.
+    """
 
     def __init__(self, segments):
-        segments = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+        segments = np.array(segments, dtype=np.float64).reshape(-1, 4)
+        if len(segments) > limits.MAX_WALLS:
+            raise ValueError(f'{len(segments)} walls; at most {limits.MAX_WALLS} are supported')
+        bad = np.flatnonzero(~np.isfinite(segments).all(axis=1))
+        if len(bad):
+            raise ValueError(f'wall {bad[0]} has a coordinate that is not finite: '
+                             f'{segments[bad[0]].tolist()}')
+        _check_coordinates(segments.reshape(-1, 2), 'wall end point')
         self.segments = segments
         self.starts = segments[:, 0:2].copy()
         self.ends = segments[:, 2:4].copy()
         edge = self.ends - self.starts
-        self.lengths = np.sqrt(np.einsum('ij,ij->i', edge, edge))
-        if np.any(self.lengths <= 0.0):
-            raise ValueError('a wall segment has zero length')
+        self.lengths = np.hypot(edge[:, 0], edge[:, 1])
+        short = np.flatnonzero(~(self.lengths >= limits.MIN_WALL_LENGTH))
+        if len(short):
+            k = short[0]
+            raise ValueError(f'wall {k} {segments[k].tolist()} is {self.lengths[k]:.3g} m long; '
+                             f'walls must be at least {limits.MIN_WALL_LENGTH} m')
         self.directions = edge / self.lengths[:, None]
+        bent = np.flatnonzero(~np.isfinite(self.directions).all(axis=1))
+        if len(bent):
+            raise ValueError(f'wall {bent[0]} {segments[bent[0]].tolist()} has no finite '
+                             'direction')
 
     def __len__(self):
         return len(self.segments)
 
 
+def _check_coordinates(points, what):
+    """Refuse points beyond COORDINATE_LIMIT (ValueError naming the first)."""
+    far = np.flatnonzero((np.abs(points) > limits.COORDINATE_LIMIT).any(axis=1))
+    if len(far):
+        raise ValueError(f'{what} {far[0]} at {points[far[0]].tolist()} is beyond the '
+                         f'coordinate limit of {limits.COORDINATE_LIMIT:g} m')
+
+
+def _check_range(values, low, high, what, unit):
+    """Refuse values outside [low, high] (ValueError naming the first)."""
+    bad = np.flatnonzero(~((values >= low) & (values <= high)))
+    if len(bad):
+        raise ValueError(f'ball {bad[0]}: {what} {values[bad[0]]:g} {unit} is outside '
+                         f'[{low:g}, {high:g}] {unit}')
+
+
+def _checked_balls(positions, velocities, radii, masses):
+    """The four ball arrays as float64 (K, 2), (K, 2), (K,), (K,), checked against limits."""
+    positions = np.array(positions, dtype=np.float64).reshape(-1, 2)
+    velocities = np.array(velocities, dtype=np.float64).reshape(-1, 2)
+    radii = np.array(radii, dtype=np.float64).reshape(-1)
+    masses = np.array(masses, dtype=np.float64).reshape(-1)
+    n = len(positions)
+    if not (len(velocities) == len(radii) == len(masses) == n):
+        raise ValueError(f'positions, velocities, radii and masses differ in length '
+                         f'({n}, {len(velocities)}, {len(radii)}, {len(masses)})')
+    for what, values in (('position', positions), ('velocity', velocities)):
+        bad = np.flatnonzero(~np.isfinite(values).all(axis=1))
+        if len(bad):
+            raise ValueError(f'ball {bad[0]}: {what} {values[bad[0]].tolist()} is not finite')
+    _check_coordinates(positions, 'ball')
+    _check_range(radii, limits.MIN_RADIUS, limits.MAX_RADIUS, 'radius', 'm')
+    _check_range(masses, limits.MIN_MASS, limits.MAX_MASS, 'mass', 'kg')
+    return positions, velocities, radii, masses
+
+
+def _check_world(radii):
+    """Refuse a whole set of balls beyond MAX_BALLS or MAX_RADIUS_RATIO."""
+    if len(radii) > limits.MAX_BALLS:
+        raise ValueError(f'{len(radii)} balls; at most {limits.MAX_BALLS} are supported')
+    if len(radii) and radii.max() > limits.MAX_RADIUS_RATIO * radii.min():
+        raise ValueError(f'radii from {radii.min():g} m to {radii.max():g} m differ by more '
+                         f'than the supported ratio of {limits.MAX_RADIUS_RATIO:g}')
+
+
+def _stepper(backend):
+    """A fresh stepper of the (concrete) backend; numba is imported only when chosen."""
+    if backend == 'numba':
+        from ball_world.core.numba_backend import NumbaStepper
+        return NumbaStepper()
+    from ball_world.core.numpy_backend import NumpyStepper
+    return NumpyStepper()
+
+
 class World:
     """N balls (positions, velocities, radii, masses) and M wall segments, as numpy arrays.
 
-    Ball i is row i of every array, for the life of the World: the broadphase never
-    reorders them, so users can rely on indices.
+    Ball i is row i of every array. The step never reorders balls; only `remove_balls`
+    renumbers them (the others keep their relative order). Change the balls through the
+    methods below, which keep derived state (neighbour lists, grid order, smallest radius,
+    scratch buffers) in step; edits replace the arrays, so hold the World, not its arrays.
+    `backend` is 'numpy', 'numba' or 'auto' (numba where installed); `self.backend` is
+    always the concrete one, and the choice never changes a trajectory.
     """
 
-    def __init__(self, positions, velocities, radii, masses, walls=(), skin=None,
-                 backend='numpy'):
-        self.positions = np.array(positions, dtype=np.float64).reshape(-1, 2)
-        self.velocities = np.array(velocities, dtype=np.float64).reshape(-1, 2)
-        self.radii = np.array(radii, dtype=np.float64).reshape(-1)
-        self.masses = np.array(masses, dtype=np.float64).reshape(-1)
-        n = len(self.positions)
-        if not (len(self.velocities) == len(self.radii) == len(self.masses) == n):
-            raise ValueError('positions, velocities, radii and masses differ in length')
-        if n and (np.any(self.radii <= 0.0) or np.any(self.masses <= 0.0)):
-            raise ValueError('radii and masses must be positive')
+    def __init__(self, positions, velocities, radii, masses, walls=(), backend='auto'):
+        self.positions, self.velocities, self.radii, self.masses = _checked_balls(
+            positions, velocities, radii, masses)
+        _check_world(self.radii)
         self.walls = Walls(walls)
-        self.min_radius = float(self.radii.min()) if n else 0.0
-        if skin is None:
-            skin = float(self.radii.mean()) * 2.0 if n else 1.0
-        self.neighbours = NeighbourLists(skin)
-        self._scratch_best = np.empty(n, dtype=np.intp)
-        if backend not in BACKENDS:
-            raise ValueError(f'unknown backend {backend!r}; expected one of {BACKENDS}')
-        if backend == 'numba':
-            # Imported here: numba takes half a second to import, and most runs use numpy.
-            from ball_world.core import numba_backend as kernels
-            if not kernels.available():
-                raise ValueError("backend 'numba' needs the numba package (pip install numba)")
-            self._kernels = kernels
-        self.backend = backend
+        self.backend = resolve_backend(backend)
+        self._stepper = _stepper(self.backend)
+        self._edited()
 
     def __len__(self):
         return len(self.positions)
 
-    # Invariants -------------------------------------------------------------------------
+    def _edited(self):
+        """Recompute what depends on the set of balls; drop the stepper's derived state."""
+        self.min_radius = float(self.radii.min()) if len(self) else 0.0
+        self._travel = travel_per_substep(self.min_radius)
+        self._totals = np.zeros(5, dtype=np.int64)  # the step's counters, zeroed by the stepper
+        self._stepper.invalidate()
+
+    # Invariants and limits --------------------------------------------------------------
 
     def kinetic_energy(self):
         """Total kinetic energy, J."""
@@ -121,17 +168,25 @@ class World:
         """Total linear momentum (px, py), kg m/s."""
         return self.masses @ self.velocities
 
-    def speed_limit(self, dt):
-        """Fastest speed an impulse may give a ball: SPEED_LIMIT_SUBSTEPS substeps per step.
+    def reachable_speed(self):
+        """The largest speed any ball can ever reach through collisions alone, m/s.
 
-        Collisions conserve energy, so speeds stay bounded by what commands put in; the
-        limit keeps one absurd command from making a single step take hours.
+        sqrt(2 E / m_min): collisions conserve the kinetic energy E and can at most hand all
+        of it to the lightest ball. Only edits and impulses change it.
         """
         if len(self) == 0:
-            return math.inf
-        return SPEED_LIMIT_SUBSTEPS * MAX_TRAVEL * self.min_radius / dt
+            return 0.0
+        return reachable_speed(self.kinetic_energy(), float(self.masses.min()))
 
-    # Inputs -----------------------------------------------------------------------------
+    def speed_limit(self, dt):
+        """Largest reachable speed for which every step of dt stays within MAX_SUBSTEPS.
+
+        Callers that change velocities (initial conditions, impulses, set states) compare
+        `reachable_speed()` with this and refuse what exceeds it; then no step is refused.
+        """
+        return speed_limit(travel_per_substep(self.min_radius), dt)
+
+    # Edits between steps ----------------------------------------------------------------
 
     def apply_impulse(self, ball, jx, jy):
         """Apply an impulse J (N s) to one ball: v += J / m."""
@@ -139,152 +194,79 @@ class World:
         self.velocities[ball, 0] += jx / mass
         self.velocities[ball, 1] += jy / mass
 
+    def add_balls(self, positions, velocities, radii, masses):
+        """Append balls (checked against core.limits); returns their indices.
+
+        Overlap with other balls or walls is the caller's policy, not checked here: balls
+        that overlap and separate are left alone, overlapping and approaching ones collide.
+        """
+        positions, velocities, radii, masses = _checked_balls(positions, velocities, radii,
+                                                              masses)
+        all_radii = np.concatenate((self.radii, radii))
+        _check_world(all_radii)
+        first = len(self)
+        self.positions = np.concatenate((self.positions, positions))
+        self.velocities = np.concatenate((self.velocities, velocities))
+        self.radii = all_radii
+        self.masses = np.concatenate((self.masses, masses))
+        self._edited()
+        return np.arange(first, len(self))
+
+    def remove_balls(self, balls):
+        """Remove balls by index; the others keep their relative order (and shift down)."""
+        balls = np.asarray(balls).reshape(-1)
+        if len(balls) == 0:
+            return
+        if not np.issubdtype(balls.dtype, np.integer):
+            raise ValueError(f'ball indices must be integers, got {balls.dtype}')
+        outside = np.flatnonzero((balls < 0) | (balls >= len(self)))
+        if len(outside):
+            raise ValueError(f'no ball {balls[outside[0]]}: the world has {len(self)} balls')
+        keep = np.ones(len(self), dtype=bool)
+        keep[balls] = False
+        self.positions = self.positions[keep]
+        self.velocities = self.velocities[keep]
+        self.radii = self.radii[keep]
+        self.masses = self.masses[keep]
+        self._edited()
+
+    def set_ball_state(self, ball, position, velocity):
+        """Put one ball at `position` (x, y) with `velocity` (vx, vy)."""
+        if not (isinstance(ball, (int, np.integer)) and 0 <= ball < len(self)):
+            raise ValueError(f'no ball {ball!r}: the world has {len(self)} balls')
+        position, velocity, _, _ = _checked_balls(position, velocity, self.radii[ball],
+                                                  self.masses[ball])
+        self.positions[ball] = position[0]
+        self.velocities[ball] = velocity[0]
+        self._edited()
+
     # Stepping ---------------------------------------------------------------------------
 
-    def _max_speed(self):
-        if len(self) == 0:
-            return 0.0
-        return math.sqrt(float(dot_rows(self.velocities, self.velocities).max()))
-
-    def _plan(self, speed, duration):
-        """Substeps needed so that no ball travels more than MAX_TRAVEL * min radius."""
-        if speed == 0.0 or self.min_radius == 0.0:
-            return 1
-        return max(1, math.ceil(speed * duration / (MAX_TRAVEL * self.min_radius)))
-
     def step(self, dt):
-        """Advance the world by dt seconds; return what happened as StepStats."""
+        """Advance the world by dt seconds; return what happened as StepStats.
+
+        This is the seed mode (`_seed_step`: a posteriori detection in substeps), the only
+        stepping mode today; another mode would be chosen here, before it.
+        """
+        dt = float(dt)
+        if not (math.isfinite(dt) and dt > 0.0):
+            raise ValueError(f'dt must be a finite number of seconds > 0, got {dt}')
+        return self._seed_step(dt)
+
+    def _seed_step(self, dt):
+        """The seed-mode step (core.stepping), by the World's backend.
+
+        Raises SubstepLimitExceeded, leaving the world as it was, if the step would need
+        more than MAX_SUBSTEPS substeps (possible only once `reachable_speed()` exceeds
+        `speed_limit(dt)`).
+        """
         if len(self) == 0:
             return StepStats(substeps=1)
-        if self.backend == 'numba':
-            return StepStats(*self._kernels.step(self, dt, MAX_TRAVEL))
-        totals = [0, 0, 0, 0, 0]
-        speed = self._max_speed()
-        count = self._plan(speed, dt)
-        h = dt / count
-        done = 0
-        while done < count:
-            new_speed = self._substep(h, speed, totals)
-            done += 1
-            if new_speed > speed:
-                speed = new_speed
-                if done < count and self._plan(speed, h) > 1:
-                    # A collision sped a ball up: split what is left of the step again.
-                    rest = (count - done) * h
-                    count = self._plan(speed, rest)
-                    h = rest / count
-                    done = 0
-        return StepStats(*totals)
-
-    def _substep(self, h, speed, totals):
-        """Move every ball for h seconds, then resolve every touching, approaching contact.
-
-        Returns the largest speed of a ball that collided (0 when none did).
-        """
-        x = self.positions
-        v = self.velocities
-        x += v * h
-        totals[2] += 1
-        lists = self.neighbours
-        lists.update(x, self.radii, self.walls, speed * h)
-
-        pair_a, pair_b, pair_rel = self._touching_pairs(lists)
-        wall_ball, wall_offset, wall_dir, wall_interior = self._touching_walls(lists)
-        if len(pair_a) == 0 and len(wall_ball) == 0:
-            return 0.0
-
-        fastest = 0.0
-        for _ in range(MAX_ROUNDS):
-            approaching_pairs = dot_rows(
-                pair_rel, take_rows(v, pair_a) - take_rows(v, pair_b)) < 0.0
-            approaching_walls = dot_rows(wall_offset, take_rows(v, wall_ball)) < 0.0
-            pairs = np.flatnonzero(approaching_pairs)
-            walls = np.flatnonzero(approaching_walls)
-            if len(pairs) == 0 and len(walls) == 0:
-                break
-            totals[3] += 1
-            pairs, walls = self._conflict_free(pair_a, pair_b, wall_ball, pairs, walls)
-            if len(pairs):
-                self._collide_pairs(pair_a[pairs], pair_b[pairs], pair_rel[pairs])
-                totals[0] += len(pairs)
-            if len(walls):
-                self._collide_walls(
-                    wall_ball[walls], wall_offset[walls], wall_dir[walls], wall_interior[walls])
-                totals[1] += len(walls)
-            moved = take_rows(v, np.concatenate((pair_a[pairs], pair_b[pairs], wall_ball[walls])))
-            fastest = max(fastest, math.sqrt(float(dot_rows(moved, moved).max())))
-        else:
-            totals[4] += len(pairs) + len(walls)
-        return fastest
-
-    def _touching_pairs(self, lists):
-        """Candidate pairs that touch: |r_a - r_b| < R_a + R_b. Returns a, b, r_a - r_b."""
-        a = lists.ball_a
-        b = lists.ball_b
-        rel = take_rows(self.positions, a) - take_rows(self.positions, b)
-        touching = np.flatnonzero(dot_rows(rel, rel) < lists.reach2)
-        return np.take(a, touching), np.take(b, touching), take_rows(rel, touching)
-
-    def _touching_walls(self, lists):
-        """Candidate ball-wall pairs that touch: |s| < R, with s the offset from the wall."""
-        balls = lists.wall_ball
-        offsets, interior = segment_offsets(
-            take_rows(self.positions, balls), lists.wall_starts, lists.wall_directions,
-            lists.wall_lengths, lists.wall_ends)
-        touching = np.flatnonzero(dot_rows(offsets, offsets) < lists.wall_radius2)
-        return (np.take(balls, touching), take_rows(offsets, touching),
-                take_rows(lists.wall_directions, touching), np.take(interior, touching))
-
-    def _conflict_free(self, pair_a, pair_b, wall_ball, pairs, walls):
-        """Keep the contacts whose balls take part in no lower-numbered approaching contact.
-
-        Ball-ball contacts are numbered before ball-wall contacts, each in list order. The
-        lowest-numbered contact is always kept, so every round makes progress.
-        """
-        best = self._scratch_best
-        big = np.iinfo(np.intp).max
-        n_pairs = len(pairs)
-        ids_pairs = np.arange(n_pairs)
-        ids_walls = np.arange(n_pairs, n_pairs + len(walls))
-        a = pair_a[pairs]
-        b = pair_b[pairs]
-        c = wall_ball[walls]
-        touched = np.concatenate((a, b, c))
-        best[touched] = big
-        np.minimum.at(best, a, ids_pairs)
-        np.minimum.at(best, b, ids_pairs)
-        np.minimum.at(best, c, ids_walls)
-        keep_pairs = (best[a] == ids_pairs) & (best[b] == ids_pairs)
-        keep_walls = best[c] == ids_walls
-        return pairs[keep_pairs], walls[keep_walls]
-
-    def _collide_pairs(self, a, b, rel):
-        """The seed's ball-ball response, for pairs that share no ball."""
-        v = self.velocities
-        m_a = np.take(self.masses, a)
-        m_b = np.take(self.masses, b)
-        v_a = take_rows(v, a)
-        v_b = take_rows(v, b)
-        dist2 = dot_rows(rel, rel)
-        # v_a' = v_a - 2 m_b/(m_a+m_b) ((v_a-v_b).(r_a-r_b)) / |r_a-r_b|^2 (r_a-r_b)
-        k_a = 2.0 * m_b / (m_a + m_b) * dot_rows(v_a - v_b, rel) / dist2
-        # v_b' = v_b - 2 m_a/(m_a+m_b) ((v_b-v_a).(r_b-r_a)) / |r_b-r_a|^2 (r_b-r_a)
-        k_b = 2.0 * m_a / (m_a + m_b) * dot_rows(v_b - v_a, -rel) / dist2
-        v[a] = v_a - k_a[:, None] * rel
-        v[b] = v_b - k_b[:, None] * -rel
-
-    def _collide_walls(self, balls, offsets, directions, interior):
-        """The seed's ball-wall response; about the end-point normal beyond a segment end."""
-        v = self.velocities
-        vb = take_rows(v, balls)
-        # Inside the segment: v' = 2 (v.w) w - v.
-        along = dot_rows(vb, directions)
-        reflected = 2.0 * along[:, None] * directions - vb
-        # Beyond an end point: reflect about n = s / |s|: v' = v - 2 (v.n) n.
-        ends = ~interior
-        if ends.any():
-            s = offsets[ends]
-            n = s / np.sqrt(dot_rows(s, s))[:, None]
-            vn = dot_rows(vb[ends], n)
-            reflected[ends] = vb[ends] - 2.0 * vn[:, None] * n
-        v[balls] = reflected
+        totals = self._totals
+        if self._stepper.step(self, dt, self._travel, totals) == STEP_REFUSED:
+            raise SubstepLimitExceeded(
+                f'step of {dt:g} s refused: it would need more than {limits.MAX_SUBSTEPS} '
+                f'substeps (reachable speed {self.reachable_speed():.4g} m/s, limit '
+                f'{self.speed_limit(dt):.4g} m/s for a smallest radius of '
+                f'{self.min_radius:g} m)')
+        return StepStats._make(totals.tolist())
