@@ -6,9 +6,11 @@ from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
-from ball_world.core.broadphase import grid_pairs, wall_pairs
-from ball_world.core.scenario import build_world
-from ball_world.core.world import BACKENDS, Walls, World
+from ball_world.core.broadphase import (CELLS_PER_BALL, CELLS_SLACK, grid_pairs,
+                                        HierarchicalGrid, wall_pairs)
+from ball_world.core import limits
+from ball_world.core.scenario import build_world, physics_backend
+from ball_world.core.world import BACKENDS, numba_installed, SubstepLimitExceeded, Walls, World
 
 BOX = [[0.0, 0.0, 10.0, 0.0], [10.0, 0.0, 10.0, 10.0], [10.0, 10.0, 0.0, 10.0],
        [0.0, 10.0, 0.0, 0.0]]
@@ -165,32 +167,107 @@ def test_fast_balls_never_pass_through_each_other(world):
 
 # Broadphase ----------------------------------------------------------------------------
 
-@settings(max_examples=30, deadline=None)
-@given(st.integers(0, 300), st.integers(0, 2**31), st.floats(0.0, 1.0))
-def test_grid_pairs_equal_all_pairs(n, seed, margin):
+def all_pairs_within(positions, radii, margin):
+    """Reference: every pair (i < j) closer than r_i + r_j + margin, by brute force."""
+    d = np.sqrt(((positions[:, None] - positions[None]) ** 2).sum(-1))
+    i, j = np.nonzero(np.triu(d < radii[:, None] + radii[None] + margin, k=1))
+    return list(zip(i.tolist(), j.tolist()))
+
+
+def segment_distances(positions, segments):
+    """Reference: (N, M) distances from points to segments, by projection and clamping."""
+    start = segments[None, :, 0:2]
+    edge = segments[None, :, 2:4] - start
+    rel = positions[:, None, :] - start
+    t = np.clip((rel * edge).sum(-1) / (edge * edge).sum(-1), 0.0, 1.0)
+    return np.sqrt(((rel - t[..., None] * edge) ** 2).sum(-1))
+
+
+def spread_radii(rng, n, ratio):
+    """Radii log-uniform between 0.02 and 0.02 * ratio."""
+    return 0.02 * np.exp(rng.uniform(0.0, math.log(ratio), n))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 300), st.integers(0, 2**31), st.floats(0.0, 1.0),
+       st.sampled_from([1.0, 3.0, 20.0, 100.0]), st.sampled_from([1.0, 0.1, 1e4]))
+def test_grid_pairs_equal_all_pairs(n, seed, margin, ratio, spread):
+    # Radius spreads up to 100 put balls in several grid levels; spreads of the positions
+    # from clusters to far-flung make cells grow.
+    rng = np.random.default_rng(seed)
+    positions = rng.uniform(-5, 5, (n, 2)) * spread
+    radii = spread_radii(rng, n, ratio)
+    a, b = grid_pairs(positions, radii, margin)
+    expected = all_pairs_within(positions, radii, margin)
+    assert list(zip(a.tolist(), b.tolist())) == expected  # same pairs, canonical order
+
+
+def test_reusing_the_previous_grid_after_balls_moved_gives_the_same_pairs():
+    rng = np.random.default_rng(5)
+    positions = rng.uniform(-5, 5, (400, 2))
+    radii = spread_radii(rng, 400, 30.0)
+    grid = HierarchicalGrid(positions, radii, 0.1)
+    moved = positions + rng.uniform(-0.3, 0.3, positions.shape)
+    a, b = HierarchicalGrid(moved, radii, 0.1, previous=grid).pairs()
+    assert list(zip(a.tolist(), b.tolist())) == all_pairs_within(moved, radii, 0.1)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 200), st.integers(1, 40), st.integers(0, 2**31), st.floats(0.0, 0.5),
+       st.sampled_from([1.0, 100.0]))
+def test_wall_pairs_equal_brute_force(n, m, seed, margin, ratio):
     rng = np.random.default_rng(seed)
     positions = rng.uniform(-5, 5, (n, 2))
-    radii = rng.uniform(0.05, 0.4, n)
-    a, b, _ = grid_pairs(positions, radii, margin)
-    got = set(zip(a.tolist(), b.tolist()))
-    d = np.sqrt(((positions[:, None] - positions[None]) ** 2).sum(-1))
-    reach = radii[:, None] + radii[None] + margin
-    i, j = np.nonzero(np.triu(d < reach, k=1))
-    assert got == set(zip(i.tolist(), j.tolist()))
-    assert len(got) == len(a)
-    # Reusing the previous cell order after the balls moved gives the same pairs.
-    moved = positions + rng.uniform(-0.3, 0.3, (n, 2))
-    a2, b2, _ = grid_pairs(moved, radii, margin, grid_pairs(positions, radii, margin)[2])
-    d2 = np.sqrt(((moved[:, None] - moved[None]) ** 2).sum(-1))
-    i2, j2 = np.nonzero(np.triu(d2 < reach, k=1))
-    assert set(zip(a2.tolist(), b2.tolist())) == set(zip(i2.tolist(), j2.tolist()))
+    radii = spread_radii(rng, n, ratio)
+    starts = rng.uniform(-6, 6, (m, 2))
+    # Oblique, axis-aligned (exactly vertical or horizontal) and very short segments.
+    kinds = rng.integers(0, 4, m)
+    ends = starts + rng.uniform(-8, 8, (m, 2)) * np.where(kinds[:, None] == 3, 1e-3, 1.0)
+    ends[kinds == 1, 0] = starts[kinds == 1, 0]
+    ends[kinds == 2, 1] = starts[kinds == 2, 1]
+    segments = np.concatenate((starts, ends), axis=1)
+    ball, wall = wall_pairs(positions, radii, Walls(segments), margin)
+    near = segment_distances(positions, segments) < radii[:, None] + margin
+    assert list(zip(ball.tolist(), wall.tolist())) == list(zip(*map(list, np.nonzero(near))))
 
 
 def test_wall_pairs_find_balls_near_walls_and_segment_ends():
     walls = Walls([[0.0, 0.0, 10.0, 0.0], [5.0, 5.0, 5.0, 6.0]])
     positions = np.array([[3.0, 0.4], [3.0, 0.6], [5.3, 6.2], [5.0, 6.6], [-0.2, -0.2]])
     ball, wall = wall_pairs(positions, np.full(5, 0.25), walls, 0.2)
-    assert sorted(zip(ball.tolist(), wall.tolist())) == [(0, 0), (2, 1), (4, 0)]
+    assert list(zip(ball.tolist(), wall.tolist())) == [(0, 0), (2, 1), (4, 0)]
+
+
+@pytest.mark.parametrize('far', [1e6, 1e100])
+def test_grid_memory_stays_linear_when_balls_are_far_apart(far):
+    # Two touching pairs of the smallest balls at opposite corners: a grid of one diameter
+    # per cell would need 1e18 (or 1e200) cells; the cells grow instead.
+    positions = np.array([[-far, -far], [-far + 0.0015, -far], [far, far], [far, far - 0.0015]])
+    radii = np.full(4, 1e-3)
+    grid = HierarchicalGrid(positions, radii, 0.0)
+    a, b = grid.pairs()
+    assert list(zip(a.tolist(), b.tolist())) == [(0, 1), (2, 3)]
+    assert len(grid.levels[0].starts) <= (CELLS_PER_BALL * 4 + CELLS_SLACK) * 2
+
+
+def test_candidates_stay_linear_with_a_radius_ratio_of_100():
+    # Four balls of radius 1 m with ~7,800 balls of 1 cm packed in the gaps between them.
+    # One grid sized by the large balls would put ~2,000 small balls in a cell and offer
+    # each about 10,000 candidates; per radius level each gets a handful.
+    large = np.array([[0.0, 0.0], [2.05, 0.0], [0.0, 2.05], [2.05, 2.05]])
+    lattice = np.stack(np.meshgrid(np.arange(-45, 137), np.arange(-45, 137)), -1).reshape(-1, 2)
+    small = lattice * 0.0225
+    clear = (np.hypot(*(small[:, None] - large[None]).transpose(2, 0, 1)) > 1.011).all(1)
+    positions = np.concatenate((small[clear], large))
+    radii = np.concatenate((np.full(clear.sum(), 0.01), np.full(4, 1.0)))
+    assert len(positions) > 7000
+    grid = HierarchicalGrid(positions, radii, 0.0)
+    candidates = sum(len(level.own_pairs()[0]) for level in grid.levels)
+    candidates += sum(len(larger.pairs_with(positions, level.balls)[0])
+                      for k, level in enumerate(grid.levels) for larger in grid.levels[k + 1:])
+    assert candidates < 20 * len(positions)
+    a, _ = grid.pairs()
+    assert len(a) == 0  # nothing touches: the small balls are 2.5 mm apart
 
 
 # Invariants over long random runs ------------------------------------------------------
@@ -243,17 +320,187 @@ def test_identical_inputs_give_bit_identical_trajectories(backend):
     assert runs[0] == runs[1]
 
 
-def test_backends_agree_where_the_contact_order_cannot_matter():
-    # Isolated pairwise collisions: one contact at a time, so both backends must apply the
-    # same seed formula to the same numbers.
-    worlds = [World([[0.0, 0.0], [1.05, 0.1], [5.0, 5.0]], [[2.0, 0.0], [-1.0, 0.3], [0, 1]],
-                    [0.5, 0.5, 0.2], [1.0, 3.0, 1.0], walls=BOX, backend=b) for b in BACKENDS]
-    collisions = 0
-    for _ in range(200):
-        stats = [w.step(0.02) for w in worlds]
-        assert stats[0].ball_ball == stats[1].ball_ball
-        assert stats[0].ball_wall == stats[1].ball_wall
-        collisions += stats[0].ball_ball + stats[0].ball_wall
-    assert collisions >= 3
-    assert worlds[0].positions.tolist() == worlds[1].positions.tolist()
-    assert worlds[0].velocities.tolist() == worlds[1].velocities.tolist()
+# Limits: what a World refuses --------------------------------------------------------
+
+@pytest.mark.parametrize('segment, problem', [
+    ([1e-200, 1.0, 0.0, 1.0], 'long'),  # its length rounds to 1e-200 m: no direction
+    ([0.0, 0.0, 5e-7, 0.0], 'long'),  # below MIN_WALL_LENGTH
+    ([0.0, 0.0, 0.0, 0.0], 'long'),
+    ([0.0, 0.0, math.nan, 1.0], 'not finite'),
+    ([0.0, 0.0, math.inf, 1.0], 'not finite'),
+    ([-1e200, 5.0, 1e200, 5.0], 'coordinate limit'),
+])
+def test_walls_refuse_degenerate_segments(segment, problem):
+    with pytest.raises(ValueError, match=problem):
+        Walls([segment])
+
+
+def test_walls_keep_a_wall_of_the_shortest_length_with_a_unit_direction():
+    walls = Walls([[1e6, 0.0, 1e6 - limits.MIN_WALL_LENGTH, 0.0]])
+    assert walls.lengths[0] >= limits.MIN_WALL_LENGTH
+    assert walls.directions[0, 0] == -1.0
+
+
+def test_walls_refuse_more_than_max_walls():
+    with pytest.raises(ValueError, match='walls'):
+        Walls(np.tile([0.0, 0.0, 1.0, 0.0], (limits.MAX_WALLS + 1, 1)))
+
+
+@pytest.mark.parametrize('change, problem', [
+    ({'radii': [1e-9, 0.5]}, 'radius'),
+    ({'radii': [0.5, 2e3]}, 'radius'),
+    ({'masses': [1e308, 1.0]}, 'mass'),
+    ({'masses': [0.0, 1.0]}, 'mass'),
+    ({'positions': [[2e6, 0.0], [0.0, 0.0]]}, 'coordinate limit'),
+    ({'positions': [[math.nan, 0.0], [0.0, 0.0]]}, 'not finite'),
+    ({'velocities': [[math.inf, 0.0], [0.0, 0.0]]}, 'not finite'),
+    ({'radii': [0.002, 0.5]}, 'ratio'),
+    ({'masses': [1.0]}, 'differ in length'),
+])
+def test_world_refuses_balls_outside_the_limits(change, problem):
+    balls = {'positions': [[0.0, 0.0], [3.0, 0.0]], 'velocities': [[0.0, 0.0], [0.0, 0.0]],
+             'radii': [0.5, 0.5], 'masses': [1.0, 1.0]}
+    balls.update(change)
+    with pytest.raises(ValueError, match=problem):
+        World(**balls)
+
+
+def test_world_refuses_more_than_max_balls():
+    n = limits.MAX_BALLS + 1
+    with pytest.raises(ValueError, match='balls'):
+        World(np.zeros((n, 2)), np.zeros((n, 2)), np.ones(n), np.ones(n))
+
+
+def test_auto_backend_resolves_to_the_installed_compiled_one():
+    expected = 'numba' if numba_installed() else 'numpy'
+    assert World([[0.0, 0.0]], [[0.0, 0.0]], [0.5], [1.0], backend='auto').backend == expected
+    assert physics_backend({}) == expected  # the default parameter is auto
+    assert physics_backend({'physics.backend': 'numpy'}) == 'numpy'
+    with pytest.raises(ValueError, match='auto'):
+        physics_backend({'physics.backend': 'fortran'})
+
+
+# Bounded work: reachable speed, speed limit, refused steps -------------------------
+
+def test_reachable_speed_is_the_speed_of_the_lightest_ball_holding_all_energy(world):
+    w = world([[0.0, 0.0], [3.0, 0.0], [6.0, 0.0]], [[1.0, 2.0], [0.0, -3.0], [0.5, 0.0]],
+              [0.5, 0.4, 0.3], [2.0, 0.5, 1.0])
+    energy = 0.5 * (2.0 * 5.0 + 0.5 * 9.0 + 1.0 * 0.25)
+    assert w.reachable_speed() == pytest.approx(math.sqrt(2.0 * energy / 0.5), rel=1e-15)
+    w.apply_impulse(0, 2.0, 0.0)  # v0 = (2, 2): E grows by 0.5 * 2 * (8 - 5)
+    assert w.reachable_speed() == pytest.approx(math.sqrt(2.0 * (energy + 3.0) / 0.5),
+                                                rel=1e-15)
+
+
+def test_speed_limit_leaves_room_for_re_splitting(world):
+    w = world([[0.0, 0.0]], [[0.0, 0.0]], [0.2], [1.0])
+    # (MAX_SUBSTEPS - 1) substeps of half the smallest radius, halved for re-splits.
+    assert w.speed_limit(0.01) == pytest.approx(
+        (limits.MAX_SUBSTEPS - 1) * 0.5 * 0.2 / (2 * 0.01), rel=1e-15)
+
+
+def test_a_ball_at_the_speed_limit_steps_within_max_substeps(world):
+    w = world([[5.0, 5.0], [5.0, 8.0]], [[0.0, 0.0], [0.0, 0.0]], [0.1, 0.1], [1.0, 1e6],
+              walls=BOX)
+    limit = w.speed_limit(1 / 60)
+    w.velocities[0] = [limit * 0.6, limit * 0.8]  # the light ball holds all the energy
+    assert w.reachable_speed() == pytest.approx(limit, rel=1e-12)
+    for _ in range(3):
+        stats = w.step(1 / 60)
+        assert stats.ball_wall > 0
+        assert limits.MAX_SUBSTEPS // 2 - 2 <= stats.substeps <= limits.MAX_SUBSTEPS
+
+
+def test_step_refuses_a_plan_past_max_substeps_and_leaves_the_world_unchanged(world):
+    w = world([[5.0, 5.0]], [[0.0, 0.0]], [0.1], [1.0], walls=BOX)
+    w.velocities[0] = [1e9, 0.0]  # written past every check
+    before = (w.positions.copy(), w.velocities.copy())
+    with pytest.raises(SubstepLimitExceeded, match='refused'):
+        w.step(1 / 60)
+    assert np.array_equal(w.positions, before[0]) and np.array_equal(w.velocities, before[1])
+
+
+def test_step_refused_after_a_collision_speeds_a_ball_up_is_rolled_back(world):
+    # A heavy ball needing 600 substeps hits a light one, which then needs twice as many:
+    # only a world whose reachable speed exceeds the limit can get here.
+    dt = 0.01
+    speed = 600 * 0.5 * 0.1 / dt
+    w = world([[0.0, 0.0], [0.25, 0.0]], [[speed, 0.0], [0.0, 0.0]], [0.1, 0.1], [1e3, 1e-2])
+    assert w.reachable_speed() > w.speed_limit(dt)
+    before = (w.positions.copy(), w.velocities.copy())
+    with pytest.raises(SubstepLimitExceeded):
+        w.step(dt)
+    assert np.array_equal(w.positions, before[0]) and np.array_equal(w.velocities, before[1])
+    w.velocities[0, 0] = speed / 10  # slow enough now: the same world steps
+    assert w.step(dt).ball_ball == 1
+
+
+@pytest.mark.parametrize('dt', [0.0, -1.0, math.nan, math.inf])
+def test_step_refuses_a_duration_that_is_not_positive_and_finite(world, dt):
+    w = world([[0.0, 0.0]], [[1.0, 0.0]], [0.5], [1.0])
+    with pytest.raises(ValueError, match='dt'):
+        w.step(dt)
+
+
+# Edits between steps ------------------------------------------------------------------
+
+def test_add_balls_returns_their_indices_and_they_collide_at_once(world):
+    w = world([[2.0, 5.0], [8.0, 5.0]], [[0.0, 0.0], [0.0, 0.0]], [0.5, 0.5], [1.0, 1.0],
+              walls=BOX)
+    for _ in range(5):
+        w.step(0.01)  # neighbour lists built and cached
+    added = w.add_balls([[2.95, 5.0], [5.0, 5.0]], [[-1.0, 0.0], [0.0, 0.0]], [0.5, 0.05],
+                        [1.0, 2.0])
+    assert added.tolist() == [2, 3]
+    assert len(w) == 4 and w.min_radius == 0.05
+    assert w.radii.tolist() == [0.5, 0.5, 0.5, 0.05] and w.masses[3] == 2.0
+    stats = w.step(0.01)  # ball 2 touches ball 0 and approaches it
+    assert stats.ball_ball == 1
+    np.testing.assert_array_equal(w.velocities[0], [-1.0, 0.0])
+
+
+def test_add_balls_refuses_what_breaks_the_limits_and_changes_nothing(world):
+    w = world([[2.0, 5.0]], [[1.0, 0.0]], [0.5], [1.0])
+    with pytest.raises(ValueError, match='ratio'):
+        w.add_balls([[5.0, 5.0]], [[0.0, 0.0]], [0.001], [1.0])
+    assert len(w) == 1 and w.min_radius == 0.5
+
+
+def test_remove_balls_keeps_the_order_of_the_others(world):
+    positions = [[1.0, 1.0], [3.0, 1.0], [5.0, 1.0], [7.0, 1.0], [9.0, 1.0]]
+    w = world(positions, np.zeros((5, 2)), [0.4, 0.3, 0.4, 0.3, 0.4], [1, 2, 3, 4, 5],
+              walls=BOX)
+    w.step(0.01)
+    w.remove_balls([3, 1])
+    assert w.positions.tolist() == [positions[0], positions[2], positions[4]]
+    assert w.masses.tolist() == [1, 3, 5] and w.min_radius == 0.4
+    w.set_ball_state(2, (5.75, 1.0), (-1.0, 0.0))  # now touching former ball 2, approaching
+    assert w.step(0.01).ball_ball == 1
+
+
+def test_set_ball_state_moves_a_ball_into_contact_and_it_collides(world):
+    w = world([[2.0, 5.0], [8.0, 5.0]], [[0.5, 0.0], [0.0, 0.0]], [0.5, 0.5], [1.0, 1.0],
+              walls=BOX)
+    for _ in range(5):
+        w.step(0.01)
+    w.set_ball_state(1, (w.positions[0, 0] + 0.99, 5.0), (-2.0, 0.0))
+    assert w.positions[1, 1] == 5.0 and w.velocities[1].tolist() == [-2.0, 0.0]
+    stats = w.step(0.01)
+    assert stats.ball_ball == 1
+
+
+@pytest.mark.parametrize('edit, problem', [
+    (lambda w: w.remove_balls([2]), 'no ball 2'),
+    (lambda w: w.remove_balls([-1]), 'no ball -1'),
+    (lambda w: w.remove_balls([0.5]), 'integers'),
+    (lambda w: w.set_ball_state(5, (0, 0), (0, 0)), 'no ball 5'),
+    (lambda w: w.set_ball_state(0, (math.nan, 0), (0, 0)), 'not finite'),
+    (lambda w: w.set_ball_state(0, (0, 0), (0, math.inf)), 'not finite'),
+    (lambda w: w.set_ball_state(0, (1e7, 0), (0, 0)), 'coordinate limit'),
+])
+def test_bad_edits_are_refused_and_change_nothing(world, edit, problem):
+    w = world([[1.0, 1.0], [3.0, 1.0]], [[1.0, 0.0], [0.0, 0.0]], [0.4, 0.3], [1.0, 2.0])
+    with pytest.raises(ValueError, match=problem):
+        edit(w)
+    assert w.positions.tolist() == [[1.0, 1.0], [3.0, 1.0]]
+    assert w.velocities.tolist() == [[1.0, 0.0], [0.0, 0.0]]
