@@ -6,9 +6,9 @@ from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
+from ball_world.core import limits
 from ball_world.core.broadphase import (CELLS_PER_BALL, CELLS_SLACK, grid_pairs,
                                         HierarchicalGrid, wall_pairs)
-from ball_world.core import limits
 from ball_world.core.scenario import build_world, physics_backend
 from ball_world.core.world import BACKENDS, numba_installed, SubstepLimitExceeded, Walls, World
 
