@@ -36,8 +36,9 @@ from ball_world.core.rules import (advance, pair_approaching, pair_response, pai
                                    reach_squared, reflect_off_end, reflect_off_wall,
                                    speed_squared, wall_approaching, wall_offset, wall_touching)
 from ball_world.core.stepping import (BALL_BALL, BALL_WALL, MAX_ROUNDS, over_budget,
-                                      plan_substeps, replan, ROUNDS, STEP_DONE, STEP_REFUSED,
-                                      SUBSTEPS, UNRESOLVED)
+                                      plan_substeps, reachable_speed, refusal_possible, replan,
+                                      ROUNDS, speed_limit, STEP_DONE, STEP_REFUSED, SUBSTEPS,
+                                      UNRESOLVED)
 
 try:
     from numba import njit
@@ -45,6 +46,10 @@ try:
 except ImportError:  # the numpy backend needs nothing more
     njit = None
 
+#: Skin of the candidate lists in smallest radii (see numpy_backend.SKIN_RADII).
+SKIN_RADII = 2.0
+#: An empty (0, 2) list of candidates, before the first build.
+_NO_ROWS = np.empty((0, 2), dtype=np.int64)
 #: Columns of the packed wall array the kernels take.
 WALL_COLUMNS = ('start_x', 'start_y', 'end_x', 'end_y', 'w_x', 'w_y', 'length')
 
@@ -99,7 +104,8 @@ FINGERPRINT = _fingerprint()
 #: compiles them where they are called (also from one another), with the kernels' options.
 SHARED = (advance, speed_squared, reach_squared, pair_touching, pair_approaching,
           pair_response, wall_offset, wall_touching, wall_approaching, reflect_off_wall,
-          reflect_off_end, plan_substeps, replan, over_budget, grid_shape, widened)
+          reflect_off_end, plan_substeps, replan, over_budget, reachable_speed, speed_limit,
+          refusal_possible, grid_shape, widened)
 
 if njit is not None:
     for _function in SHARED:
@@ -122,11 +128,11 @@ def move(x, v, h):
         x[i, 1] = advance(x[i, 1], v[i, 1], h)
 
 
-# Stage 2: the hierarchical grid and the touching contacts ------------------------------
+# Stage 2: candidates from the hierarchical grid, then the touching contacts ------------
 
 @_compile
-def build_grids(x, members, level_starts, level_largest):
-    """Counting sort of each level's balls into its own grid.
+def build_grids(x, members, level_starts, level_largest, margin):
+    """Counting sort of each level's balls into its own grid, cells 2 r_max + margin wide.
 
     Returns (origin, cell, shape, starts, cell_balls, cell_keys, scale): level k's balls in
     cell order are cell_balls[level_starts[k]:level_starts[k + 1]]; shape[k] holds columns,
@@ -158,7 +164,7 @@ def build_grids(x, members, level_starts, level_largest):
     table = 0
     for k in range(levels):
         size, nx, ny = grid_shape(extent[k, 0], extent[k, 1],
-                                  widened(2.0 * level_largest[k], scale),
+                                  widened(2.0 * level_largest[k] + margin, scale),
                                   level_starts[k + 1] - level_starts[k])
         cell[k] = size
         stride = ny + 2 * PAD
@@ -210,17 +216,20 @@ def _append(found, count, first, second):
 
 
 @_compile
-def _touching(x, radii, i, j):
-    """Whether balls i and j touch, tested exactly as the numpy backend does (a < b)."""
-    a = min(i, j)
-    b = max(i, j)
-    return pair_touching(x[a, 0] - x[b, 0], x[a, 1] - x[b, 1], reach_squared(radii[a], radii[b]))
+def _near(x, radii, i, j, margin):
+    """Whether balls i and j are closer than r_i + r_j + margin."""
+    dx = x[i, 0] - x[j, 0]
+    dy = x[i, 1] - x[j, 1]
+    reach = radii[i] + radii[j] + margin
+    return dx * dx + dy * dy < reach * reach
 
 
 @_compile
-def _touching_pairs(x, radii, level_starts, low, cell, shape, starts, cell_balls, cell_keys):
-    """Every touching pair, unsorted: half stencil within a level, 3 x 3 into larger ones."""
-    found = np.empty((x.shape[0] + 16, 2), dtype=np.int64)
+def _candidate_pairs(x, radii, margin, level_starts, low, cell, shape, starts, cell_balls,
+                     cell_keys):
+    """Pairs (a < b) closer than r_a + r_b + margin, unsorted: half stencil within a level,
+    3 x 3 cells of every larger level around each ball."""
+    found = np.empty((2 * x.shape[0] + 16, 2), dtype=np.int64)
     count = 0
     levels = cell.shape[0]
     for k in range(levels):
@@ -231,14 +240,14 @@ def _touching_pairs(x, radii, level_starts, low, cell, shape, starts, cell_balls
             key = cell_keys[p]
             for s in range(p + 1, starts[base + key + 1]):
                 j = cell_balls[s]
-                if _touching(x, radii, i, j):
+                if _near(x, radii, i, j, margin):
                     found = _append(found, count, min(i, j), max(i, j))
                     count += 1
             for offset in (1, stride - 1, stride, stride + 1):
                 other = base + key + offset
                 for s in range(starts[other], starts[other + 1]):
                     j = cell_balls[s]
-                    if _touching(x, radii, i, j):
+                    if _near(x, radii, i, j, margin):
                         found = _append(found, count, min(i, j), max(i, j))
                         count += 1
         for larger in range(k + 1, levels):
@@ -256,7 +265,7 @@ def _touching_pairs(x, radii, level_starts, low, cell, shape, starts, cell_balls
                         other = base + centre + dx * stride + dy
                         for s in range(starts[other], starts[other + 1]):
                             j = cell_balls[s]
-                            if _touching(x, radii, i, j):
+                            if _near(x, radii, i, j, margin):
                                 found = _append(found, count, min(i, j), max(i, j))
                                 count += 1
     return found[:count]
@@ -271,14 +280,15 @@ def _cell_range(low, high, reach, origin, cell, cells):
 
 
 @_compile
-def _touching_walls(x, radii, walls, wall_scale, level_starts, level_largest, low, cell,
-                    shape, starts, cell_balls, scale):
-    """Every touching ball-wall pair, unsorted: each wall rasterised into each level's grid."""
+def _candidate_walls(x, radii, margin, walls, wall_scale, level_starts, level_largest, low,
+                     cell, shape, starts, cell_balls, scale):
+    """(ball, wall) with the ball closer than r + margin to the segment, unsorted: each
+    wall rasterised, column by column, into the cells of each level within reach of it."""
     found = np.empty((64, 2), dtype=np.int64)
     count = 0
     for k in range(cell.shape[0]):
         nx, ny, stride, base = shape[k, 0], shape[k, 1], shape[k, 2], shape[k, 3]
-        reach = widened(level_largest[k], max(scale, wall_scale))
+        reach = widened(level_largest[k] + margin, max(scale, wall_scale))
         size = cell[k]
         for w in range(walls.shape[0]):
             x0, y0, x1, y1 = walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3]
@@ -305,61 +315,108 @@ def _touching_walls(x, radii, walls, wall_scale, level_starts, level_largest, lo
                         i = cell_balls[s]
                         sx, sy, _ = wall_offset(x[i, 0], x[i, 1], walls[w, 0], walls[w, 1],
                                                 walls[w, 4], walls[w, 5], walls[w, 6])
-                        if wall_touching(sx, sy, radii[i]):
+                        reach_i = radii[i] + margin
+                        if sx * sx + sy * sy < reach_i * reach_i:
                             found = _append(found, count, i, w)
                             count += 1
     return found[:count]
 
 
 @_compile
-def _canonical(found):
-    """Rows (first, second) sorted by first, then second, in place: the canonical order.
+def _canonical(found, rows):
+    """Rows (first, second) sorted by first, then second: the canonical order.
 
-    A handful of rows (the usual case) are insertion-sorted without allocating.
+    A counting sort on `first` (values below `rows`), then an insertion sort of each run
+    of equal firsts, which holds a handful of rows: O(len(found) + rows), no comparison
+    sort of the whole list.
     """
     count = found.shape[0]
-    if count > 32:
-        order = np.argsort(found[:, 0] * (found[:, 1].max() + 1) + found[:, 1])
-        found[:] = found[order]
-        return found
-    for i in range(1, count):
-        first = found[i, 0]
-        second = found[i, 1]
-        j = i - 1
-        while j >= 0 and (found[j, 0] > first or (found[j, 0] == first and found[j, 1] > second)):
-            found[j + 1, 0] = found[j, 0]
-            found[j + 1, 1] = found[j, 1]
-            j -= 1
-        found[j + 1, 0] = first
-        found[j + 1, 1] = second
-    return found
+    starts = np.zeros(rows + 1, dtype=np.int64)
+    for c in range(count):
+        starts[found[c, 0] + 1] += 1
+    for r in range(rows):
+        starts[r + 1] += starts[r]
+    fill = starts[:-1].copy()
+    ordered = np.empty_like(found)
+    for c in range(count):
+        slot = fill[found[c, 0]]
+        ordered[slot, 0] = found[c, 0]
+        ordered[slot, 1] = found[c, 1]
+        fill[found[c, 0]] += 1
+    for r in range(rows):
+        for i in range(starts[r] + 1, starts[r + 1]):
+            second = ordered[i, 1]
+            j = i - 1
+            while j >= starts[r] and ordered[j, 1] > second:
+                ordered[j + 1, 1] = ordered[j, 1]
+                j -= 1
+            ordered[j + 1, 1] = second
+    return ordered
 
 
 @_compile
-def find_contacts(x, radii, walls, wall_scale, members, level_starts, level_largest):
-    """The touching contacts in canonical order, with their geometry.
+def build_candidates(x, radii, walls, wall_scale, margin, members, level_starts,
+                     level_largest):
+    """Candidate pairs and ball-wall pairs within `margin` of touching, in canonical order."""
+    low, cell, shape, starts, cell_balls, cell_keys, scale = build_grids(
+        x, members, level_starts, level_largest, margin)
+    pairs = _candidate_pairs(x, radii, margin, level_starts, low, cell, shape, starts,
+                             cell_balls, cell_keys)
+    near_walls = _candidate_walls(x, radii, margin, walls, wall_scale, level_starts,
+                                  level_largest, low, cell, shape, starts, cell_balls, scale)
+    return _canonical(pairs, x.shape[0]), _canonical(near_walls, x.shape[0])
+
+
+@_compile
+def find_contacts(x, radii, walls, candidates, near_walls):
+    """The touching contacts among the candidates, in their (canonical) order.
 
     Returns pairs (P, 2) with a < b, rel (P, 2) = r_a - r_b, wall contacts (W, 2) as
     (ball, wall), offsets (W, 2) and interior (W,).
     """
-    low, cell, shape, starts, cell_balls, cell_keys, scale = build_grids(
-        x, members, level_starts, level_largest)
-    pairs = _canonical(_touching_pairs(x, radii, level_starts, low, cell, shape, starts,
-                                       cell_balls, cell_keys))
-    rel = np.empty((pairs.shape[0], 2))
-    for c in range(pairs.shape[0]):
-        rel[c, 0] = x[pairs[c, 0], 0] - x[pairs[c, 1], 0]
-        rel[c, 1] = x[pairs[c, 0], 1] - x[pairs[c, 1], 1]
-    contacts = _canonical(_touching_walls(x, radii, walls, wall_scale, level_starts,
-                                          level_largest, low, cell, shape, starts, cell_balls,
-                                          scale))
-    offsets = np.empty((contacts.shape[0], 2))
-    interior = np.empty(contacts.shape[0], dtype=np.bool_)
-    for c in range(contacts.shape[0]):
-        i = contacts[c, 0]
-        w = contacts[c, 1]
-        offsets[c, 0], offsets[c, 1], interior[c] = wall_offset(
-            x[i, 0], x[i, 1], walls[w, 0], walls[w, 1], walls[w, 4], walls[w, 5], walls[w, 6])
+    touching = np.empty(candidates.shape[0], dtype=np.bool_)
+    count = 0
+    for c in range(candidates.shape[0]):
+        a = candidates[c, 0]
+        b = candidates[c, 1]
+        touching[c] = pair_touching(x[a, 0] - x[b, 0], x[a, 1] - x[b, 1],
+                                    reach_squared(radii[a], radii[b]))
+        count += touching[c]
+    pairs = np.empty((count, 2), dtype=np.int64)
+    rel = np.empty((count, 2))
+    count = 0
+    for c in range(candidates.shape[0]):
+        if touching[c]:
+            a = candidates[c, 0]
+            b = candidates[c, 1]
+            pairs[count, 0] = a
+            pairs[count, 1] = b
+            rel[count, 0] = x[a, 0] - x[b, 0]
+            rel[count, 1] = x[a, 1] - x[b, 1]
+            count += 1
+    inside = np.empty(near_walls.shape[0], dtype=np.bool_)
+    count = 0
+    for c in range(near_walls.shape[0]):
+        i = near_walls[c, 0]
+        w = near_walls[c, 1]
+        sx, sy, _ = wall_offset(x[i, 0], x[i, 1], walls[w, 0], walls[w, 1], walls[w, 4],
+                                walls[w, 5], walls[w, 6])
+        inside[c] = wall_touching(sx, sy, radii[i])
+        count += inside[c]
+    contacts = np.empty((count, 2), dtype=np.int64)
+    offsets = np.empty((count, 2))
+    interior = np.empty(count, dtype=np.bool_)
+    count = 0
+    for c in range(near_walls.shape[0]):
+        if inside[c]:
+            i = near_walls[c, 0]
+            w = near_walls[c, 1]
+            contacts[count, 0] = i
+            contacts[count, 1] = w
+            offsets[count, 0], offsets[count, 1], interior[count] = wall_offset(
+                x[i, 0], x[i, 1], walls[w, 0], walls[w, 1], walls[w, 4], walls[w, 5],
+                walls[w, 6])
+            count += 1
     return pairs, rel, contacts, offsets, interior
 
 
@@ -452,45 +509,56 @@ def resolve(v, masses, walls, pairs, rel, contacts, offsets, interior, best, tot
 # The step -----------------------------------------------------------------------------
 
 @_compile
-def max_speed(v):
-    """Speed of the fastest ball, m/s."""
+def speed_and_energy(v, masses):
+    """Speed of the fastest ball (m/s) and the kinetic energy (J), in one pass."""
     fastest2 = 0.0
+    energy = 0.0
     for i in range(v.shape[0]):
-        fastest2 = max(fastest2, speed_squared(v[i, 0], v[i, 1]))
-    return np.sqrt(fastest2)
+        speed2 = speed_squared(v[i, 0], v[i, 1])
+        fastest2 = max(fastest2, speed2)
+        energy += masses[i] * speed2
+    return np.sqrt(fastest2), 0.5 * energy
 
 
 @_compile
-def seed_step(x, v, radii, masses, dt, travel, walls, wall_scale, members, level_starts,
-              level_largest, best, totals):
+def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, wall_scale, members,
+              level_starts, level_largest, skin, candidates, near_walls, moved, best, totals):
     """One seed-mode step, planned and split exactly as numpy_backend.NumpyStepper.step.
 
-    Counts into `totals` (zeroed first). A step refused part-way (STEP_REFUSED) puts
-    positions and velocities back as they were.
+    The candidates (Verlet lists with `skin`, `moved` metres old) are rebuilt whenever the
+    balls may have closed half the skin. Counts into `totals` (zeroed first). Returns
+    (status, candidates, near_walls, moved); a step refused part-way (STEP_REFUSED) puts
+    positions and velocities back as they were and asks for new candidates.
     """
     totals[:] = 0
-    speed = max_speed(v)
+    speed, energy = speed_and_energy(v, masses)
     count = plan_substeps(speed, dt, travel)
     if over_budget(0, count, 0):
-        return STEP_REFUSED
-    saved_x = x.copy()
-    saved_v = v.copy()
+        return STEP_REFUSED, candidates, near_walls, moved
+    keep = refusal_possible(energy, min_mass, travel, dt)
+    saved_x = x.copy() if keep else x[:0]
+    saved_v = v.copy() if keep else v[:0]
     h = dt / count
     done = 0
     while done < count:
         move(x, v, h)
-        pairs, rel, contacts, offsets, interior = find_contacts(
-            x, radii, walls, wall_scale, members, level_starts, level_largest)
+        moved += speed * h
+        if not 2.0 * moved < skin:
+            candidates, near_walls = build_candidates(x, radii, walls, wall_scale, skin,
+                                                      members, level_starts, level_largest)
+            moved = 0.0
+        pairs, rel, contacts, offsets, interior = find_contacts(x, radii, walls, candidates,
+                                                                near_walls)
         fastest = resolve(v, masses, walls, pairs, rel, contacts, offsets, interior, best,
                           totals)
         done += 1
         totals[SUBSTEPS] += 1
         count, done, h, speed = replan(count, done, h, speed, fastest, travel)
         if over_budget(totals[SUBSTEPS], count, done):
-            x[:] = saved_x
+            x[:] = saved_x  # kept: this is reachable only when refusal_possible
             v[:] = saved_v
-            return STEP_REFUSED
-    return STEP_DONE
+            return STEP_REFUSED, candidates, near_walls, np.inf
+    return STEP_DONE, candidates, near_walls, moved
 
 
 def ensure_fresh_cache():
@@ -527,7 +595,8 @@ def radius_classes(radii):
 
 
 class NumbaStepper:
-    """Steps a World with the compiled stages; holds what depends only on radii and walls."""
+    """Steps a World with the compiled stages; holds what depends only on radii and walls,
+    and the candidate lists between steps."""
 
     def __init__(self):
         ensure_fresh_cache()
@@ -541,12 +610,18 @@ class NumbaStepper:
         """One seed-mode step; counts into `totals` (zeroed first); STEP_DONE or STEP_REFUSED."""
         if self._prepared is None:
             walls, wall_scale = pack_walls(world.walls)
-            self._prepared = (walls, wall_scale, *radius_classes(world.radii),
+            self._prepared = (float(world.masses.min()), walls, wall_scale,
+                              *radius_classes(world.radii), SKIN_RADII * world.min_radius,
                               np.full(len(world), -1, dtype=np.int64))
-        walls, wall_scale, members, level_starts, largest, best = self._prepared
-        return seed_step(world.positions, world.velocities, world.radii, world.masses, dt,
-                         travel, walls, wall_scale, members, level_starts, largest, best,
-                         totals)
+            self._candidates = _NO_ROWS
+            self._near_walls = _NO_ROWS
+            self._moved = np.inf
+        min_mass, walls, wall_scale, members, level_starts, largest, skin, best = self._prepared
+        status, self._candidates, self._near_walls, self._moved = seed_step(
+            world.positions, world.velocities, world.radii, world.masses, min_mass, dt, travel,
+            walls, wall_scale, members, level_starts, largest, skin, self._candidates,
+            self._near_walls, self._moved, best, totals)
+        return status
 
 
 def warm():
@@ -560,8 +635,9 @@ def warm():
     members, level_starts, largest = radius_classes(radii)
     walls = np.array([[0.0, 0.0, 10.0, 0.0, 1.0, 0.0, 10.0], [0.0, 4.0, 4.0, 4.0, 1.0, 0.0, 4.0]])
     totals = np.zeros(5, dtype=np.int64)
-    seed_step(x, v, radii, masses, 0.1, stepping.travel_per_substep(0.05), walls, 10.0,
-              members, level_starts, largest, np.full(3, -1, dtype=np.int64), totals)
+    seed_step(x, v, radii, masses, 1.0, 0.1, stepping.travel_per_substep(0.05), walls, 10.0,
+              members, level_starts, largest, SKIN_RADII * 0.05, _NO_ROWS, _NO_ROWS, np.inf,
+              np.full(3, -1, dtype=np.int64), totals)
     return time.perf_counter() - began
 
 

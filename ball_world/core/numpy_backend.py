@@ -12,8 +12,8 @@ import numpy as np
 from ball_world.core import rules
 from ball_world.core.broadphase import NeighbourLists, take_rows
 from ball_world.core.stepping import (BALL_BALL, BALL_WALL, MAX_ROUNDS, over_budget,
-                                      plan_substeps, replan, ROUNDS, STEP_DONE, STEP_REFUSED,
-                                      SUBSTEPS, UNRESOLVED)
+                                      plan_substeps, refusal_possible, replan, ROUNDS, STEP_DONE,
+                                      STEP_REFUSED, SUBSTEPS, UNRESOLVED)
 
 #: Skin of the Verlet lists in smallest radii: a rebuild every two to four substeps.
 SKIN_RADII = 2.0
@@ -182,8 +182,8 @@ class NumpyStepper:
         count = plan_substeps(speed, dt, travel)
         if over_budget(0, count, 0):
             return STEP_REFUSED
-        saved_x = x.copy()
-        saved_v = v.copy()
+        keep = refusal_possible(world.kinetic_energy(), float(world.masses.min()), travel, dt)
+        saved = (x.copy(), v.copy()) if keep else None
         h = dt / count
         done = 0
         while done < count:
@@ -195,8 +195,7 @@ class NumpyStepper:
             totals[SUBSTEPS] += 1
             count, done, h, speed = replan(count, done, h, speed, fastest, travel)
             if over_budget(totals[SUBSTEPS], count, done):
-                x[:] = saved_x
-                v[:] = saved_v
+                x[:], v[:] = saved  # kept: this is reachable only when refusal_possible
                 self.invalidate()  # the lists followed the balls part-way
                 return STEP_REFUSED
         return STEP_DONE

@@ -149,3 +149,12 @@ def reachable_speed(energy, min_mass):
     if energy == 0.0:
         return 0.0
     return math.sqrt(2.0 * energy / min_mass)
+
+
+def refusal_possible(energy, min_mass, travel, dt):
+    """Whether a step could be refused part-way, so that it must keep a copy of the state.
+
+    By `speed_limit`'s argument, a world whose reachable speed is within the limit never
+    needs more than MAX_SUBSTEPS substeps, so its steps skip the copy.
+    """
+    return not reachable_speed(energy, min_mass) <= speed_limit(travel, dt)
