@@ -1,11 +1,17 @@
-"""ball_world_bench: ball_world's World against pymunk (Chipmunk2D) and an all-pairs baseline.
+"""ball_world_bench: ball_world's World (both backends) against pymunk (Chipmunk2D).
 
 Why a tool and not a note: speed claims rot. This runs every engine in one process on the
 same scene (the issue's: equal balls of radius 0.5 m at a 20% area fraction, all at 24 m/s,
 dt 1/240 s, elastic, no gravity), so the numbers in docs/bench.md can be re-made on any
-machine with one command. Besides steps per second it measures what the node spends per
-step around the physics (CDR encoding, publishing, MCAP recording), the energy drift of each
-engine, and optionally memory growth over a long recorded run.
+machine with one command. The default backend (`physics.backend: auto`) is named in the
+report and compared with pymunk. Besides steps per second it measures what the node spends
+per step around the physics (CDR encoding, publishing, MCAP recording), the energy drift of
+each engine, and optionally: memory growth over a long recorded run, the time from process
+start to the first step (numba kernels cached or not), and worst-case worlds at the size
+limits of `core.limits`.
+
+An all-pairs numpy baseline used to sit here; it was dropped: it carried a third copy of
+the contact resolution, and what it showed (O(N^2) detection loses) the N sweep shows too.
 """
 import argparse
 import datetime
@@ -15,15 +21,19 @@ import os
 from pathlib import Path
 import platform
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
 
 import numpy as np
 
+from ball_world.core import limits
 from ball_world.core.alloc import MMAP_THRESHOLD_BYTES, TRIM_THRESHOLD_BYTES, tune_allocator
+from ball_world.core.broadphase import grid_pairs, wall_pairs
 from ball_world.core.scenario import arena_walls
-from ball_world.core.world import numba_installed, World
+from ball_world.core.stepping import AUTO, resolve_backend
+from ball_world.core.world import numba_installed, Walls, World
 from ball_world.msgs.cdr import decode_pose_array, encode_pose_array
 
 RADIUS = 0.5
@@ -31,19 +41,15 @@ AREA_FRACTION = 0.2
 SPEED = 24.0
 DT = 1.0 / 240.0
 MASS = 1.0
-#: The all-pairs baseline holds N x N arrays: past this it only shows what O(N^2) costs.
-ALL_PAIRS_MAX_N = 2000
-#: Resolution rounds per step of the all-pairs baseline before it gives up (never reached).
-ALL_PAIRS_MAX_ROUNDS = 10_000
 FRAME_ID = 'world'
 
-OURS = 'ball_world (numpy)'
+OURS_NUMPY = 'ball_world (numpy)'
 OURS_NUMBA = 'ball_world (numba)'
+OURS = {'numpy': OURS_NUMPY, 'numba': OURS_NUMBA}
 PYMUNK_TREE = 'pymunk (tree)'
 PYMUNK_HASH = 'pymunk (spatial hash)'
-ALL_PAIRS = 'numpy all-pairs'
-ENGINE_CHOICES = {'ours': OURS, 'ours-numba': OURS_NUMBA, 'pymunk-tree': PYMUNK_TREE,
-                  'pymunk-hash': PYMUNK_HASH, 'all-pairs': ALL_PAIRS}
+ENGINE_CHOICES = {'ours-numba': OURS_NUMBA, 'ours-numpy': OURS_NUMPY, 'pymunk-tree': PYMUNK_TREE,
+                  'pymunk-hash': PYMUNK_HASH}
 
 
 # The scene ---------------------------------------------------------------------------------
@@ -82,7 +88,7 @@ def _escaped(positions, side):
 class OurEngine:
     """ball_world's World, exactly as the node steps it (pure numpy, or the numba kernels)."""
 
-    def __init__(self, scene, backend='numpy'):
+    def __init__(self, scene, backend):
         walls, _ = arena_walls({'arena': [0.0, 0.0, scene.side, scene.side]})
         self.side = scene.side
         self.world = World(scene.positions, scene.velocities, np.full(scene.n, RADIUS),
@@ -144,77 +150,11 @@ class PymunkEngine:
         return _escaped(positions, self.side)
 
 
-class AllPairsEngine:
-    """The obvious numpy solution: test all N^2 pairs every step, then the seed's response.
-
-    Contacts are resolved like the World does (rounds of disjoint touching-and-approaching
-    pairs), so its energy is exact too; only the O(N^2) pair search differs.
-    """
-
-    name = ALL_PAIRS
-
-    def __init__(self, scene):
-        self.side = scene.side
-        self.x = scene.positions.copy()
-        self.v = scene.velocities.copy()
-        self.upper = np.triu(np.ones((scene.n, scene.n), dtype=bool), k=1)
-        self.best = np.empty(scene.n, dtype=np.intp)
-
-    def run(self, steps):
-        for _ in range(steps):
-            self._step()
-
-    def _step(self):
-        x = self.x
-        v = self.v
-        x += v * DT
-        dx = x[:, 0:1] - x[:, 0]
-        dy = x[:, 1:2] - x[:, 1]
-        touching = dx * dx + dy * dy < (2.0 * RADIUS) ** 2
-        touching &= self.upper
-        a, b = np.nonzero(touching)
-        if len(a):
-            self._collide(a, b, x[a] - x[b])
-        for axis in (0, 1):
-            low = (x[:, axis] < RADIUS) & (v[:, axis] < 0.0)
-            high = (x[:, axis] > self.side - RADIUS) & (v[:, axis] > 0.0)
-            v[low | high, axis] *= -1.0
-
-    def _collide(self, a, b, rel):
-        v = self.v
-        best = self.best
-        for _ in range(ALL_PAIRS_MAX_ROUNDS):
-            dv = v[a] - v[b]
-            approaching = np.flatnonzero((dv * rel).sum(axis=1) < 0.0)
-            if len(approaching) == 0:
-                return
-            ca = a[approaching]
-            cb = b[approaching]
-            ids = np.arange(len(approaching))
-            best[ca] = best[cb] = len(ids)
-            np.minimum.at(best, ca, ids)
-            np.minimum.at(best, cb, ids)
-            keep = approaching[(best[ca] == ids) & (best[cb] == ids)]
-            pa, pb, r = a[keep], b[keep], rel[keep]
-            # Equal masses: v_a' = v_a - ((v_a - v_b).r / |r|^2) r, and v_b' gets the opposite.
-            impulse = (((v[pa] - v[pb]) * r).sum(axis=1) / (r * r).sum(axis=1))[:, None] * r
-            v[pa] -= impulse
-            v[pb] += impulse
-
-    def kinetic_energy(self):
-        return 0.5 * MASS * float(np.sum(self.v * self.v))
-
-    def escaped(self):
-        return _escaped(self.x, self.side)
-
-
 def make_engine(name, scene, pymunk):
-    if name == OURS:
-        return OurEngine(scene)
+    if name == OURS_NUMPY:
+        return OurEngine(scene, backend='numpy')
     if name == OURS_NUMBA:
         return OurEngine(scene, backend='numba')
-    if name == ALL_PAIRS:
-        return AllPairsEngine(scene)
     return PymunkEngine(scene, pymunk, spatial_hash=name == PYMUNK_HASH)
 
 
@@ -385,7 +325,7 @@ def bench_budget(n, seconds, seed, directory):
             publishers.close()
     result = {key: 1e3 * statistics.median(values) for key, values in parts.items()}
     result.update(n=n, steps=len(parts['total']), publish_ok=publishers is not None,
-                  mcap_ok=sink is not None)
+                  mcap_ok=sink is not None, backend=world.backend)
     return result
 
 
@@ -428,6 +368,134 @@ def memory_run(minutes, n, seed):
             'growth': (end - start) / start, 'produced_mb': produced / 2 ** 20}
 
 
+def default_backend_line():
+    """What physics.backend: auto means on this machine."""
+    if numba_installed():
+        from importlib.metadata import version
+        return (f'Default backend: physics.backend auto = numba (numba {version("numba")} '
+                'installed); both backends give bit-identical trajectories')
+    return 'Default backend: physics.backend auto = numpy (numba not installed)'
+
+
+# Start-up: process start to first step -----------------------------------------------
+
+#: What a node does before its first message, timed inside a fresh interpreter.
+_FIRST_STEP = """
+import time
+began = time.perf_counter()
+from ball_world.core.scenario import build_world, DEFAULTS
+world = build_world({{'physics.backend': {backend!r}}})
+world.step(1.0 / DEFAULTS['rate_hz'])
+print(world.backend, time.perf_counter() - began)
+"""
+
+
+def _first_step_seconds(backend, cache_dir):
+    """Seconds from starting a Python process to the end of the default world's first step.
+
+    The parent times the whole child (interpreter start, imports, world, step, exit): what
+    a user waits for. numba's cache goes to `cache_dir` (empty: cold; filled: warm).
+    """
+    environment = dict(os.environ, NUMBA_CACHE_DIR=str(cache_dir))
+    began = time.perf_counter()
+    done = subprocess.run([sys.executable, '-c', _FIRST_STEP.format(backend=backend)],
+                          capture_output=True, text=True, env=environment, check=True)
+    total = time.perf_counter() - began
+    resolved, inside = done.stdout.split()
+    return resolved, total, float(inside)
+
+
+def bench_startup(repeats):
+    """Process start to first step of the default world: numba cold, numba warm, numpy."""
+    rows = []
+    with tempfile.TemporaryDirectory() as cache:
+        cases = [('auto, no kernel cache (first run ever)', AUTO)]
+        cases += [('auto, kernels cached', AUTO)] * repeats
+        cases += [('numpy', 'numpy')] * repeats
+        for label, backend in cases:
+            resolved, total, inside = _first_step_seconds(backend, cache)
+            rows.append((label, resolved, total, inside))
+            print(f'start-up, {label} ({resolved}): {total:.2f} s to the first step '
+                  f'({inside:.2f} s after the interpreter started)', flush=True)
+    merged = {}
+    for label, resolved, total, inside in rows:
+        merged.setdefault((label, resolved), []).append((total, inside))
+    return [(label, resolved, statistics.median(t for t, _ in values),
+             statistics.median(i for _, i in values), len(values))
+            for (label, resolved), values in merged.items()]
+
+
+# Worst cases inside the limits -------------------------------------------------------
+
+def _box(side):
+    return [[0.0, 0.0, side, 0.0], [side, 0.0, side, side], [side, side, 0.0, side],
+            [0.0, side, 0.0, 0.0]]
+
+
+def radius_spread_world(n, rng):
+    """n balls whose radii differ by MAX_RADIUS_RATIO: 1% of 1 m, the rest of 1 cm.
+
+    The large balls sit on a jittered lattice filling 20% of the box; the small ones on a
+    finer lattice between them (those touching a large ball are left out). All at 1 m/s.
+    """
+    large_count = max(1, n // 100)
+    small_radius = 1.0 / limits.MAX_RADIUS_RATIO
+    per_row = math.ceil(math.sqrt(large_count))
+    spacing = math.sqrt(math.pi / AREA_FRACTION)
+    side = per_row * spacing
+    lattice = np.stack(np.divmod(np.arange(large_count), per_row), axis=1)
+    large = (lattice + 0.5) * spacing + rng.uniform(-0.3, 0.3, (large_count, 2))
+    columns = math.ceil(math.sqrt((n - large_count) * 1.5))
+    fine = np.stack(np.divmod(np.arange(columns * columns), columns), axis=1)
+    small = (fine + 0.5) * (side / columns)
+    positions = np.concatenate((large, small))
+    radii = np.concatenate((np.ones(large_count), np.full(len(small), small_radius)))
+    a, b = grid_pairs(positions, radii, 0.0)
+    keep = np.setdiff1d(np.arange(len(positions)), b[a < large_count])[:n]
+    heading = rng.uniform(0.0, 2.0 * math.pi, len(keep))
+    return (positions[keep], np.stack((np.cos(heading), np.sin(heading)), axis=1),
+            radii[keep], np.ones(len(keep)), _box(side))
+
+
+def many_walls_world(n, rng):
+    """The benchmark scene of n balls plus MAX_WALLS - 4 random segments 0.3-6% of the box
+    side long (2-40 m at 100,000 balls); balls the segments touch are left out."""
+    scene = Scene(n, 1)
+    count = limits.MAX_WALLS - 4
+    starts = rng.uniform(0.0, scene.side, (count, 2))
+    heading = rng.uniform(0.0, 2.0 * math.pi, count)
+    length = rng.uniform(0.003, 0.064, count)[:, None] * scene.side
+    ends = np.clip(starts + np.stack((np.cos(heading), np.sin(heading)), axis=1) * length,
+                   0.0, scene.side)
+    walls = np.concatenate((_box(scene.side), np.concatenate((starts, ends), axis=1)))
+    radii = np.full(n, RADIUS)
+    touched, _ = wall_pairs(scene.positions, radii, Walls(walls), 0.0)
+    keep = np.setdiff1d(np.arange(n), touched)
+    return scene.positions[keep], scene.velocities[keep], radii[keep], np.ones(len(keep)), walls
+
+
+def bench_worst_case(n, steps, seed):
+    """ms per step of both backends on the two worst cases inside core.limits at n balls."""
+    rows = []
+    for label, make in (('radius ratio 100', radius_spread_world),
+                        (f'{limits.MAX_WALLS:,} walls', many_walls_world)):
+        arrays = make(n, np.random.default_rng(seed))
+        for backend in [b for b in ('numba', 'numpy') if b == 'numpy' or numba_installed()]:
+            began = time.perf_counter()
+            world = World(*arrays[:4], walls=arrays[4], backend=backend)
+            world.step(DT)  # builds the candidate lists (and loads the kernels)
+            first = time.perf_counter() - began
+            samples = []
+            for _ in range(steps):
+                samples.append(_timed(world.step, DT))
+            substeps = world.step(DT).substeps
+            rows.append((label, len(world), len(world.walls), backend, 1e3 * first,
+                         1e3 * statistics.median(samples), substeps))
+            print(f'worst case {label}, {len(world):,} balls, {backend}: '
+                  f'{rows[-1][5]:.1f} ms per step', flush=True)
+    return rows
+
+
 # Report ------------------------------------------------------------------------------------
 
 def _rate(value):
@@ -460,8 +528,9 @@ def machine_lines(pymunk, allocator):
 
 def markdown(results, args, pymunk, allocator, command):
     engines = results['engines']
+    ours = [name for name in engines if name in OURS.values()]
     lines = ['# ball_world benchmark', '', f'Command: `{command}`', '',
-             *machine_lines(pymunk, allocator), '',
+             *machine_lines(pymunk, allocator), f'- {default_backend_line()}', '',
              f'Scene: N equal balls, r = {RADIUS} m, square box of side r sqrt(N pi / '
              f'{AREA_FRACTION}) ({AREA_FRACTION:.0%} area fraction), jittered-lattice start '
              f'(the same for every engine), |v| = {SPEED:g} m/s in random directions, '
@@ -470,15 +539,15 @@ def markdown(results, args, pymunk, allocator, command):
              'the spatial hash has cells of one diameter and 10 N cells.', '',
              f'## Steps per second (median of {args.repeats} runs of about {args.seconds:g} s, '
              f'after {args.warmup_steps:,} warm-up steps)',
-             '', '| N | ' + ' | '.join(engines) + ' | numpy / pymunk | numba / pymunk |',
-             '|---:|' + '---:|' * (len(engines) + 2)]
+             '', '| N | ' + ' | '.join(engines) + ''.join(f' | {name} / pymunk' for name in ours)
+             + ' |', '|---:|' + '---:|' * (len(engines) + len(ours))]
     for n in args.n:
         row = results['rates'].get(n, {})
         pymunks = [row[name] for name in (PYMUNK_TREE, PYMUNK_HASH) if row.get(name)]
-        ratios = [f'{row[ours] / max(pymunks):.2f}' if pymunks and row.get(ours) else '-'
-                  for ours in (OURS, OURS_NUMBA)]
+        ratios = [f'{row[name] / max(pymunks):.2f}' if pymunks and row.get(name) else '-'
+                  for name in ours]
         lines.append(f'| {n:,} | ' + ' | '.join(_rate(row.get(name)) for name in engines)
-                     + f' | {ratios[0]} | {ratios[1]} |')
+                     + ''.join(f' | {ratio}' for ratio in ratios) + ' |')
     lines += ['', 'Ratios: against the faster pymunk index at that N, measured in the same run.']
     smallest = min(args.n)
     row = results['rates'].get(smallest, {})
@@ -491,6 +560,26 @@ def markdown(results, args, pymunk, allocator, command):
                   '|---|---:|---:|---:|---:|']
         lines += [f'| {name} | {n:,} | {steps:,} | {change:+.2e} | {escaped} |'
                   for name, n, steps, change, escaped in results['energy']]
+    if results.get('startup'):
+        lines += ['', '## Process start to the first step of the default world', '',
+                  '| case | backend | s to first step | of which after interpreter start | runs |',
+                  '|---|---|---:|---:|---:|']
+        lines += [f'| {label} | {backend} | {total:.2f} | {inside:.2f} | {runs} |'
+                  for label, backend, total, inside, runs in results['startup']]
+        lines += ['', 'Each run is a fresh process (build_world of the default parameters, one '
+                  'step); numba keeps its compiled kernels in NUMBA_CACHE_DIR, empty for the '
+                  'first row. `python -m ball_world.core.numba_backend --warm` fills it at '
+                  'set-up.']
+    if results.get('worst'):
+        lines += ['', '## Worst cases inside core.limits (median ms per step)', '',
+                  '| world | balls | walls | backend | first step incl. build, ms | '
+                  'ms per step | substeps per step |', '|---|---:|---:|---|---:|---:|---:|']
+        lines += [f'| {label} | {balls:,} | {walls:,} | {backend} | {first:,.0f} | '
+                  f'{per_step:,.1f} | {substeps} |'
+                  for label, balls, walls, backend, first, per_step, substeps in results['worst']]
+        lines += ['', f'dt = 1/{round(1 / DT)} s. Radius ratio 100: 1% of the balls of 1 m, '
+                  'the rest of 1 cm, at 1 m/s. Walls: the benchmark scene plus random segments '
+                  '0.3-6% of the box side long (balls they touch removed).']
     cdr = results.get('cdr')
     if cdr:
         lines += ['', f'## CDR encoding of a {cdr["count"]:,}-pose PoseArray (median)', '',
@@ -502,7 +591,8 @@ def markdown(results, args, pymunk, allocator, command):
                       f'Ratio: {cdr["rclpy_ms"] / cdr["ours_ms"]:,.0f}x; decoded values equal: '
                       f'{"yes" if cdr["same_values"] else "NO"}.']
     if results['budget']:
-        lines += ['', '## Node per-step budget (median ms per step)', '',
+        lines += ['', '## Node per-step budget (median ms per step, default backend '
+                  f'{results["budget"][0]["backend"]})', '',
                   '| N | physics | encode | publish | MCAP record | total | steps timed |',
                   '|---:|---:|---:|---:|---:|---:|---:|']
         for b in results['budget']:
@@ -536,12 +626,13 @@ def plot(results, args, path):
                   if results['rates'].get(n, {}).get(name)]
         if points:
             axes.plot(*zip(*points), marker='o', label=name)
-    ours = {n: results['rates'][n][OURS] for n in args.n if results['rates'][n].get(OURS)}
+    default = OURS[resolve_backend(AUTO)]
+    ours = {n: results['rates'][n][default] for n in args.n if results['rates'][n].get(default)}
     if ours:
         anchor = min(ours, key=lambda n: abs(math.log(n / 1000)))
         ns = np.array(sorted(args.n), dtype=float)
         axes.plot(ns, ours[anchor] * anchor / ns, linestyle='--', color='grey',
-                  label=f'linear scaling from {OURS} at N={anchor:,}')
+                  label=f'linear scaling from {default} at N={anchor:,}')
     axes.set_xscale('log')
     axes.set_yscale('log')
     axes.set_xlabel('balls N')
@@ -580,6 +671,12 @@ def parse_args(argv):
                         help='time the engines only: no energy, CDR or budget sections')
     parser.add_argument('--memory-minutes', type=float, default=0.0,
                         help='also record 1,000 balls to MCAP for M minutes; report RSS growth')
+    parser.add_argument('--startup', action='store_true',
+                        help='also time process start to first step, numba cold and warm')
+    parser.add_argument('--worst-case', action='store_true',
+                        help='also time both backends on the worst worlds inside core.limits')
+    parser.add_argument('--worst-case-n', type=int, default=limits.MAX_BALLS,
+                        help=f'balls of the worst-case worlds (default {limits.MAX_BALLS:,})')
     parser.add_argument('--no-tune-allocator', action='store_true',
                         help="leave glibc malloc's thresholds at their defaults")
     parser.add_argument('--seed', type=int, default=1)
@@ -619,8 +716,6 @@ def run_engines(args, pymunk):
         scene = Scene(n, args.seed)
         row = results['rates'].setdefault(n, {})
         for name in names:
-            if name == ALL_PAIRS and n > ALL_PAIRS_MAX_N:
-                continue
             engine = make_engine(name, scene, pymunk)
             row[name], rates = steps_per_second(engine, args.seconds, args.repeats,
                                                 args.warmup_steps)
@@ -630,8 +725,6 @@ def run_engines(args, pymunk):
         for n in (args.n if args.energy_all else [args.energy_n]):
             scene = Scene(n, args.seed)
             for name in names:
-                if name == ALL_PAIRS and n > ALL_PAIRS_MAX_N:
-                    continue
                 change, escaped = energy_change(make_engine(name, scene, pymunk),
                                                 args.energy_steps)
                 results['energy'].append((name, n, args.energy_steps, change, escaped))
@@ -659,6 +752,10 @@ def main(argv=None):
                                  for n in args.budget_n]
     else:
         results['budget'] = []
+    if args.startup:
+        results['startup'] = bench_startup(max(1, args.repeats // 2))
+    if args.worst_case:
+        results['worst'] = bench_worst_case(args.worst_case_n, 5, args.seed)
     if args.memory_minutes > 0.0:
         results['memory'] = memory_run(args.memory_minutes, 1000, args.seed)
     table = markdown(results, args, pymunk, allocator, command)

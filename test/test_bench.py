@@ -1,9 +1,14 @@
 """ball_world_bench runs end to end in its quick configuration and reports what it promises.
 
-No timing is asserted (machines differ); only that every section is produced, that our
-engine has a number at every N, and that its energy change is rounding noise.
+No timing is asserted (machines differ); only that every section is produced, that both
+backends have a number at every N, that the default backend is named, and that the energy
+change is rounding noise.
 """
-from benchmarks.bench import main
+from benchmarks.bench import bench_worst_case, main, many_walls_world, radius_spread_world
+import numpy as np
+
+from ball_world.core import limits
+from ball_world.core.broadphase import grid_pairs
 
 PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
 
@@ -33,11 +38,14 @@ def test_quick_benchmark_writes_table_and_plot(tmp_path, capsys):
              if line.startswith('| ')]
     header, rows = rates[0], rates[1:]
     ours = [header.index('ball_world (numpy)'), header.index('ball_world (numba)')]
+    ratios = [header.index('ball_world (numpy) / pymunk'),
+              header.index('ball_world (numba) / pymunk')]
     by_n = {row[0]: row for row in rows}
     assert set(by_n) == {'100', '300'}
     for row in by_n.values():
-        for column in ours:
+        for column in ours + ratios:
             assert float(row[column].replace(',', '')) > 0.0
+    assert '- Default backend: physics.backend auto = numba' in text
 
     printed = capsys.readouterr().out
     energy = [_cells(line) for line in _section(printed, 'Kinetic energy')
@@ -45,3 +53,18 @@ def test_quick_benchmark_writes_table_and_plot(tmp_path, capsys):
     assert len(energy) == 2
     for row in energy:
         assert abs(float(row[3])) < 1e-12
+
+
+def test_worst_case_worlds_are_inside_the_limits_and_step_on_both_backends(capsys):
+    for make in (radius_spread_world, many_walls_world):
+        positions, velocities, radii, masses, walls = make(2000, np.random.default_rng(0))
+        assert len(positions) > 1000
+        assert radii.max() <= limits.MAX_RADIUS_RATIO * radii.min()
+        assert len(walls) <= limits.MAX_WALLS
+        a, _ = grid_pairs(positions, radii, 0.0)
+        assert len(a) == 0  # nothing overlaps at the start
+    rows = bench_worst_case(2000, 2, seed=0)
+    assert [(row[0], row[3]) for row in rows] == [
+        ('radius ratio 100', 'numba'), ('radius ratio 100', 'numpy'),
+        (f'{limits.MAX_WALLS:,} walls', 'numba'), (f'{limits.MAX_WALLS:,} walls', 'numpy')]
+    assert all(row[5] > 0.0 for row in rows)
