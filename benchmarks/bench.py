@@ -450,7 +450,7 @@ def radius_spread_world(n, rng):
     small = (fine + 0.5) * (side / columns)
     positions = np.concatenate((large, small))
     radii = np.concatenate((np.ones(large_count), np.full(len(small), small_radius)))
-    a, b = grid_pairs(positions, radii, 0.0)
+    a, b, _ = grid_pairs(positions, radii, 0.0)
     keep = np.setdiff1d(np.arange(len(positions)), b[a < large_count])[:n]
     heading = rng.uniform(0.0, 2.0 * math.pi, len(keep))
     return (positions[keep], np.stack((np.cos(heading), np.sin(heading)), axis=1),

@@ -61,7 +61,7 @@ def test_worst_case_worlds_are_inside_the_limits_and_step_on_both_backends(capsy
         assert len(positions) > 1000
         assert radii.max() <= limits.MAX_RADIUS_RATIO * radii.min()
         assert len(walls) <= limits.MAX_WALLS
-        a, _ = grid_pairs(positions, radii, 0.0)
+        a, _, _ = grid_pairs(positions, radii, 0.0)
         assert len(a) == 0  # nothing overlaps at the start
     rows = bench_worst_case(2000, 2, seed=0)
     assert [(row[0], row[3]) for row in rows] == [

@@ -197,7 +197,7 @@ def test_grid_pairs_equal_all_pairs(n, seed, margin, ratio, spread):
     rng = np.random.default_rng(seed)
     positions = rng.uniform(-5, 5, (n, 2)) * spread
     radii = spread_radii(rng, n, ratio)
-    a, b = grid_pairs(positions, radii, margin)
+    a, b, _ = grid_pairs(positions, radii, margin)
     expected = all_pairs_within(positions, radii, margin)
     assert list(zip(a.tolist(), b.tolist())) == expected  # same pairs, canonical order
 
@@ -206,9 +206,9 @@ def test_reusing_the_previous_grid_after_balls_moved_gives_the_same_pairs():
     rng = np.random.default_rng(5)
     positions = rng.uniform(-5, 5, (400, 2))
     radii = spread_radii(rng, 400, 30.0)
-    grid = HierarchicalGrid(positions, radii, 0.1)
+    _, _, grid = grid_pairs(positions, radii, 0.1)
     moved = positions + rng.uniform(-0.3, 0.3, positions.shape)
-    a, b = HierarchicalGrid(moved, radii, 0.1, previous=grid).pairs()
+    a, b, _ = grid_pairs(moved, radii, 0.1, previous=grid)
     assert list(zip(a.tolist(), b.tolist())) == all_pairs_within(moved, radii, 0.1)
 
 

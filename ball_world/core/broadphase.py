@@ -293,11 +293,16 @@ class HierarchicalGrid:
         return np.take(ball, order), np.take(wall, order)
 
 
-def grid_pairs(positions, radii, margin):
-    """Pairs (a, b), a < b, sorted, with |x_a - x_b| < r_a + r_b + margin. O(N)."""
+def grid_pairs(positions, radii, margin, previous=None):
+    """Pairs (a, b), a < b, sorted, with |x_a - x_b| < r_a + r_b + margin, in O(N).
+
+    Returns (a, b, grid); passing the grid back as `previous` after the balls moved a
+    little makes the next sort nearly free.
+    """
     if len(positions) < 2:
-        return _EMPTY, _EMPTY
-    return HierarchicalGrid(positions, radii, margin).pairs()
+        return _EMPTY, _EMPTY, None
+    grid = HierarchicalGrid(positions, radii, margin, previous)
+    return (*grid.pairs(), grid)
 
 
 def wall_pairs(positions, radii, walls, margin):

@@ -30,11 +30,11 @@ import numpy as np
 
 from ball_world.core import limits
 from ball_world.core.broadphase import dot_rows
-from ball_world.core.stepping import (BACKENDS, numba_installed, reachable_speed,
+from ball_world.core.stepping import (BACKENDS, MAX_TRAVEL, numba_installed, reachable_speed,
                                       resolve_backend, speed_limit, STEP_REFUSED, StepStats,
                                       SubstepLimitExceeded, travel_per_substep)
 
-__all__ = ['BACKENDS', 'numba_installed', 'StepStats', 'SubstepLimitExceeded',
+__all__ = ['BACKENDS', 'MAX_TRAVEL', 'numba_installed', 'StepStats', 'SubstepLimitExceeded',
            'Walls', 'World']
 
 
