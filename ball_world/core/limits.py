@@ -19,8 +19,9 @@ COORDINATE_LIMIT = 1e6
 #: Radius of a ball, m.
 MIN_RADIUS = 1e-3
 MAX_RADIUS = 1e3
-#: Largest radius over smallest radius within one world: the broadphase's cells are sized
-#: by the largest ball, so this bounds how many balls one cell can hold.
+#: Largest radius over smallest radius within one world. The broadphase's hierarchical grid
+#: keeps candidates O(N) at any ratio; the substeps are planned on the smallest radius, so
+#: the ratio bounds how much finer than its size a large ball's motion is cut.
 MAX_RADIUS_RATIO = 100.0
 #: Mass of a ball, kg.
 MIN_MASS = 1e-6

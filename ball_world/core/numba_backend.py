@@ -9,8 +9,9 @@ the same canonical contact order and the same rounds, with no fastmath (no fused
 multiply-adds, no re-association). Its trajectories are therefore bit-identical to the
 numpy backend's, and a recording made with one re-simulates exactly with the other.
 
-What may differ is only the broadphase: here a hierarchical grid (as in `broadphase`) is
-rebuilt at every substep with no skin, and it yields the touching contacts directly.
+Only the broadphase is this file's own: the same hierarchical grid and Verlet lists as
+`broadphase`, built in compiled loops, their candidates put in canonical order by a counting
+sort. Candidate lists may differ from the numpy backend's; the touching contacts may not.
 
 Compiled kernels are cached on disk (numba's cache=True, next to this file or in the
 user's cache directory). numba only notices changes to this file, not to the modules its

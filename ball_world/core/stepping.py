@@ -16,7 +16,9 @@ and in `numba_backend` (compiled loops):
    repeat until no touching contact is approaching, at most MAX_ROUNDS times.
 4. `respond`: each kept contact gets the seed's response (`rules.pair_response`,
    `rules.reflect_off_wall`, `rules.reflect_off_end`). Kept contacts share no ball, so the
-   order within a round cannot matter.
+   order within a round cannot matter. numpy responds to a round's contacts at once
+   (`respond_pairs`, `respond_walls`), numba to one at a time (`respond_pair`,
+   `respond_wall`), from the same formulas.
 
 If a collision makes a ball faster than the plan assumed, the rest of the step is split
 again (`replan`). The same `StepStats` counters come out of both backends.
