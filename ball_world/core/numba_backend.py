@@ -49,6 +49,8 @@ except ImportError:  # the numpy backend needs nothing more
 
 #: Skin of the candidate lists in smallest radii (see numpy_backend.SKIN_RADII).
 SKIN_RADII = 2.0
+#: Lists are rebuilt a millionth before the skin could close: rounding never decides.
+LISTS_MARGIN = 1.0 - 1e-6
 #: An empty (0, 2) list of candidates, before the first build.
 _NO_ROWS = np.empty((0, 2), dtype=np.int64)
 #: Columns of the packed wall array the kernels take.
@@ -205,15 +207,11 @@ def build_grids(x, members, level_starts, level_largest, margin):
 
 
 @_compile
-def _append(found, count, first, second):
-    """Write (first, second) as row `count` of `found`, doubled when full; returns it."""
-    if count == found.shape[0]:
-        bigger = np.empty((2 * found.shape[0], 2), dtype=found.dtype)
-        bigger[:count] = found[:count]
-        found = bigger
-    found[count, 0] = first
-    found[count, 1] = second
-    return found
+def _doubled(found):
+    """`found` (K, 2) copied into twice the room."""
+    bigger = np.empty((2 * found.shape[0], 2), dtype=found.dtype)
+    bigger[:found.shape[0]] = found
+    return bigger
 
 
 @_compile
@@ -242,14 +240,20 @@ def _candidate_pairs(x, radii, margin, level_starts, low, cell, shape, starts, c
             for s in range(p + 1, starts[base + key + 1]):
                 j = cell_balls[s]
                 if _near(x, radii, i, j, margin):
-                    found = _append(found, count, min(i, j), max(i, j))
+                    if count == found.shape[0]:
+                        found = _doubled(found)
+                    found[count, 0] = min(i, j)
+                    found[count, 1] = max(i, j)
                     count += 1
             for offset in (1, stride - 1, stride, stride + 1):
                 other = base + key + offset
                 for s in range(starts[other], starts[other + 1]):
                     j = cell_balls[s]
                     if _near(x, radii, i, j, margin):
-                        found = _append(found, count, min(i, j), max(i, j))
+                        if count == found.shape[0]:
+                            found = _doubled(found)
+                        found[count, 0] = min(i, j)
+                        found[count, 1] = max(i, j)
                         count += 1
         for larger in range(k + 1, levels):
             nx, ny, stride, base = shape[larger, 0], shape[larger, 1], shape[larger, 2], \
@@ -267,7 +271,10 @@ def _candidate_pairs(x, radii, margin, level_starts, low, cell, shape, starts, c
                         for s in range(starts[other], starts[other + 1]):
                             j = cell_balls[s]
                             if _near(x, radii, i, j, margin):
-                                found = _append(found, count, min(i, j), max(i, j))
+                                if count == found.shape[0]:
+                                    found = _doubled(found)
+                                found[count, 0] = min(i, j)
+                                found[count, 1] = max(i, j)
                                 count += 1
     return found[:count]
 
@@ -318,7 +325,10 @@ def _candidate_walls(x, radii, margin, walls, wall_scale, level_starts, level_la
                                                 walls[w, 4], walls[w, 5], walls[w, 6])
                         reach_i = radii[i] + margin
                         if sx * sx + sy * sy < reach_i * reach_i:
-                            found = _append(found, count, i, w)
+                            if count == found.shape[0]:
+                                found = _doubled(found)
+                            found[count, 0] = i
+                            found[count, 1] = w
                             count += 1
     return found[:count]
 
@@ -522,20 +532,44 @@ def speed_and_energy(v, masses):
 
 
 @_compile
+def lists_stale(x, anchor, skin):
+    """Whether two balls may have closed the skin since the lists were built at `anchor`.
+
+    A pair left out was r_a + r_b + skin apart; it can touch only once the two largest
+    displacements since then add up to the skin (a ball-wall pair needs the largest one to).
+    Tighter than the numpy backend's bound (speed times time), so rebuilds are rarer.
+    """
+    first = 0.0
+    second = 0.0
+    for i in range(x.shape[0]):
+        dx = x[i, 0] - anchor[i, 0]
+        dy = x[i, 1] - anchor[i, 1]
+        moved2 = dx * dx + dy * dy
+        if moved2 > second:
+            if moved2 > first:
+                second = first
+                first = moved2
+            else:
+                second = moved2
+    return not np.sqrt(first) + np.sqrt(second) < LISTS_MARGIN * skin
+
+
+@_compile
 def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, wall_scale, members,
-              level_starts, level_largest, skin, candidates, near_walls, moved, best, totals):
+              level_starts, level_largest, skin, candidates, near_walls, anchor, fresh, best,
+              totals):
     """One seed-mode step, planned and split exactly as numpy_backend.NumpyStepper.step.
 
-    The candidates (Verlet lists with `skin`, `moved` metres old) are rebuilt whenever the
-    balls may have closed half the skin. Counts into `totals` (zeroed first). Returns
-    (status, candidates, near_walls, moved); a step refused part-way (STEP_REFUSED) puts
-    positions and velocities back as they were and asks for new candidates.
+    The candidates (Verlet lists with `skin`, built with the balls at `anchor`; `fresh`
+    False forces a build) are rebuilt whenever the balls may have closed the skin. Counts
+    into `totals` (zeroed first). Returns (status, candidates, near_walls, fresh); a step
+    refused part-way (STEP_REFUSED) puts positions and velocities back as they were.
     """
     totals[:] = 0
     speed, energy = speed_and_energy(v, masses)
     count = plan_substeps(speed, dt, travel)
     if over_budget(0, count, 0):
-        return STEP_REFUSED, candidates, near_walls, moved
+        return STEP_REFUSED, candidates, near_walls, fresh
     keep = refusal_possible(energy, min_mass, travel, dt)
     saved_x = x.copy() if keep else x[:0]
     saved_v = v.copy() if keep else v[:0]
@@ -543,11 +577,11 @@ def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, wall_scale, memb
     done = 0
     while done < count:
         move(x, v, h)
-        moved += speed * h
-        if not 2.0 * moved < skin:
+        if not fresh or lists_stale(x, anchor, skin):
             candidates, near_walls = build_candidates(x, radii, walls, wall_scale, skin,
                                                       members, level_starts, level_largest)
-            moved = 0.0
+            anchor[:] = x
+            fresh = True
         pairs, rel, contacts, offsets, interior = find_contacts(x, radii, walls, candidates,
                                                                 near_walls)
         fastest = resolve(v, masses, walls, pairs, rel, contacts, offsets, interior, best,
@@ -558,8 +592,8 @@ def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, wall_scale, memb
         if over_budget(totals[SUBSTEPS], count, done):
             x[:] = saved_x  # kept: this is reachable only when refusal_possible
             v[:] = saved_v
-            return STEP_REFUSED, candidates, near_walls, np.inf
-    return STEP_DONE, candidates, near_walls, moved
+            return STEP_REFUSED, candidates, near_walls, False
+    return STEP_DONE, candidates, near_walls, fresh
 
 
 def ensure_fresh_cache():
@@ -613,15 +647,16 @@ class NumbaStepper:
             walls, wall_scale = pack_walls(world.walls)
             self._prepared = (float(world.masses.min()), walls, wall_scale,
                               *radius_classes(world.radii), SKIN_RADII * world.min_radius,
-                              np.full(len(world), -1, dtype=np.int64))
+                              np.empty((len(world), 2)), np.full(len(world), -1, np.int64))
             self._candidates = _NO_ROWS
             self._near_walls = _NO_ROWS
-            self._moved = np.inf
-        min_mass, walls, wall_scale, members, level_starts, largest, skin, best = self._prepared
-        status, self._candidates, self._near_walls, self._moved = seed_step(
+            self._fresh = False
+        (min_mass, walls, wall_scale, members, level_starts, largest, skin, anchor,
+         best) = self._prepared
+        status, self._candidates, self._near_walls, self._fresh = seed_step(
             world.positions, world.velocities, world.radii, world.masses, min_mass, dt, travel,
             walls, wall_scale, members, level_starts, largest, skin, self._candidates,
-            self._near_walls, self._moved, best, totals)
+            self._near_walls, anchor, self._fresh, best, totals)
         return status
 
 
@@ -637,8 +672,8 @@ def warm():
     walls = np.array([[0.0, 0.0, 10.0, 0.0, 1.0, 0.0, 10.0], [0.0, 4.0, 4.0, 4.0, 1.0, 0.0, 4.0]])
     totals = np.zeros(5, dtype=np.int64)
     seed_step(x, v, radii, masses, 1.0, 0.1, stepping.travel_per_substep(0.05), walls, 10.0,
-              members, level_starts, largest, SKIN_RADII * 0.05, _NO_ROWS, _NO_ROWS, np.inf,
-              np.full(3, -1, dtype=np.int64), totals)
+              members, level_starts, largest, SKIN_RADII * 0.05, _NO_ROWS, _NO_ROWS,
+              np.empty((3, 2)), False, np.full(3, -1, dtype=np.int64), totals)
     return time.perf_counter() - began
 
 
