@@ -80,6 +80,8 @@ def _hash_code(digest, code):
     for constant in code.co_consts:
         if hasattr(constant, 'co_code'):
             _hash_code(digest, constant)
+        elif isinstance(constant, frozenset):  # its repr's order varies with hash seeds
+            digest.update(repr(sorted(map(repr, constant))).encode())
         else:
             digest.update(repr(constant).encode())
 
