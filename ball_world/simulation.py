@@ -1,24 +1,40 @@
-"""A run without ROS: the World, its integer-nanosecond clock, queued impulses and sinks.
+"""A run without ROS: the World, its clock, named balls, impulses, edits and sinks.
 
 The node is a thin ROS shell around a Simulation; re-simulation and tests drive the same
-class directly. Keeping the clock, the impulse order and the record layout here is what
-makes a live run and its re-simulation bit-identical.
+class directly. Keeping the clock, the order of impulses and edits and the record layout
+here is what makes a live run and its re-simulation bit-identical.
 """
 from collections import deque
 from dataclasses import dataclass
+import json
 import math
 
+import numpy as np
+
 from ball_world import __version__
-from ball_world.core.impulses import ImpulseRejected, velocity_after
+from ball_world.core import limits
+from ball_world.core.edits import (check_placement, check_speeds, EditRefused, Entities,
+                                   INVALID_POSE, MAX_SPAWN_BATCH, TOO_MANY)
+from ball_world.core.impulses import ImpulseRejected, lookup_ball, velocity_after
 from ball_world.core.limits import MAX_SIM_TIME_NS
 from ball_world.core.parameters import checked
 from ball_world.core.scenario import build_world, step_duration_ns
 from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
                                  encode_vector3_stamped)
-from ball_world.step_record import AppliedImpulse, RunInfo, STATS_FIELDS, StepRecord, WorldSnapshot
+from ball_world.step_record import (AppliedEdit, AppliedImpulse, RunInfo, STATS_FIELDS,
+                                    StepRecord, WorldSnapshot)
 
 DEFAULT_TOPICS = {'balls': '/balls', 'state': '/state', 'stats': '/stats',
                   'impulse': '/impulse'}
+
+
+@dataclass(frozen=True)
+class SpawnRequest:
+    """One ball to spawn: the name asked for (or ''), and the ball (core.edits.Ball)."""
+
+    name: str
+    allow_renaming: bool
+    ball: object
 
 
 @dataclass(frozen=True)
@@ -50,10 +66,12 @@ class Simulation:
 
     Step k ends at simulation time k * dt_ns. Step 0 is the initial state. Impulses queued
     between two steps are applied, in arrival order, just before the next one, and are
-    recorded with that step's stamp.
+    recorded with that step's stamp. Edits (spawn, delete, set_state) are applied when they
+    are made, between two steps, after the impulses that arrived before them, and recorded
+    with the next step's stamp too.
     """
 
-    def __init__(self, parameters, sinks=(), topics=None, on_sink_failure=None):
+    def __init__(self, parameters, sinks=(), topics=None, on_sink_failure=None, built=None):
         self.sinks = list(sinks)
         self.topics = dict(topics or DEFAULT_TOPICS)
         self.on_sink_failure = on_sink_failure
@@ -64,7 +82,7 @@ class Simulation:
         self.applied = 0
         self.discarded = 0
         self._queue = deque()
-        self.reset(parameters)
+        self.reset(parameters, built)
 
     # Life cycle ------------------------------------------------------------------------
 
@@ -84,8 +102,11 @@ class Simulation:
         self.world = world
         self.dt_ns = dt_ns
         self.frame_id = str(parameters['frame_id'])
-        self.names = [f'ball_{i}' for i in range(len(world))]
-        self.index_of = {name: i for i, name in enumerate(self.names)}
+        self.entities = Entities(len(world))
+        self._names = tuple(self.entities.names)
+        self._world_changed = False
+        self._applied = []  # impulses applied since the last step
+        self._edits = []  # edits applied since the last step
         self.step_index = 0
         self.last_discarded = len(self._queue)
         self.discarded += self.last_discarded
@@ -99,9 +120,25 @@ class Simulation:
         snapshot = WorldSnapshot(
             radii=world.radii.copy(), masses=world.masses.copy(),
             walls=world.walls.segments.copy(), positions=world.positions.copy(),
-            velocities=world.velocities.copy(), dt_ns=dt_ns, frame_id=self.frame_id)
+            velocities=world.velocities.copy(), dt_ns=dt_ns, frame_id=self.frame_id,
+            names=self._names)
         self._each_sink(lambda sink: sink.start_segment(snapshot, info))
-        return self.record(stats=None, impulses=())
+        return self.record(stats=None)
+
+    @property
+    def names(self):
+        """The balls' entity names, in the order of the World's arrays and of `balls`."""
+        return self._names
+
+    @property
+    def pending_edits(self):
+        """Edits applied since the last step (recorded with the next one), in order."""
+        return tuple(self._edits)
+
+    @property
+    def index_of(self):
+        """Entity name -> index in the World's arrays."""
+        return self.entities.index_of
 
     @property
     def stamp_ns(self):
@@ -124,9 +161,13 @@ class Simulation:
 
     # Impulses ---------------------------------------------------------------------------
 
-    def queue_impulse(self, ball, jx, jy, frame_id):
-        """Queue a checked impulse (see impulses.check_impulse) for the next step."""
-        self._queue.append((ball, jx, jy, frame_id))
+    def queue_impulse(self, frame_id, jx, jy):
+        """Queue a checked impulse (see impulses.check_impulse) for the next step.
+
+        The ball is found by name when the impulse is applied: an edit in between may have
+        moved it in the arrays, or deleted it (then the impulse is rejected as unknown_ball).
+        """
+        self._queue.append((frame_id, jx, jy))
 
     @property
     def queued(self):
@@ -135,19 +176,24 @@ class Simulation:
     def count_rejection(self, reason):
         self.rejected[reason] = self.rejected.get(reason, 0) + 1
 
-    def _apply_queued(self, stamp_ns):
-        """Apply queued impulses in order; returns (applied, rejected) lists."""
+    def apply_queued(self):
+        """Apply the queued impulses in order now; returns the rejected ones.
+
+        Called before each step and before each edit, so impulses and edits take effect in
+        the order they arrived. Applied impulses are recorded with the next step.
+        """
         world = self.world
-        applied = []
         rejected = []
         if not self._queue:
-            return applied, rejected
+            return rejected
+        stamp_ns = (self.step_index + 1) * self.dt_ns
         limit = world.speed_limit(self.dt_ns * 1e-9)
         energy = world.kinetic_energy()
-        lightest = float(world.masses.min())
+        lightest = float(world.masses.min()) if len(world) else 1.0
         while self._queue:
-            ball, jx, jy, frame_id = self._queue.popleft()
+            frame_id, jx, jy = self._queue.popleft()
             try:
+                ball = lookup_ball(frame_id, self.index_of)
                 _, _, energy = velocity_after(world.velocities, world.masses, ball, jx, jy,
                                               limit, energy, lightest)
             except ImpulseRejected as rejection:
@@ -156,10 +202,128 @@ class Simulation:
                 continue
             world.apply_impulse(ball, jx, jy)
             self.applied += 1
-            applied.append(AppliedImpulse(
+            self._applied.append(AppliedImpulse(
                 ball=ball, jx=jx, jy=jy, frame_id=frame_id,
                 cdr=encode_vector3_stamped(stamp_ns, frame_id, jx, jy, 0.0)))
-        return applied, rejected
+        return rejected
+
+    # Edits ------------------------------------------------------------------------------
+
+    @property
+    def arena(self):
+        """The arena box [xmin, ymin, xmax, ymax] balls must stay inside, or []."""
+        return self.parameters['arena']
+
+    def spawn(self, requests):
+        """Add balls between steps; one result per request: its name, or the EditRefused.
+
+        Requests are judged in order, each against the world and the balls spawned before
+        it; those that pass are added together. Returns (results, rejected impulses).
+        """
+        requests = list(requests)
+        if len(requests) > MAX_SPAWN_BATCH:
+            raise EditRefused(TOO_MANY, f'{len(requests):,} balls in one request; at most '
+                                        f'{MAX_SPAWN_BATCH:,} per call')
+        rejected = self.apply_queued()
+        world = self.world
+        results = []
+        accepted = []
+        taken = set()
+        energy = world.kinetic_energy()
+        lightest = float(world.masses.min()) if len(world) else math.inf
+        smallest = world.min_radius if len(world) else math.inf
+        largest = float(world.radii.max()) if len(world) else 0.0
+        for request in requests:
+            ball = request.ball
+            try:
+                if len(world) + len(accepted) >= limits.MAX_BALLS:
+                    raise EditRefused(TOO_MANY, f'the world holds {limits.MAX_BALLS:,} balls, '
+                                                'the most it can')
+                name = self.entities.new_name(request.name, request.allow_renaming, taken)
+                what = f"ball '{name}' at"
+                check_placement(world, self.entities, self.arena, ball.x, ball.y,
+                                ball.radius, what)
+                self._check_against_new(ball, accepted, what)
+                low = min(smallest, ball.radius)
+                high = max(largest, ball.radius)
+                if high > limits.MAX_RADIUS_RATIO * low:
+                    raise EditRefused(INVALID_POSE, f'radius {ball.radius:g} m: the radii would '
+                                                    f'differ by more than '
+                                                    f'{limits.MAX_RADIUS_RATIO:g} times')
+                added = energy + 0.5 * ball.mass * (ball.vx * ball.vx + ball.vy * ball.vy)
+                check_speeds(added, min(lightest, ball.mass), low, self.dt_ns, what[:-3])
+            except EditRefused as refusal:
+                results.append(refusal)
+                continue
+            energy, lightest, smallest, largest = added, min(lightest, ball.mass), low, high
+            taken.add(name)
+            accepted.append((name, ball))
+            results.append(name)
+        if accepted:
+            balls = [ball for _, ball in accepted]
+            world.add_balls([(b.x, b.y) for b in balls], [(b.vx, b.vy) for b in balls],
+                            [b.radius for b in balls], [b.mass for b in balls])
+            self.entities.append([name for name, _ in accepted])
+            for name, ball in accepted:
+                self._record_edit('spawn', name, ball.x, ball.y, ball.vx, ball.vy,
+                                  ball.radius, ball.mass)
+            self._changed()
+        return results, rejected
+
+    @staticmethod
+    def _check_against_new(ball, accepted, what):
+        if not accepted:
+            return
+        others = np.array([(b.x, b.y) for _, b in accepted])
+        radii = np.array([b.radius for _, b in accepted])
+        dx = others[:, 0] - ball.x
+        dy = others[:, 1] - ball.y
+        reach = radii + ball.radius
+        hits = np.flatnonzero(dx * dx + dy * dy < reach * reach)
+        if len(hits):
+            raise EditRefused(INVALID_POSE, f'{what} ({ball.x:g}, {ball.y:g}) overlaps '
+                                            f"ball '{accepted[hits[0]][0]}' of this request")
+
+    def delete(self, name):
+        """Remove the ball named `name` between steps; returns the rejected impulses."""
+        index = self.entities.index(name)
+        rejected = self.apply_queued()  # impulses never move a ball in the arrays
+        self.world.remove_balls([index])
+        self.entities.remove(index)
+        self._record_edit('delete', name)
+        self._changed()
+        return rejected
+
+    def set_state(self, name, x, y, vx, vy):
+        """Put the ball named `name` at (x, y) with velocity (vx, vy); returns rejections."""
+        index = self.entities.index(name)
+        world = self.world
+        what = f"'{name}' at"
+        radius = float(world.radii[index])
+        for value in (vx, vy):
+            if not math.isfinite(value):
+                raise EditRefused(INVALID_POSE, f'velocity ({vx}, {vy}) is not finite')
+        check_placement(world, self.entities, self.arena, x, y, radius, what, skip=index)
+        mass = float(world.masses[index])
+        old = world.velocities[index]
+        energy = world.kinetic_energy() + 0.5 * mass * (
+            vx * vx + vy * vy - float(old[0] * old[0] + old[1] * old[1]))
+        check_speeds(energy, float(world.masses.min()), world.min_radius, self.dt_ns,
+                     f"'{name}'")
+        rejected = self.apply_queued()
+        world.set_ball_state(index, (x, y), (vx, vy))
+        self._record_edit('set_state', name, x, y, vx, vy)
+        return rejected
+
+    def _record_edit(self, kind, name, x=0.0, y=0.0, vx=0.0, vy=0.0, radius=0.0, mass=0.0):
+        fields = dict(kind=kind, name=name, x=float(x), y=float(y), vx=float(vx),
+                      vy=float(vy), radius=float(radius), mass=float(mass),
+                      impulses_before=len(self._applied))
+        self._edits.append(AppliedEdit(**fields, text=json.dumps(fields)))
+
+    def _changed(self):
+        self._names = tuple(self.entities.names)
+        self._world_changed = True
 
     # Stepping ---------------------------------------------------------------------------
 
@@ -168,15 +332,14 @@ class Simulation:
 
         Returns (record, rejected impulses).
         """
-        stamp_ns = (self.step_index + 1) * self.dt_ns
-        applied, rejected = self._apply_queued(stamp_ns)
+        rejected = self.apply_queued()
         stats = self.world.step(self.dt_ns * 1e-9)
         self.step_index += 1
-        record = self.record(stats, tuple(applied), real_time_factor)
+        record = self.record(stats, real_time_factor)
         return record, rejected
 
-    def record(self, stats, impulses, real_time_factor=None):
-        """Pack the current state as a StepRecord and write it to the sinks."""
+    def record(self, stats, real_time_factor=None):
+        """Pack the state, and what was applied since the last step, for every sink."""
         world = self.world
         stamp_ns = self.stamp_ns
         positions = world.positions.copy()
@@ -195,7 +358,12 @@ class Simulation:
             state_cdr=encode_state(positions, velocities),
             stats_cdr=encode_float64_vector(
                 (energy, momentum[0], momentum[1], ball_ball, ball_wall, rtf), STATS_FIELDS),
-            impulses=impulses, real_time_factor=real_time_factor)
+            impulses=tuple(self._applied), real_time_factor=real_time_factor,
+            edits=tuple(self._edits), names=self._names, radii=world.radii,
+            masses=world.masses, world_changed=self._world_changed)
+        self._applied = []
+        self._edits = []
+        self._world_changed = False
         self.last_log_ns = record.log_time_ns
         self.last_record = record
         self._each_sink(lambda sink: sink.write_step(record))

@@ -30,6 +30,28 @@ class AppliedImpulse:
 
 
 @dataclass(frozen=True)
+class AppliedEdit:
+    """A world edit (spawn, delete, set_state) the node applied between two steps.
+
+    It is recorded, and published on `edits`, as `text`: one JSON object with every field
+    below, so a recording re-simulates exactly and any tool can read it. impulses_before
+    is how many of the step's impulses were applied before this edit (edits are applied
+    when their service is called; impulses when the step comes or an edit forces them).
+    """
+
+    kind: str  # 'spawn', 'delete' or 'set_state'
+    name: str  # the entity's name
+    x: float = 0.0  # spawn, set_state: centre, m
+    y: float = 0.0
+    vx: float = 0.0  # spawn, set_state: velocity, m/s
+    vy: float = 0.0
+    radius: float = 0.0  # spawn: m
+    mass: float = 0.0  # spawn: kg
+    impulses_before: int = 0
+    text: str = ''  # the JSON document as recorded and published
+
+
+@dataclass(frozen=True)
 class WorldSnapshot:
     """The static part of a world: what sinks need once per segment (start or reset)."""
 
@@ -40,6 +62,7 @@ class WorldSnapshot:
     velocities: np.ndarray  # (N, 2) at step 0
     dt_ns: int
     frame_id: str
+    names: Optional[tuple] = None  # entity names in pose order (ball_<i> when None)
 
 
 @dataclass(frozen=True)
@@ -78,6 +101,14 @@ class StepRecord:
     stats_cdr: bytes  # std_msgs/Float64MultiArray, CDR: STATS_FIELDS in order, as published
     impulses: tuple = field(default_factory=tuple)  # AppliedImpulse applied before this step
     real_time_factor: Optional[float] = None  # simulated / wall time, when known
+    edits: tuple = field(default_factory=tuple)  # AppliedEdit applied before this step
+    # The balls in pose order: entity names, radii and masses. They change only with edits
+    # (world_changed is then True for the first step after them); unchanged, the same
+    # objects are handed on, so a record costs nothing more.
+    names: Optional[tuple] = None
+    radii: Optional[np.ndarray] = None
+    masses: Optional[np.ndarray] = None
+    world_changed: bool = False
 
 
 class Sink(Protocol):

@@ -301,7 +301,7 @@ def bench_budget(n, seconds, seed, directory):
             stats = world.step(DT)
             simulation.step_index += 1
             t1 = time.perf_counter()
-            record = simulation.record(stats, ())
+            record = simulation.record(stats)
             t2 = time.perf_counter()
             if publishers:
                 publishers.publish(record)

@@ -76,3 +76,7 @@ elif ! "$venv/bin/python" -c 'import simulation_interfaces.srv' >/dev/null 2>&1;
   exit 1
 fi
 "$venv/bin/python" -m pip install --quiet --no-deps --no-build-isolation .
+# Compile the numba kernels now (cached), so no run waits ~15 s for them: once for the
+# installed package the executables run, once for the source tree the tests import.
+(cd "$venv" && bin/python -m ball_world.core.numba_backend --warm) >/dev/null
+"$venv/bin/python" -m ball_world.core.numba_backend --warm >/dev/null

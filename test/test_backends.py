@@ -14,7 +14,7 @@ from numba import njit
 import numpy as np
 
 from ball_world.core import numba_backend, rules
-from ball_world.core.world import SubstepLimitExceeded, World
+from ball_world.core.world import StepStats, SubstepLimitExceeded, World
 
 BOX_SIDE = 10.0
 BOX = [[0.0, 0.0, BOX_SIDE, 0.0], [BOX_SIDE, 0.0, BOX_SIDE, BOX_SIDE],
@@ -149,7 +149,7 @@ def run_pair(worlds, steps, rng, edit_every, substeps=SUBSTEP_BUDGET):
 
     Returns the summed counters and how many steps needed more rounds than substeps.
     """
-    totals = np.zeros(5, dtype=np.int64)
+    totals = np.zeros(len(StepStats._fields), dtype=np.int64)
     crowded = 0
     for k in range(steps):
         if edit_every and k % edit_every == edit_every - 1:
@@ -245,4 +245,4 @@ def test_warm_entry_point_compiles_the_kernels():
     done = subprocess.run([sys.executable, '-m', 'ball_world.core.numba_backend', '--warm'],
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
-    assert 'numba kernels ready' in done.stdout
+    assert 'numba kernels (seed and exact mode) ready' in done.stdout

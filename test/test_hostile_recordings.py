@@ -445,7 +445,7 @@ def test_fuzzed_recordings_get_an_answer_from_every_tool(tmp_path, compression):
     simulation = Simulation(PARAMS, sinks=[McapSink(path, compression, chunk_bytes=4000)])
     for step in range(20):
         if step in (4, 9):
-            simulation.queue_impulse(2, 0.1, 0.2, 'ball_2')
+            simulation.queue_impulse('ball_2', 0.1, 0.2)
         simulation.step()
     simulation.reset({**PARAMS, 'random.count': 5})
     for _ in range(5):

@@ -1,13 +1,12 @@
 """The node in-process: topics, stamps, impulses, services, parameters, determinism."""
-from ball_world_testing.harness import Probe, RECEIVE_QOS
-from geometry_msgs.msg import PoseArray, Vector3Stamped
+from ball_world_testing.harness import InProcessWorld
+from geometry_msgs.msg import Vector3Stamped
 import numpy as np
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
@@ -20,44 +19,13 @@ ONE_BALL = {'random.count': 0, 'balls.x': [5.0], 'balls.y': [5.0], 'balls.vx': [
             'balls.vy': [0.0], 'balls.radius': [0.5], 'balls.mass': [0.5]}
 
 
-class Harness:
-    """A BallWorld spun in-process with a probe: in the probe's context, by its executor."""
-
-    def __init__(self, **parameters):
-        self.probe = Probe()
-        overrides = [Parameter(name, value=value) for name, value in parameters.items()]
-        self.node = self.probe.add_node(BallWorld(context=self.probe.context,
-                                                  parameter_overrides=overrides))
-        self.executor = self.probe.executor
-        self.balls = self.probe.listen(PoseArray, 'balls')
-        self.states = self.probe.listen(Float64MultiArray, 'state')
-        self.impulses = self.probe.node.create_publisher(Vector3Stamped, 'impulse', RECEIVE_QOS)
-
-    def spin_until(self, predicate, timeout=None):
-        self.probe.spin_until(predicate, timeout=timeout)
-
-    def call(self, srv_type, name, request):
-        return self.probe.call(srv_type, name, request)
-
-    def impulse(self, frame_id, x, y, z=0.0):
-        msg = Vector3Stamped()
-        msg.header.frame_id = frame_id
-        msg.vector.x, msg.vector.y, msg.vector.z = x, y, z
-        self.spin_until(lambda: self.impulses.get_subscription_count() > 0)
-        self.impulses.publish(msg)
-
-    def close(self):
-        self.node.close()
-        self.probe.close()
-
-
 @pytest.fixture
 def harness_factory():
     made = []
 
     def make(**parameters):
         parameters.setdefault('markers.rate_hz', 0.0)
-        made.append(Harness(**parameters))
+        made.append(InProcessWorld(**parameters))
         return made[-1]
 
     yield make
@@ -89,11 +57,11 @@ def test_balls_and_state_stamps_advance_by_exactly_dt(harness_factory):
 
 def test_impulse_changes_velocity_by_j_over_m_at_the_next_step(harness_factory):
     h = harness_factory(**ONE_BALL)
-    assert h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True)).success
+    assert h.call(SetBool, 'pause', SetBool.Request(data=True)).success
     h.impulse('ball_0', 1.0, -0.5)
     h.spin_until(lambda: h.node.simulation.queued == 1)
     h.states.clear()
-    assert h.call(Trigger, '/ball_world/step', Trigger.Request()).success
+    assert h.call(Trigger, 'step', Trigger.Request()).success
     h.spin_until(lambda: h.states)
     assert state_rows(h.states[-1])[0, 2:].tolist() == [0.5 + 1.0 / 0.5, -0.5 / 0.5]
 
@@ -116,44 +84,44 @@ def test_impulse_changes_velocity_by_j_over_m_at_the_next_step(harness_factory):
 def test_bad_impulses_are_rejected_counted_and_never_applied(harness_factory, frame_id,
                                                              vector, reason):
     h = harness_factory(**ONE_BALL)
-    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
+    h.call(SetBool, 'pause', SetBool.Request(data=True))
     before = h.node.simulation.world.velocities.copy()
     h.impulse(frame_id, *vector)
     h.spin_until(lambda: h.node.simulation.rejected.get(reason, 0) == 1
                  or h.node.simulation.queued)
-    h.call(Trigger, '/ball_world/step', Trigger.Request())
+    h.call(Trigger, 'step', Trigger.Request())
     assert h.node.simulation.rejected == {reason: 1}
     assert h.node.simulation.world.velocities.tolist() == before.tolist()
     # The node keeps stepping after a rejection.
-    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=False))
+    h.call(SetBool, 'pause', SetBool.Request(data=False))
     step = h.node.simulation.step_index
     h.spin_until(lambda: h.node.simulation.step_index > step + 3)
 
 
 def test_pause_step_and_reset_do_what_they_say(harness_factory):
     h = harness_factory(rate_hz=100.0)
-    response = h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
+    response = h.call(SetBool, 'pause', SetBool.Request(data=True))
     assert response.success and 'paused' in response.message
-    again = h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
+    again = h.call(SetBool, 'pause', SetBool.Request(data=True))
     assert again.success and 'already paused' in again.message
     step = h.node.simulation.step_index
     for _ in range(5):
         h.executor.spin_once(timeout_sec=0.02)
     assert h.node.simulation.step_index == step  # paused: the timer steps nothing
-    assert h.call(Trigger, '/ball_world/step', Trigger.Request()).success
+    assert h.call(Trigger, 'step', Trigger.Request()).success
     assert h.node.simulation.step_index == step + 1
-    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=False))
-    refused = h.call(Trigger, '/ball_world/step', Trigger.Request())
+    h.call(SetBool, 'pause', SetBool.Request(data=False))
+    refused = h.call(Trigger, 'step', Trigger.Request())
     assert not refused.success and 'not paused' in refused.message
     h.spin_until(lambda: h.node.simulation.step_index > step + 5)
-    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
+    h.call(SetBool, 'pause', SetBool.Request(data=True))
     h.node.set_parameters([Parameter('random.count', value=5)])
-    assert h.call(Trigger, '/ball_world/reset', Trigger.Request()).success
+    assert h.call(Trigger, 'reset', Trigger.Request()).success
     assert h.node.simulation.step_index == 0
     assert len(h.node.simulation.world) == 5
     five = h.node.simulation.world.positions.tolist()
     h.node.set_parameters([Parameter('random.count', value=20)])
-    assert h.call(Trigger, '/ball_world/reset', Trigger.Request()).success
+    assert h.call(Trigger, 'reset', Trigger.Request()).success
     # Random balls are drawn in order, so the first five are those of the 5-ball world.
     assert h.node.simulation.world.positions[:5].tolist() == five
 
@@ -209,20 +177,20 @@ def test_same_parameters_and_impulses_give_bit_identical_poses(harness_factory):
     runs = []
     for _ in range(2):
         h = harness_factory(**{'random.count': 40, 'random.seed': 7})
-        h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
-        h.call(Trigger, '/ball_world/reset', Trigger.Request())
+        h.call(SetBool, 'pause', SetBool.Request(data=True))
+        h.call(Trigger, 'reset', Trigger.Request())
         for k in range(60):
             if k in (5, 30):
                 h.impulse(f'ball_{k % 40}', 0.3, -0.2)
                 h.spin_until(lambda: h.node.simulation.queued == 1)
-            h.call(Trigger, '/ball_world/step', Trigger.Request())
+            h.call(Trigger, 'step', Trigger.Request())
         runs.append(h.node.simulation.world.positions.tobytes())
     assert runs[0] == runs[1]
 
 
 def test_garbage_bytes_and_stale_stamps_are_rejected_and_stepping_goes_on(harness_factory):
     h = harness_factory(**ONE_BALL)
-    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
+    h.call(SetBool, 'pause', SetBool.Request(data=True))
     before = h.node.simulation.world.velocities.copy()
     step = h.node.simulation.step_index
     h.spin_until(lambda: h.impulses.get_subscription_count() > 0)
@@ -237,7 +205,7 @@ def test_garbage_bytes_and_stale_stamps_are_rejected_and_stepping_goes_on(harnes
     rejected = h.node.simulation.rejected
     h.spin_until(lambda: sum(rejected.values()) == 5)
     assert rejected == {'malformed_message': 4, 'stamp_out_of_range': 1}
-    assert h.call(Trigger, '/ball_world/step', Trigger.Request()).success
+    assert h.call(Trigger, 'step', Trigger.Request()).success
     assert h.node.simulation.step_index == step + 1
     # Only the step itself moved the ball: its velocity is untouched.
     assert h.node.simulation.world.velocities.tolist() == before.tolist()
@@ -245,11 +213,11 @@ def test_garbage_bytes_and_stale_stamps_are_rejected_and_stepping_goes_on(harnes
 
 def test_reset_discards_queued_impulses_and_says_how_many(harness_factory):
     h = harness_factory(**ONE_BALL)
-    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
+    h.call(SetBool, 'pause', SetBool.Request(data=True))
     for _ in range(100):
         h.impulse('ball_0', 0.01, 0.0)
     h.spin_until(lambda: h.node.simulation.queued == 100)
-    response = h.call(Trigger, '/ball_world/reset', Trigger.Request())
+    response = h.call(Trigger, 'reset', Trigger.Request())
     assert response.success
     assert response.message.endswith('discarded 100 queued impulses')
     assert h.node.simulation.discarded == 100 and h.node.simulation.applied == 0
@@ -259,17 +227,17 @@ def test_reset_discards_queued_impulses_and_says_how_many(harness_factory):
 
 def test_world_parameters_can_be_set_one_by_one_and_are_checked_at_reset(harness_factory):
     h = harness_factory(**{'random.count': 0})
-    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=True))
+    h.call(SetBool, 'pause', SetBool.Request(data=True))
     for name, value in (('balls.x', [2.0, 4.0]), ('balls.y', [5.0, 5.0])):
         assert h.node.set_parameters([Parameter(name, value=value)])[0].successful
-    refused = h.call(Trigger, '/ball_world/reset', Trigger.Request())
+    refused = h.call(Trigger, 'reset', Trigger.Request())
     assert not refused.success and "'balls.vx': has 0 entries but balls.x has 2" in \
         refused.message and 'world unchanged' in refused.message
     assert len(h.node.simulation.world) == 0
     for name, value in (('balls.vx', [1.0, -1.0]), ('balls.vy', [0.0, 0.0]),
                         ('balls.radius', [0.5, 0.5]), ('balls.mass', [1, 2])):
         assert h.node.set_parameters([Parameter(name, value=value)])[0].successful, name
-    assert h.call(Trigger, '/ball_world/reset', Trigger.Request()).success
+    assert h.call(Trigger, 'reset', Trigger.Request()).success
     assert h.node.simulation.world.masses.tolist() == [1.0, 2.0]
 
 
@@ -295,7 +263,7 @@ def test_rates_across_the_whole_range_keep_the_node_answering(harness_factory):
     h = harness_factory(dt=0.01, **ONE_BALL)
     for rate in (1e-300, 1e-10, 0.5, 1e6, 0.0):
         assert h.node.set_parameters([Parameter('rate_hz', value=rate)])[0].successful, rate
-        h.spin_until(lambda: h.call(SetBool, '/ball_world/pause',
+        h.spin_until(lambda: h.call(SetBool, 'pause',
                                     SetBool.Request(data=False)).success)
     step = h.node.simulation.step_index
     h.spin_until(lambda: h.node.simulation.step_index > step + 50)  # rate 0: full speed
@@ -321,7 +289,7 @@ def test_start_paused_holds_step_zero_until_resumed(harness_factory):
     for _ in range(10):
         h.executor.spin_once(timeout_sec=0.02)
     assert h.node.simulation.step_index == 0
-    h.call(SetBool, '/ball_world/pause', SetBool.Request(data=False))
+    h.call(SetBool, 'pause', SetBool.Request(data=False))
     h.spin_until(lambda: h.node.simulation.step_index > 2)
 
 

@@ -59,7 +59,7 @@ MARKERS_QOS = JAZZY_QOS.replace('depth: 10', 'depth: 1').replace(
 def run(simulation, steps, impulses=None):
     for k in range(1, steps + 1):
         for ball, jx, jy in (impulses or {}).get(simulation.step_index + 1, ()):
-            simulation.queue_impulse(ball, jx, jy, f'ball_{ball}')
+            simulation.queue_impulse(f'ball_{ball}', jx, jy)
         simulation.step()
 
 
@@ -321,7 +321,7 @@ WRITER = textwrap.dedent("""
     sim = Simulation(params, sinks=[McapSink(sys.argv[1], chunk_bytes=20000)])
     while True:
         if sim.step_index == 7:
-            sim.queue_impulse(3, 0.2, 0.1, 'ball_3')
+            sim.queue_impulse('ball_3', 0.2, 0.1)
         sim.step()
         if sim.step_index % 10 == 0:
             sim.flush()

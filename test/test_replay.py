@@ -37,7 +37,7 @@ def recording_path(tmp_path_factory):
                             sinks=[McapSink(path)])
     for _ in range(50):
         if simulation.step_index in (9, 30):
-            simulation.queue_impulse(1, 0.1, -0.2, 'ball_1')
+            simulation.queue_impulse('ball_1', 0.1, -0.2)
         simulation.step()
     simulation.close()
     return path

@@ -45,7 +45,7 @@ def run(sinks, steps=30, parameters=None, reset_at=None, reset_parameters=None,
     for k in range(1, steps + 1):
         if k in impulses:
             ball, jx, jy = impulses[k]
-            simulation.queue_impulse(ball, jx, jy, f'ball_{ball}')
+            simulation.queue_impulse(f'ball_{ball}', jx, jy)
         if k == reset_at:
             simulation.reset(reset_parameters or {})
         simulation.step(real_time_factor=1.0 + k / 100)
@@ -270,12 +270,14 @@ def test_balls_named_by_the_record_may_come_and_go(tmp_path):
     # Step 1: ball_1 is gone; step 2: a ball named 'red' arrives with its own radius.
     gone = SimpleNamespace(**{**vars(replace(two)), 'positions': two.positions[[0, 2]],
                               'velocities': two.velocities[[0, 2]],
-                              'names': ('ball_0', 'ball_2')})
+                              'names': ('ball_0', 'ball_2'), 'radii': world.radii[[0, 2]],
+                              'masses': world.masses[[0, 2]]})
     sink.write_step(gone)
     arrived = SimpleNamespace(**{**vars(gone), 'step': 2, 'log_time_ns': 2 * two.log_time_ns,
                                  'positions': np.vstack([gone.positions, [[5.0, 5.0]]]),
                                  'names': ('ball_0', 'ball_2', 'red'),
-                                 'radii': [*world.radii[[0, 2]], 0.5]})
+                                 'radii': [*world.radii[[0, 2]], 0.5],
+                                 'masses': [*world.masses[[0, 2]], 0.8]})
     sink.write_step(arrived)
     sink.close()
     _, content, _, _ = read(path)

@@ -689,7 +689,11 @@ def main(argv=None):
     if not available():
         print('numba is not installed: nothing to compile (the numpy backend needs nothing)')
         return 0
-    print(f'numba kernels ready in {warm():.1f} s')
+    from ball_world.core import exact
+    began = time.perf_counter()
+    warm()
+    exact.warm()
+    print(f'numba kernels (seed and exact mode) ready in {time.perf_counter() - began:.1f} s')
     return 0
 
 

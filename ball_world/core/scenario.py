@@ -290,28 +290,18 @@ def _check_world_limits(params, box, walls, explicit_count, radii):
                                   'can hold')
 
 
-def _reachable_speed(world):
-    """The fastest any ball can ever go by collisions alone: all the energy in the lightest.
-
-    Energy is conserved and only shared out, so no sequence of collisions can exceed it.
-    """
-    if len(world) == 0:
-        return 0.0
-    return math.sqrt(2.0 * world.kinetic_energy() / float(world.masses.min()))
-
-
 def _check_speeds(world, params, dt_ns):
     """No ball may ever be faster than the world can step (limits.MAX_SUBSTEPS)."""
     limit = world.speed_limit(dt_ns * 1e-9)
-    reachable = _reachable_speed(world)
+    reachable = world.reachable_speed()
     if reachable <= limit:
         return
     name = 'balls.vx' if len(params['balls.x']) else 'random.speed'
     raise ScenarioError(name, f'the balls carry enough energy for one of them to reach '
                               f'{reachable:.3g} m/s, faster than the {limit:.3g} m/s this '
-                              f'world can step ({limits.MAX_SUBSTEPS:,} substeps of half the '
-                              'smallest radius per step); lower the speeds or dt, or raise '
-                              'the smallest radius or mass')
+                              f'world can step in {limits.MAX_SUBSTEPS:,} substeps (a quarter '
+                              'of the smallest radius per substep); lower the speeds or dt, '
+                              'or raise the smallest radius or mass')
 
 
 def build_world(params):
@@ -329,8 +319,11 @@ def build_world(params):
     extra = _random_balls(params, arena, walls, explicit)
     positions, velocities, radii, masses = (
         np.concatenate((a, b)) for a, b in zip(explicit, extra))
+    if params['physics.mode'] == 'exact' and not numba_installed():
+        raise ScenarioError('physics.mode', "'exact' needs the numba package (pip install "
+                                            "numba); use 'seed'")
     world = World(positions, velocities, radii, masses, walls=np.concatenate((box, walls)),
-                  backend=_physics_backend(params))
+                  backend=_physics_backend(params), mode=params['physics.mode'])
     _check_speeds(world, params, dt_ns)
     return world
 

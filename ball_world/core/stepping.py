@@ -59,6 +59,7 @@ class StepStats(NamedTuple):
     substeps: int = 0
     rounds: int = 0
     unresolved: int = 0
+    events: int = 0  # exact mode: events processed (collisions, stale ones, cell crossings)
 
 
 #: Positions of the counters in the totals array the backends fill (StepStats' field order).

@@ -17,9 +17,15 @@ Choices the seed leaves open, made here:
   `MAX_TRAVEL` (half) of the smallest radius in one substep. A ball that was not touching
   a wall cannot reach its far side then, and two balls close by at most half the sum of
   their radii per substep, so their centres cannot pass each other unseen. What a
-  posteriori detection can still miss is a graze shallower than 1 - sqrt(15/16) (3.2%)
-  of the sum of the radii, entered and left within one substep. If a collision speeds a
-  ball up, the rest of the step is split again.
+  posteriori detection can still miss is a graze shallower than 1 - sqrt(3)/2 (13.4%) of
+  the sum of the radii when both balls move (1 - sqrt(15)/4, 3.2%, when one is at rest):
+  the pair approaches only over the first half of its overlap chord, and no substep end
+  may fall in it (docs/physics.md derives it). If a collision speeds a ball up, the rest
+  of the step is split again.
+
+Modes: `mode='seed'` is the rule above; `mode='exact'` (core.exact, needs numba) moves the
+balls through every collision of a step in time order, each at its true time of impact,
+with the same responses.
 
 Every World holds only what `core.limits` allows (ball count, radii, masses, coordinates,
 walls): the constructor and the edit methods refuse anything else with a ValueError.
@@ -34,8 +40,11 @@ from ball_world.core.stepping import (BACKENDS, MAX_TRAVEL, numba_installed, rea
                                       resolve_backend, speed_limit, STEP_REFUSED, StepStats,
                                       SubstepLimitExceeded, travel_per_substep)
 
-__all__ = ['BACKENDS', 'MAX_TRAVEL', 'numba_installed', 'StepStats', 'SubstepLimitExceeded',
-           'Walls', 'World']
+__all__ = ['BACKENDS', 'MAX_TRAVEL', 'MODES', 'numba_installed', 'StepStats',
+           'SubstepLimitExceeded', 'Walls', 'World']
+
+#: How a World steps: the seed's a posteriori rule, or every collision at its exact time.
+MODES = ('seed', 'exact')
 
 
 class Walls:
@@ -136,10 +145,17 @@ class World:
     methods below, which keep derived state (neighbour lists, grid order, smallest radius,
     scratch buffers) in step; edits replace the arrays, so hold the World, not its arrays.
     `backend` is 'numpy', 'numba' or 'auto' (numba where installed); `self.backend` is
-    always the concrete one, and the choice never changes a trajectory.
+    always the concrete one, and the choice never changes a trajectory. `mode` is one of
+    MODES; 'exact' needs numba whatever the backend.
     """
 
-    def __init__(self, positions, velocities, radii, masses, walls=(), backend='auto'):
+    def __init__(self, positions, velocities, radii, masses, walls=(), backend='auto',
+                 mode='seed'):
+        if mode not in MODES:
+            raise ValueError(f'unknown mode {mode!r}; expected one of {", ".join(MODES)}')
+        if mode == 'exact' and not numba_installed():
+            raise ValueError("mode 'exact' needs the numba package (pip install numba)")
+        self.mode = mode
         self.positions, self.velocities, self.radii, self.masses = _checked_balls(
             positions, velocities, radii, masses)
         _check_world(self.radii)
@@ -243,15 +259,23 @@ class World:
     # Stepping ---------------------------------------------------------------------------
 
     def step(self, dt):
-        """Advance the world by dt seconds; return what happened as StepStats.
+        """Advance the world by dt seconds in its mode; return what happened as StepStats.
 
-        This is the seed mode (`_seed_step`: a posteriori detection in substeps), the only
-        stepping mode today; another mode would be chosen here, before it.
+        Seed mode may raise SubstepLimitExceeded, exact mode core.exact.EventBudgetExceeded
+        (a jammed world): both only for worlds past what their checks let in.
         """
         dt = float(dt)
         if not (math.isfinite(dt) and dt > 0.0):
             raise ValueError(f'dt must be a finite number of seconds > 0, got {dt}')
+        if self.mode == 'exact':
+            return self._exact_step(dt)
         return self._seed_step(dt)
+
+    def _exact_step(self, dt):
+        """The exact-mode step (core.exact): every collision at its time of impact."""
+        from ball_world.core import exact  # numba: imported only by worlds that use it
+        ball_ball, ball_wall, events = exact.step(self, dt)
+        return StepStats(ball_ball=ball_ball, ball_wall=ball_wall, substeps=1, events=events)
 
     def _seed_step(self, dt):
         """The seed-mode step (core.stepping), by the World's backend.
@@ -269,4 +293,4 @@ class World:
                 f'substeps (reachable speed {self.reachable_speed():.4g} m/s, limit '
                 f'{self.speed_limit(dt):.4g} m/s for a smallest radius of '
                 f'{self.min_radius:g} m)')
-        return StepStats._make(totals.tolist())
+        return StepStats(*totals.tolist())

@@ -23,18 +23,21 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from ball_world.core import parameters as table
 from ball_world.core.alloc import tune_allocator
+from ball_world.core.exact import EventBudgetExceeded
 from ball_world.core.impulses import check_impulse, ImpulseRejected
 from ball_world.core.scenario import describe, ScenarioError, step_duration_ns
+from ball_world.core.stepping import SubstepLimitExceeded
 from ball_world.msgs.cdr import decode_vector3_stamped, encode_clock
 from ball_world.msgs.markers import MarkerBuilder
 from ball_world.recording.writer_thread import BackgroundSink
 from ball_world.ros.parameters import converted, current_values, declare_all, ParameterError
+from ball_world.ros.sim_interfaces import ACTION, SimulationInterfaces
 from ball_world.simulation import build, Simulation
 
 #: Seconds between the node's progress lines (achieved rate, real-time factor, impulses).
@@ -54,11 +57,13 @@ STEP_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
 MARKER_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+#: Edits are few and each matters: reliable, with room for a burst of spawns.
+EDITS_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 IMPULSE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=IMPULSE_QUEUE_DEPTH,
                          reliability=ReliabilityPolicy.RELIABLE)
 
 #: The node's own topics and services (relative names, resolved in the start-up line).
-TOPICS_OUT = ('balls', 'state', 'stats', 'markers')
+TOPICS_OUT = ('balls', 'state', 'stats', 'markers', 'edits', 'entity_names')
 TOPICS_IN = ('impulse',)
 SERVICES = ('~/reset', '~/pause', '~/step')
 
@@ -138,14 +143,15 @@ class BallWorld(Node):
         failures = []
         topics = {name: self.resolve_topic_name(name)
                   for name in ('balls', 'state', 'stats', 'impulse', 'markers')}
-        sinks = open_sinks(values)
         try:
-            self.simulation = Simulation(values, sinks, topics=topics,
-                                         on_sink_failure=failures.append)
+            # The world first: a start refused for its parameters creates no file, and a
+            # signal while a large world builds leaves none half-written.
+            built = build(values)
         except ScenarioError as error:
-            for sink in sinks:
-                sink.close()
             raise StartupError(str(error)) from None
+        sinks = open_sinks(values)
+        self.simulation = Simulation(values, sinks, topics=topics,
+                                     on_sink_failure=failures.append, built=built)
         if failures:
             # A recording that fails on its first segment is a bad path, not a run-time fault.
             self.simulation.close()
@@ -160,18 +166,20 @@ class BallWorld(Node):
         self.stats_pub = self.create_publisher(Float64MultiArray, 'stats', STEP_QOS)
         self.markers_pub = self.create_publisher(MarkerArray, 'markers', MARKER_QOS)
         self.clock_pub = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
+        self.edits_pub = self.create_publisher(String, 'edits', EDITS_QOS)
+        self.entities_pub = self.create_publisher(String, 'entity_names', MARKER_QOS)
         self._impulse_sub = self.create_subscription(
             Vector3Stamped, 'impulse', self._on_impulse, IMPULSE_QOS, raw=True)
         # Calls that take long (a reset builds its world on a thread) run as coroutines in
         # their own group: while one waits, the default group's timers, subscription and
         # services go on (rclpy holds a whole mutually exclusive group while a coroutine of
         # it is pending). _wake resumes a waiting coroutine without waiting for a timer.
-        self._long_calls = MutuallyExclusiveCallbackGroup()
+        self.long_calls = MutuallyExclusiveCallbackGroup()
         self._wake = self.create_guard_condition(lambda: None)
-        self.create_service(Trigger, '~/reset', self._on_reset,
-                            callback_group=self._long_calls)
+        self.create_service(Trigger, '~/reset', self._on_reset, callback_group=self.long_calls)
         self.create_service(SetBool, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/step', self._on_step)
+        self.interfaces = SimulationInterfaces(self)
         self.add_pre_set_parameters_callback(converted)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
@@ -182,10 +190,10 @@ class BallWorld(Node):
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._markers = MarkerBuilder()
         self._markers_next = 0.0
-        self._rebuild_markers()
+        self._markers_timer = None
+        self._world_edited()
         self._timer = None
         self._schedule(values['rate_hz'])
-        self._markers_timer = None
         self._set_markers_rate(values['markers.rate_hz'])
         self.create_timer(FLUSH_PERIOD, self.simulation.flush, clock=self._steady)
         self.create_timer(REPORT_PERIOD, self._report, clock=self._steady)
@@ -201,11 +209,14 @@ class BallWorld(Node):
         if values['publish_clock']:
             published.append('/clock')
         services = [self.resolve_service_name(name) for name in SERVICES]
+        standard = ', '.join(self.interfaces.names)
         return (f'world: {describe(simulation.world, simulation.dt_ns)}; rate '
                 f"{values['rate_hz']:g} Hz{' (paused at step 0)' if self.paused else ''}; "
                 f"publishing {', '.join(published)}; subscribed to "
                 f"{', '.join(self.resolve_topic_name(name) for name in TOPICS_IN)}; services "
-                f"{', '.join(services)}")
+                f"{', '.join(services)}; simulation_interfaces services "
+                f'{self.get_fully_qualified_name()}/{{{standard}}} and action '
+                f"{self.resolve_service_name('~/' + ACTION)}")
 
     # Stepping ---------------------------------------------------------------------------
 
@@ -269,7 +280,15 @@ class BallWorld(Node):
         elapsed = time.monotonic() - self._start_wall
         simulated = (simulation.step_index + 1) * simulation.dt_ns * 1e-9
         rtf = simulated / elapsed if elapsed > 0 else None
-        record, rejected = simulation.step(real_time_factor=rtf)
+        try:
+            record, rejected = simulation.step(real_time_factor=rtf)
+        except (SubstepLimitExceeded, EventBudgetExceeded) as error:
+            # Only a world built to jam (a ball wedged between walls) gets here. Stepping
+            # stops until a reset; the node stays up and keeps answering.
+            self.get_logger().error(f'step {simulation.step_index + 1} cannot be taken: '
+                                    f'{error}; paused (change the world and call ~/reset)')
+            self.paused = True
+            return simulation.last_record
         for rejection in rejected:
             self._warn_rejection(rejection)
         self._publish(record)
@@ -327,14 +346,14 @@ class BallWorld(Node):
                 stamp_ns, frame_id, x, y, z = decode_vector3_stamped(data)
             except ValueError as error:
                 raise ImpulseRejected('malformed_message', f'undecodable impulse: {error}')
-            ball, jx, jy = check_impulse(
+            _, jx, jy = check_impulse(
                 frame_id, x, y, z, simulation.index_of, stamp_ns, simulation.stamp_ns,
                 time.time_ns())
         except ImpulseRejected as rejection:
             simulation.count_rejection(rejection.reason)
             self._warn_rejection(rejection)
             return
-        simulation.queue_impulse(ball, jx, jy, frame_id)
+        simulation.queue_impulse(frame_id, jx, jy)
 
     def _warn_rejection(self, rejection):
         count = self.simulation.rejected.get(rejection.reason, 0)
@@ -345,45 +364,86 @@ class BallWorld(Node):
     # Services ---------------------------------------------------------------------------
 
     async def _on_reset(self, request, response):
-        """Rebuild the world from the current parameters, back to step 0.
+        response.success, response.message = await self.reset_world()
+        return response
+
+    async def reset_world(self):
+        """Rebuild the world from the current parameters, back to step 0: (ok, message).
 
         The world is built on a worker thread (the largest takes about a second), so the
         node keeps stepping the old world and answering until the new one is ready; it is
         swapped in between two steps. Impulses queued for the old world are discarded and
-        counted.
+        counted. Callers run in the long-calls group (see __init__).
         """
         if self._resetting:
-            response.success = False
-            response.message = 'a reset is already in progress'
-            return response
+            return False, 'a reset is already in progress'
         self._resetting = True
         try:
             built = await self._build_in_background(current_values(self))
         except ScenarioError as error:
-            response.success = False
-            response.message = f'reset refused, world unchanged: {error}'
-            return response
+            return False, f'reset refused, world unchanged: {error}'
         except Exception as error:  # noqa: B902 - a fault of the build must not kill the node
-            response.success = False
-            response.message = f'reset failed, world unchanged: {error!r}'
-            self.get_logger().error(response.message)
-            return response
+            message = f'reset failed, world unchanged: {error!r}'
+            self.get_logger().error(message)
+            return False, message
         finally:
             self._resetting = False
         record = self.simulation.reset(None, built=built)
         discarded = self.simulation.last_discarded
         self._start_wall = time.monotonic()
-        self._rebuild_markers()
+        self._world_edited()
         self._publish(record)
+        message = (f'reset to step 0: {describe(self.simulation.world, self.simulation.dt_ns)}'
+                   f"; discarded {discarded} queued impulse{'' if discarded == 1 else 's'}")
+        self.get_logger().info(message)
+        return True, message
+
+    def edit(self, change):
+        """Apply a world edit (a Simulation method, via `change`) and tell the world about it.
+
+        change() returns (value, impulses rejected on the way); the value is returned. The
+        edit goes out on `edits` at once; a change of the set of balls also goes out on
+        `entity_names` and in the markers.
+        """
+        simulation = self.simulation
+        names = simulation.names
+        done = len(simulation.pending_edits)
+        value, rejected = change()
+        for rejection in rejected:
+            self._warn_rejection(rejection)
+        for applied in simulation.pending_edits[done:]:
+            self.edits_pub.publish(String(data=applied.text))
+        if simulation.names is not names:
+            self._world_edited()
+        return value
+
+    def _world_edited(self):
+        """Balls appeared or went (or a reset): names and markers follow."""
+        self.entities_pub.publish(String(data='\n'.join(self.simulation.names)))
+        self._rebuild_markers()
         if self._markers_timer is not None:
             self._markers_next = 0.0
             self._publish_markers()
-        response.success = True
-        response.message = (f'reset to step 0: '
-                            f'{describe(self.simulation.world, self.simulation.dt_ns)}; '
-                            f"discarded {discarded} queued impulse{'' if discarded == 1 else 's'}")
-        self.get_logger().info(response.message)
-        return response
+
+    def set_paused(self, paused):
+        """Pause or resume stepping; returns whether it was paused before."""
+        was = self.paused
+        self.paused = bool(paused)
+        if not self.paused and was:
+            # Resume the real-time factor and the schedule from now, not from before.
+            simulated = self.simulation.step_index * self.simulation.dt_ns * 1e-9
+            self._start_wall = time.monotonic() - simulated
+            self._next_due = time.monotonic()
+        return was
+
+    def quit(self, reason):
+        """End the run as max_steps does: the main loop stops and closes the recordings."""
+        self.get_logger().info(f'{reason}: stopping at step {self.simulation.step_index}')
+        self.finished = True
+
+    def wake(self):
+        """Make the executor look again at once (resumes a waiting long call)."""
+        self._wake.trigger()
 
     def _build_in_background(self, values):
         """An rclpy Future of build(values), computed on a worker thread.
@@ -404,13 +464,7 @@ class BallWorld(Node):
         return future
 
     def _on_pause(self, request, response):
-        was = self.paused
-        self.paused = bool(request.data)
-        if not self.paused and was:
-            # Resume the real-time factor and the schedule from now, not from before.
-            simulated = self.simulation.step_index * self.simulation.dt_ns * 1e-9
-            self._start_wall = time.monotonic() - simulated
-            self._next_due = time.monotonic()
+        was = self.set_paused(request.data)
         state = 'paused' if self.paused else 'running'
         response.success = True
         response.message = (f'already {state}' if was == self.paused else state) + \

@@ -19,7 +19,7 @@ from typing import Optional
 
 import numpy as np
 
-from ball_world.core.impulses import ImpulseRejected, parse_ball
+from ball_world.core.impulses import ImpulseRejected, lookup_ball
 from ball_world.core.scenario import ScenarioError
 from ball_world.msgs.cdr import decode_state_layout
 from ball_world.recording.mcap_reader import Recording, RecordingError
@@ -124,15 +124,14 @@ def _advance(simulation, step, comparison, segment_index):
     """Step the simulation once to `step` (the next one), with its recorded impulses queued."""
     if step.step == 0:
         return simulation.last_record
-    ball_count = len(simulation.world)
     for impulse in step.impulses:
         try:
-            ball = parse_ball(impulse.frame_id, ball_count)
+            lookup_ball(impulse.frame_id, simulation.index_of)
         except ImpulseRejected as error:
             comparison.add(Difference(segment_index, step.step, 'impulse', None,
                                       impulse.frame_id, str(error), math.inf))
             continue
-        simulation.queue_impulse(ball, impulse.x, impulse.y, impulse.frame_id)
+        simulation.queue_impulse(impulse.frame_id, impulse.x, impulse.y)
     result, rejected = simulation.step()
     for rejection in rejected:
         comparison.add(Difference(segment_index, step.step, 'impulse rejected', None,

@@ -1,0 +1,255 @@
+"""Edits of a running world: which balls exist under which names, and which edits are valid.
+
+Why a module of its own: an edit (spawn, delete, set state) reaches the world from the
+standard simulation_interfaces services of the node and, identically, from a recording
+being re-simulated; the rules must be one piece of code. No ROS here: the node turns
+requests into these calls and EditRefused kinds into the standard's result codes.
+
+Names. Every ball has an entity name for its life: `ball_<i>` for the balls a world starts
+with, the requested name (or a generated `ball_<k>`) for spawned ones. Names are never
+reused within a segment (from a start or reset to the next), so an impulse or a state
+request for a deleted ball can never reach another ball that took its name.
+"""
+from dataclasses import dataclass
+import math
+import re
+
+import numpy as np
+import yaml
+
+from ball_world.core import limits
+from ball_world.core.parameters import number_text
+from ball_world.core.stepping import reachable_speed, speed_limit, travel_per_substep
+
+#: A name: a letter, then letters, digits or underscores (usable as a frame id and in YAML).
+NAME_PATTERN = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
+#: Longest resource_string accepted, characters.
+MAX_RESOURCE_LENGTH = 4096
+#: Most balls one SpawnEntities request may ask for.
+MAX_SPAWN_BATCH = 1_000
+#: A spawned ball's radius and mass when its resource_string does not give them.
+DEFAULT_RADIUS = 0.2
+DEFAULT_DENSITY = 1.0
+#: The one kind of entity the world spawns (GetSpawnables lists it).
+BALL_URI = 'ball'
+RESOURCE_FORMAT = ('YAML or JSON mapping, all keys optional: radius (m, default '
+                   f'{DEFAULT_RADIUS}), mass (kg, default {DEFAULT_DENSITY:g} kg/m^2 x area), '
+                   'velocity ([vx, vy] in m/s, default [0, 0])')
+
+# What an edit can be refused for (the node maps each to the standard's result code).
+NAME_NOT_UNIQUE = 'name_not_unique'
+NAME_INVALID = 'name_invalid'
+NO_RESOURCE = 'no_resource'
+UNSUPPORTED_FORMAT = 'unsupported_format'
+NAMESPACE_INVALID = 'namespace_invalid'
+RESOURCE_PARSE_ERROR = 'resource_parse_error'
+INVALID_POSE = 'invalid_pose'
+NOT_FOUND = 'not_found'
+TOO_MANY = 'too_many'
+
+
+class EditRefused(ValueError):
+    """An edit that must not touch the world; `kind` says why, the message how to fix it."""
+
+    def __init__(self, kind, message):
+        super().__init__(message)
+        self.kind = kind
+
+
+@dataclass(frozen=True)
+class Ball:
+    """A ball to spawn: where, how fast, how large and heavy."""
+
+    x: float
+    y: float
+    vx: float
+    vy: float
+    radius: float
+    mass: float
+
+
+class _NoAliasLoader(yaml.SafeLoader):
+    """A YAML loader without anchors and aliases: a 4 KB alias bomb cannot expand."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            raise yaml.YAMLError('aliases are not accepted')
+        return super().compose_node(parent, index)
+
+
+def _number(value, what):
+    if isinstance(value, str):  # YAML 1.1 reads 1.0e6 (no sign) as text
+        try:
+            value = float(value)
+        except ValueError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise EditRefused(RESOURCE_PARSE_ERROR, f'{what} must be a number, got {value!r:.64}')
+    value = float(value)
+    if not math.isfinite(value):
+        raise EditRefused(RESOURCE_PARSE_ERROR, f'{what} must be finite, got {value}')
+    return value
+
+
+def parse_resource(text):
+    """(radius, mass, (vx, vy)) from a spawn request's resource_string (see RESOURCE_FORMAT)."""
+    if len(text) > MAX_RESOURCE_LENGTH:
+        raise EditRefused(RESOURCE_PARSE_ERROR, f'resource_string is {len(text):,} characters; '
+                                                f'at most {MAX_RESOURCE_LENGTH} are accepted')
+    fields = {}
+    if text.strip():
+        try:
+            fields = yaml.load(text, Loader=_NoAliasLoader)
+        except yaml.YAMLError as error:
+            reason = str(error).splitlines()[0]
+            raise EditRefused(RESOURCE_PARSE_ERROR, f'resource_string is not YAML: {reason}')
+        if not isinstance(fields, dict):
+            raise EditRefused(RESOURCE_PARSE_ERROR, 'resource_string must be a mapping such '
+                                                    "as '{radius: 0.2, mass: 1.0}'")
+    unknown = sorted(str(key) for key in fields if key not in ('radius', 'mass', 'velocity'))
+    if unknown:
+        raise EditRefused(RESOURCE_PARSE_ERROR, f'unknown key {unknown[0][:64]!r} in '
+                                                'resource_string; expected radius, mass, '
+                                                'velocity')
+    radius = _number(fields.get('radius', DEFAULT_RADIUS), 'radius')
+    mass = _number(fields['mass'], 'mass') if 'mass' in fields else \
+        DEFAULT_DENSITY * math.pi * radius * radius
+    velocity = fields.get('velocity', [0.0, 0.0])
+    if not isinstance(velocity, (list, tuple)) or len(velocity) != 2:
+        raise EditRefused(RESOURCE_PARSE_ERROR, f'velocity must be [vx, vy], got '
+                                                f'{velocity!r:.64}')
+    vx, vy = (_number(v, 'velocity') for v in velocity)
+    for what, value, low, high, unit in (
+            ('radius', radius, limits.MIN_RADIUS, limits.MAX_RADIUS, 'm'),
+            ('mass', mass, limits.MIN_MASS, limits.MAX_MASS, 'kg')):
+        if not low <= value <= high:
+            raise EditRefused(RESOURCE_PARSE_ERROR, f'{what} {number_text(value)} {unit} is '
+                                                    f'outside {number_text(low)} to '
+                                                    f'{number_text(high)} {unit}')
+    return radius, mass, (vx, vy)
+
+
+class Entities:
+    """The entity names of a world's balls, in the order of its arrays."""
+
+    def __init__(self, count):
+        self.names = [f'ball_{i}' for i in range(count)]
+        self.index_of = {name: i for i, name in enumerate(self.names)}
+        self._retired = set()
+        self._next_number = count
+
+    def __len__(self):
+        return len(self.names)
+
+    def index(self, name):
+        """Array index of the ball named `name` (EditRefused NOT_FOUND otherwise)."""
+        index = self.index_of.get(name) if isinstance(name, str) else None
+        if index is None:
+            shown = name[:64] if isinstance(name, str) else repr(name)
+            raise EditRefused(NOT_FOUND, f"no entity named '{shown}'")
+        return index
+
+    def new_name(self, requested, allow_renaming, taken=()):
+        """The name a new ball gets: the requested one if valid and unused, else generated.
+
+        taken: names already given to other balls of the same request.
+        """
+        if requested and NAME_PATTERN.fullmatch(requested) \
+                and len(requested) <= limits.MAX_NAME_LENGTH:
+            if not self._used(requested, taken):
+                return requested
+            if not allow_renaming:
+                reason = ('was deleted; names are not reused' if requested in self._retired
+                          else 'is taken')
+                raise EditRefused(NAME_NOT_UNIQUE, f"name '{requested}' {reason}; choose "
+                                                   'another or set allow_renaming')
+        elif not allow_renaming:
+            if not requested:
+                raise EditRefused(NAME_INVALID, 'name is empty; give one or set '
+                                                'allow_renaming to get a generated name')
+            raise EditRefused(NAME_INVALID, f"name '{requested[:64]}' is not a letter followed "
+                                            'by letters, digits or underscores (at most '
+                                            f'{limits.MAX_NAME_LENGTH} characters)')
+        while self._used(f'ball_{self._next_number}', taken):
+            self._next_number += 1
+        return f'ball_{self._next_number}'
+
+    def _used(self, name, taken):
+        return name in self.index_of or name in self._retired or name in taken
+
+    def append(self, names):
+        for name in names:
+            self.index_of[name] = len(self.names)
+            self.names.append(name)
+
+    def remove(self, index):
+        """Drop the name at `index`; later balls move down one place, as in the World."""
+        name = self.names.pop(index)
+        self._retired.add(name)
+        del self.index_of[name]
+        for i in range(index, len(self.names)):
+            self.index_of[self.names[i]] = i
+        return name
+
+
+def _check_pose(x, y, radius, arena, what):
+    """The centre is finite and the whole ball lies inside the arena (if there is one)."""
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise EditRefused(INVALID_POSE, f'{what} ({x}, {y}) is not finite')
+    if max(abs(x), abs(y)) > limits.COORDINATE_LIMIT:
+        raise EditRefused(INVALID_POSE, f'{what} ({number_text(x)}, {number_text(y)}) is beyond '
+                                        f'{number_text(limits.COORDINATE_LIMIT)} m')
+    if arena and not (arena[0] + radius <= x <= arena[2] - radius
+                      and arena[1] + radius <= y <= arena[3] - radius):
+        raise EditRefused(INVALID_POSE, f'{what} ({number_text(x)}, {number_text(y)}) with '
+                                        f'radius {number_text(radius)} m is not inside the '
+                                        f'arena [{", ".join(number_text(v) for v in arena)}]')
+
+
+def first_overlap(x, y, radius, positions, radii, walls, skip=None):
+    """What a ball at (x, y) would overlap: ('ball', index), ('wall', index) or None.
+
+    O(N + M) numpy: the request path of one spawn or set-state, not the step.
+    """
+    if len(positions):
+        dx = positions[:, 0] - x
+        dy = positions[:, 1] - y
+        reach = radii + radius
+        overlapping = dx * dx + dy * dy < reach * reach
+        if skip is not None:
+            overlapping[skip] = False
+        hits = np.flatnonzero(overlapping)
+        if len(hits):
+            return 'ball', int(hits[0])
+    if len(walls.starts):
+        rx = x - walls.starts[:, 0]
+        ry = y - walls.starts[:, 1]
+        along = np.clip(rx * walls.directions[:, 0] + ry * walls.directions[:, 1], 0.0,
+                        walls.lengths)
+        sx = rx - along * walls.directions[:, 0]
+        sy = ry - along * walls.directions[:, 1]
+        hits = np.flatnonzero(sx * sx + sy * sy < radius * radius)
+        if len(hits):
+            return 'wall', int(hits[0])
+    return None
+
+
+def check_speeds(energy, min_mass, min_radius, dt_ns, what):
+    """Refuse an edit after which some ball could go faster than the world can step."""
+    limit = speed_limit(travel_per_substep(min_radius), dt_ns * 1e-9)
+    reachable = reachable_speed(energy, min_mass)
+    if not reachable <= limit:
+        raise EditRefused(INVALID_POSE, f'{what} would give the world enough energy for a ball '
+                                        f'to reach {reachable:.3g} m/s, faster than the '
+                                        f'{limit:.3g} m/s it can step')
+
+
+def check_placement(world, entities, arena, x, y, radius, what, skip=None):
+    """A ball of `radius` at (x, y) fits: inside, overlapping no other ball and no wall."""
+    _check_pose(x, y, radius, arena, what)
+    hit = first_overlap(x, y, radius, world.positions, world.radii, world.walls, skip)
+    if hit is not None:
+        kind, index = hit
+        other = f"ball '{entities.names[index]}'" if kind == 'ball' else f'wall {index}'
+        raise EditRefused(INVALID_POSE, f'{what} ({number_text(x)}, {number_text(y)}) overlaps '
+                                        f'{other}')

@@ -1,0 +1,537 @@
+"""The standard ROS 2 simulation interfaces (simulation_interfaces 1.5.1) of a ball world.
+
+Why: Gazebo, Isaac Sim and O3DE implement this standard, so one test pipeline written
+against it drives any of them; here it drives ball_world, for speed and exactness, unchanged.
+
+What the standard means in a ball world:
+- Entities are balls, of category DYNAMIC_OBJECT, named as core.edits says (`ball_<i>` for
+  the balls a world starts with; names are never reused). GetSpawnables lists one spawnable,
+  uri `ball`; SpawnEntity takes its radius, mass and velocity from resource_string (YAML or
+  JSON, core.edits.RESOURCE_FORMAT) and its position from initial_pose.
+- Poses are in the node's frame_id (header.frame_id empty or equal to it), in the z = 0
+  plane, unrotated; twists are linear velocities in that plane. Anything else is refused
+  with the standard's code and a message naming the problem; the world is then unchanged.
+- Every edit is applied between two steps, after the impulses that arrived before it, and
+  recorded (core.edits, simulation.Simulation), so a recording re-simulates exactly.
+- The simulation is PLAYING, PAUSED, or STOPPED (= paused at step 0: after a start with
+  start_paused, or a stop, which rebuilds the world from the parameters). QUITTING ends the
+  node as max_steps does, recordings closed.
+- ResetSimulation rebuilds the world from the parameters (scopes DEFAULT and ALL; time,
+  state or spawned entities alone cannot be reset without breaking re-simulation).
+- StepSimulation and the SimulateSteps action step a paused world; they go on step by step
+  between other callbacks, and stop early if the world is resumed, stopped or reset.
+Features not listed in FEATURES are answered with RESULT_FEATURE_UNSUPPORTED.
+"""
+import math
+import re
+from re import _constants as sre_constants  # what sre_constants became (3.11+)
+from re import _parser as sre_parse  # what sre_parse became (3.11+)
+
+from geometry_msgs.msg import Point
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.callback_groups import ReentrantCallbackGroup
+from simulation_interfaces.action import SimulateSteps
+from simulation_interfaces.msg import (Bounds, EntityCategory, EntityState, Result,
+                                       SimulationState, SimulatorFeatures, Spawnable,
+                                       SpawnResult)
+from simulation_interfaces.srv import (DeleteEntity, GetEntities, GetEntitiesStates,
+                                       GetEntityInfo, GetEntityState, GetSimulationState,
+                                       GetSimulatorFeatures, GetSpawnables, ResetSimulation,
+                                       SetEntityState, SetSimulationState, SpawnEntities,
+                                       SpawnEntity, StepSimulation)
+
+from ball_world.core import edits
+from ball_world.core.parameters import number_text
+from ball_world.simulation import SpawnRequest
+
+_F = SimulatorFeatures
+#: Exactly what works, as GetSimulatorFeatures lists it.
+FEATURES = (_F.SPAWNING, _F.DELETING, _F.ENTITY_CATEGORIES, _F.SPAWNING_RESOURCE_STRING,
+            _F.ENTITY_STATE_GETTING, _F.ENTITY_STATE_SETTING, _F.ENTITY_INFO_GETTING,
+            _F.SPAWNABLES, _F.SIMULATION_RESET, _F.SIMULATION_STATE_GETTING,
+            _F.SIMULATION_STATE_SETTING, _F.SIMULATION_STATE_PAUSE, _F.STEP_SIMULATION_SINGLE,
+            _F.STEP_SIMULATION_MULTIPLE, _F.STEP_SIMULATION_ACTION, _F.SPAWNING_ENTITIES)
+CATEGORY = EntityCategory.CATEGORY_DYNAMIC_OBJECT
+#: Longest name filter accepted, characters.
+MAX_FILTER_LENGTH = 256
+#: The node-private name of the standard's action (its services are listed in __init__).
+ACTION = 'simulate_steps'
+#: Steps a StepSimulation call or SimulateSteps goal takes before letting other callbacks in.
+STEPS_PER_TURN = 8
+
+_SPAWN_CODES = {
+    edits.NAME_NOT_UNIQUE: SpawnResult.NAME_NOT_UNIQUE,
+    edits.NAME_INVALID: SpawnResult.NAME_INVALID,
+    edits.NO_RESOURCE: SpawnResult.NO_RESOURCE,
+    edits.UNSUPPORTED_FORMAT: SpawnResult.UNSUPPORTED_FORMAT,
+    edits.NAMESPACE_INVALID: SpawnResult.NAMESPACE_INVALID,
+    edits.RESOURCE_PARSE_ERROR: SpawnResult.RESOURCE_PARSE_ERROR,
+    edits.INVALID_POSE: SpawnResult.INVALID_POSE,
+    edits.TOO_MANY: Result.RESULT_OPERATION_FAILED,
+    edits.NOT_FOUND: Result.RESULT_NOT_FOUND,
+}
+
+
+def _result(code=Result.RESULT_OK, message=''):
+    return Result(result=code, error_message=message)
+
+
+class _NextTurn:
+    """Awaiting it hands control back to the executor once (a coroutine's yield)."""
+
+    def __await__(self):
+        yield
+
+
+# Requests to plain values ------------------------------------------------------------------
+
+def _check_frame(frame_id, world_frame):
+    if frame_id not in ('', world_frame):
+        raise edits.EditRefused(edits.INVALID_POSE, f"frame '{frame_id[:64]}' is unknown; "
+                                                    f"poses are in '{world_frame}'")
+
+
+def planar_position(pose, frame_id, world_frame):
+    """(x, y) of a Pose, which must lie in the z = 0 plane, unrotated, in the world frame."""
+    _check_frame(frame_id, world_frame)
+    p = pose.position
+    q = pose.orientation
+    if not all(math.isfinite(v) for v in (p.x, p.y, p.z, q.x, q.y, q.z, q.w)):
+        raise edits.EditRefused(edits.INVALID_POSE, 'the pose is not finite')
+    if p.z != 0.0:
+        raise edits.EditRefused(edits.INVALID_POSE, f'position z is {p.z:g}; balls live in '
+                                                    'the z = 0 plane')
+    if (q.x, q.y, q.z) != (0.0, 0.0, 0.0) or abs(q.w) != 1.0:
+        raise edits.EditRefused(edits.INVALID_POSE, 'the orientation is a rotation; balls '
+                                                    'are not rotated (use w = 1)')
+    return p.x, p.y
+
+
+def planar_velocity(twist):
+    """(vx, vy) of a Twist, which must be linear and in the z = 0 plane."""
+    linear, angular = twist.linear, twist.angular
+    if not all(math.isfinite(v) for v in (linear.x, linear.y, linear.z, angular.x,
+                                          angular.y, angular.z)):
+        raise edits.EditRefused(edits.INVALID_POSE, 'the twist is not finite')
+    if linear.z != 0.0 or (angular.x, angular.y, angular.z) != (0.0, 0.0, 0.0):
+        raise edits.EditRefused(edits.INVALID_POSE, 'balls move in the z = 0 plane and do '
+                                                    'not spin: linear.z and angular must be 0')
+    return linear.x, linear.y
+
+
+def spawn_request(name, allow_renaming, uri, resource_string, namespace, initial_pose,
+                  world_frame):
+    """A SpawnRequest from the fields SpawnEntity and SpawnEntities share."""
+    if not uri and not resource_string:
+        raise edits.EditRefused(edits.NO_RESOURCE, 'uri and resource_string are both empty; '
+                                                   f"use uri '{edits.BALL_URI}'")
+    if uri and uri != edits.BALL_URI:
+        raise edits.EditRefused(edits.UNSUPPORTED_FORMAT, f"uri '{uri[:64]}' is not "
+                                                          f"'{edits.BALL_URI}', the one "
+                                                          'spawnable')
+    if namespace:
+        raise edits.EditRefused(edits.NAMESPACE_INVALID, 'balls have no ROS interfaces to '
+                                                         'put in a namespace; leave it empty')
+    radius, mass, (vx, vy) = edits.parse_resource(resource_string)
+    x, y = planar_position(initial_pose.pose, initial_pose.header.frame_id, world_frame)
+    ball = edits.Ball(x=x, y=y, vx=vx, vy=vy, radius=radius, mass=mass)
+    return SpawnRequest(name=name, allow_renaming=allow_renaming, ball=ball)
+
+
+def _nested_repeat(tree, inside=False):
+    """Whether a parsed pattern repeats something that itself repeats or branches."""
+    for op, argument in tree:
+        if op in (sre_constants.MAX_REPEAT, sre_constants.MIN_REPEAT):
+            if inside or _nested_repeat(argument[2], True):
+                return True
+        elif op == sre_constants.BRANCH:
+            if inside or any(_nested_repeat(branch, inside) for branch in argument[1]):
+                return True
+        elif op == sre_constants.SUBPATTERN:
+            if _nested_repeat(argument[-1], inside):
+                return True
+    return False
+
+
+def name_filter(pattern):
+    """A compiled name filter (POSIX extended syntax, searched anywhere in the name).
+
+    Patterns whose matching time could explode (a repetition of something that repeats or
+    branches, such as (a+)+ or (a|b)*) are refused: names are public input too.
+    """
+    if len(pattern) > MAX_FILTER_LENGTH:
+        raise ValueError(f'the filter is {len(pattern)} characters; at most '
+                         f'{MAX_FILTER_LENGTH} are accepted')
+    try:
+        if _nested_repeat(sre_parse.parse(pattern)):
+            raise ValueError('nested repetitions such as (a+)+ or (a|b)* are not accepted')
+        return re.compile(pattern)
+    except (re.error, RecursionError, OverflowError) as error:
+        raise ValueError(f'the filter is not a regular expression: {error}') from None
+
+
+def _overlaps_bounds(bounds, positions, radii):
+    """Mask of balls (spheres at z = 0) overlapping a sphere or box Bounds."""
+    points = bounds.points
+    if bounds.type == Bounds.TYPE_SPHERE and len(points) >= 2:
+        c, reach = points[0], points[1].x + radii
+        dx = positions[:, 0] - c.x
+        dy = positions[:, 1] - c.y
+        return dx * dx + dy * dy + c.z * c.z < reach * reach
+    if bounds.type == Bounds.TYPE_BOX and len(points) >= 2:
+        low = [min(getattr(points[0], a), getattr(points[1], a)) for a in 'xyz']
+        high = [max(getattr(points[0], a), getattr(points[1], a)) for a in 'xyz']
+        dx = positions[:, 0] - positions[:, 0].clip(low[0], high[0])
+        dy = positions[:, 1] - positions[:, 1].clip(low[1], high[1])
+        dz = 0.0 - min(max(0.0, low[2]), high[2])
+        return dx * dx + dy * dy + dz * dz < radii * radii
+    raise ValueError('bounds filters of type sphere (points: centre, (radius, 0, 0)) and box '
+                     '(points: two corners) are supported')
+
+
+class SimulationInterfaces:
+    """The standard's services and action on a BallWorld node (see the module docstring)."""
+
+    def __init__(self, node):
+        self.node = node
+        self._stepping = False
+        long_calls = node.long_calls
+        services = (
+            (GetSimulatorFeatures, 'get_simulator_features', self.get_simulator_features),
+            (SpawnEntity, 'spawn_entity', self.spawn_entity),
+            (SpawnEntities, 'spawn_entities', self.spawn_entities),
+            (DeleteEntity, 'delete_entity', self.delete_entity),
+            (GetEntities, 'get_entities', self.get_entities),
+            (GetEntitiesStates, 'get_entities_states', self.get_entities_states),
+            (GetEntityState, 'get_entity_state', self.get_entity_state),
+            (SetEntityState, 'set_entity_state', self.set_entity_state),
+            (GetEntityInfo, 'get_entity_info', self.get_entity_info),
+            (GetSpawnables, 'get_spawnables', self.get_spawnables),
+            (GetSimulationState, 'get_simulation_state', self.get_simulation_state),
+        )
+        long_services = (
+            (ResetSimulation, 'reset_simulation', self.reset_simulation),
+            (StepSimulation, 'step_simulation', self.step_simulation),
+            (SetSimulationState, 'set_simulation_state', self.set_simulation_state))
+        for srv_type, name, callback in services:
+            node.create_service(srv_type, f'~/{name}', callback)
+        for srv_type, name, callback in long_services:
+            node.create_service(srv_type, f'~/{name}', callback, callback_group=long_calls)
+        #: The services' names, for the node's start-up line.
+        self.names = [name for _, name, _ in services + long_services]
+        # Its own reentrant group: cancel requests must get through while a goal steps.
+        self._action = ActionServer(
+            node, SimulateSteps, f'~/{ACTION}', execute_callback=self.simulate_steps,
+            goal_callback=lambda goal: GoalResponse.ACCEPT,
+            cancel_callback=lambda goal: CancelResponse.ACCEPT,
+            callback_group=ReentrantCallbackGroup())
+
+    def destroy(self):
+        self._action.destroy()
+
+    @property
+    def simulation(self):
+        return self.node.simulation
+
+    # Features and spawnables ------------------------------------------------------------
+
+    def get_simulator_features(self, request, response):
+        response.features.features = list(FEATURES)
+        response.features.spawn_formats = [edits.BALL_URI]
+        response.features.custom_info = (
+            f"ball_world: entities are balls. Spawn uri '{edits.BALL_URI}'; resource_string: "
+            f'{edits.RESOURCE_FORMAT}. Poses in the z = 0 plane of the frame_id parameter, '
+            'unrotated. ResetSimulation scopes DEFAULT and ALL.')
+        return response
+
+    def get_spawnables(self, request, response):
+        spawnable = Spawnable(uri=edits.BALL_URI, description=f'a ball: {edits.RESOURCE_FORMAT}')
+        arena = self.simulation.arena
+        if arena:
+            spawnable.spawn_bounds.type = Bounds.TYPE_BOX
+            spawnable.spawn_bounds.points = [Point(x=arena[0], y=arena[1]),
+                                             Point(x=arena[2], y=arena[3])]
+        response.spawnables = [spawnable]
+        unknown = [source[:64] for source in request.sources]
+        response.result = _result(message=f'sources ignored (balls need none): {unknown}'
+                                  if unknown else '')
+        return response
+
+    # Spawning and deleting --------------------------------------------------------------
+
+    def spawn_entity(self, request, response):
+        try:
+            spawn = spawn_request(request.name, request.allow_renaming, request.uri,
+                                  request.resource_string, request.entity_namespace,
+                                  request.initial_pose, self.simulation.frame_id)
+            results = self.node.edit(lambda: self.simulation.spawn([spawn]))
+            outcome = results[0]
+        except edits.EditRefused as refusal:
+            outcome = refusal
+        if isinstance(outcome, edits.EditRefused):
+            response.result = _result(_SPAWN_CODES[outcome.kind], str(outcome))
+        else:
+            response.entity_name = outcome
+            response.result = _result()
+        return response
+
+    def spawn_entities(self, request, response):
+        spawns = []
+        outcomes = []
+        for item in request.spawn_requests:
+            try:
+                spawns.append(spawn_request(
+                    item.name, item.allow_renaming, item.entity_resource.uri,
+                    item.entity_resource.resource_string, item.entity_namespace,
+                    item.initial_pose, self.simulation.frame_id))
+                outcomes.append(None)
+            except edits.EditRefused as refusal:
+                outcomes.append(refusal)
+        try:
+            spawned = iter(self.node.edit(lambda: self.simulation.spawn(spawns)))
+        except edits.EditRefused as refusal:
+            response.result = _result(Result.RESULT_OPERATION_FAILED, str(refusal))
+            return response
+        results = []
+        for outcome in outcomes:
+            outcome = next(spawned) if outcome is None else outcome
+            if isinstance(outcome, edits.EditRefused):
+                results.append(SpawnResult(result=_result(_SPAWN_CODES[outcome.kind],
+                                                          str(outcome))))
+            else:
+                results.append(SpawnResult(result=_result(), entity_name=outcome))
+        response.results = results
+        failed = sum(r.result.result != Result.RESULT_OK for r in results)
+        response.result = _result() if not failed else _result(
+            SpawnEntities.Response.ENTITIES_SPAWN_FAILED,
+            f'{failed} of {len(results)} balls were not spawned; see results')
+        return response
+
+    def delete_entity(self, request, response):
+        try:
+            self.node.edit(lambda: (None, self.simulation.delete(request.entity)))
+            response.result = _result()
+        except edits.EditRefused as refusal:
+            response.result = _result(_SPAWN_CODES[refusal.kind], str(refusal))
+        return response
+
+    # Entities and their states ----------------------------------------------------------
+
+    def _matching(self, filters):
+        """Indices of the balls matching EntityFilters, or a Result saying why not."""
+        simulation = self.simulation
+        world = simulation.world
+        indices = range(len(world))
+        if filters.tags.tags:
+            return _result(Result.RESULT_FEATURE_UNSUPPORTED, 'balls have no tags')
+        if filters.categories and CATEGORY not in [c.category for c in filters.categories]:
+            return []
+        if filters.filter:
+            try:
+                pattern = name_filter(filters.filter)
+            except ValueError as error:
+                return _result(Result.RESULT_OPERATION_FAILED, str(error))
+            names = simulation.names
+            indices = [i for i in indices if pattern.search(names[i])]
+        if filters.bounds.type != Bounds.TYPE_EMPTY:
+            try:
+                inside = _overlaps_bounds(filters.bounds, world.positions, world.radii)
+            except ValueError as error:
+                return _result(Result.RESULT_FEATURE_UNSUPPORTED, str(error))
+            indices = [i for i in indices if inside[i]]
+        return list(indices)
+
+    def get_entities(self, request, response):
+        matching = self._matching(request.filters)
+        if isinstance(matching, Result):
+            response.result = matching
+            return response
+        names = self.simulation.names
+        response.entities = [names[i] for i in matching]
+        response.result = _result()
+        return response
+
+    def _state(self, index):
+        simulation = self.simulation
+        world = simulation.world
+        state = EntityState()
+        sec, nanosec = divmod(simulation.stamp_ns, 10**9)
+        state.header.stamp.sec, state.header.stamp.nanosec = sec, nanosec
+        state.header.frame_id = simulation.frame_id
+        state.pose.position.x, state.pose.position.y = world.positions[index].tolist()
+        state.pose.orientation.w = 1.0
+        state.twist.linear.x, state.twist.linear.y = world.velocities[index].tolist()
+        return state
+
+    def get_entities_states(self, request, response):
+        matching = self._matching(request.filters)
+        if isinstance(matching, Result):
+            response.result = matching
+            return response
+        names = self.simulation.names
+        response.entities = [names[i] for i in matching]
+        response.states = [self._state(i) for i in matching]
+        response.result = _result()
+        return response
+
+    def get_entity_state(self, request, response):
+        try:
+            response.state = self._state(self.simulation.entities.index(request.entity))
+            response.result = _result()
+        except edits.EditRefused as refusal:
+            response.result = _result(Result.RESULT_NOT_FOUND, str(refusal))
+        return response
+
+    def set_entity_state(self, request, response):
+        state = request.state
+        try:
+            x, y = planar_position(state.pose, state.header.frame_id,
+                                   self.simulation.frame_id)
+            vx, vy = planar_velocity(state.twist)
+            self.node.edit(lambda: (None, self.simulation.set_state(request.entity, x, y,
+                                                                    vx, vy)))
+            response.result = _result()
+        except edits.EditRefused as refusal:
+            code = SetEntityState.Response.INVALID_POSE if refusal.kind == edits.INVALID_POSE \
+                else _SPAWN_CODES[refusal.kind]
+            response.result = _result(code, str(refusal))
+        return response
+
+    def get_entity_info(self, request, response):
+        simulation = self.simulation
+        try:
+            index = simulation.entities.index(request.entity)
+        except edits.EditRefused as refusal:
+            response.result = _result(Result.RESULT_NOT_FOUND, str(refusal))
+            return response
+        world = simulation.world
+        response.info.category.category = CATEGORY
+        radius = number_text(world.radii[index])
+        response.info.description = (f'ball, radius {radius} m, mass '
+                                     f'{number_text(world.masses[index])} kg')
+        response.result = _result()
+        return response
+
+    # The simulation's state, reset and steps --------------------------------------------
+
+    def state(self):
+        node = self.node
+        if node.finished:
+            return SimulationState.STATE_QUITTING
+        if not node.paused:
+            return SimulationState.STATE_PLAYING
+        if self.simulation.step_index == 0:
+            return SimulationState.STATE_STOPPED
+        return SimulationState.STATE_PAUSED
+
+    def get_simulation_state(self, request, response):
+        response.state.state = self.state()
+        response.result = _result()
+        return response
+
+    async def set_simulation_state(self, request, response):
+        target = request.state.state
+        current = self.state()
+        codes = SetSimulationState.Response
+        if target == current:
+            response.result = _result(codes.ALREADY_IN_TARGET_STATE,
+                                      f'already in state {target}')
+        elif target == SimulationState.STATE_PLAYING:
+            self.node.set_paused(False)
+            response.result = _result()
+        elif target == SimulationState.STATE_PAUSED:
+            if current == SimulationState.STATE_STOPPED:
+                response.result = _result(codes.INCORRECT_TRANSITION, 'a stopped simulation '
+                                          'is already paused at step 0; play it or step it')
+            else:
+                self.node.set_paused(True)
+                response.result = _result()
+        elif target == SimulationState.STATE_STOPPED:
+            self.node.set_paused(True)
+            ok, message = await self.node.reset_world()
+            response.result = _result() if ok else _result(codes.STATE_TRANSITION_ERROR,
+                                                           message)
+        elif target == SimulationState.STATE_QUITTING:
+            self.node.quit('SetSimulationState QUITTING')
+            response.result = _result()
+        else:
+            response.result = _result(codes.INCORRECT_TRANSITION,
+                                      f'state {target} cannot be set: worlds are not loaded '
+                                      'or unloaded here')
+        return response
+
+    async def reset_simulation(self, request, response):
+        scope = request.scope
+        full = (ResetSimulation.Request.SCOPE_TIME | ResetSimulation.Request.SCOPE_STATE
+                | ResetSimulation.Request.SCOPE_SPAWNED)
+        if scope not in (ResetSimulation.Request.SCOPE_DEFAULT,
+                         ResetSimulation.Request.SCOPE_ALL, full):
+            response.result = _result(
+                Result.RESULT_FEATURE_UNSUPPORTED, f'scope {scope}: only the whole world is '
+                'reset (DEFAULT or ALL), rebuilt from the parameters, so that a recording '
+                'can be re-simulated')
+            return response
+        ok, message = await self.node.reset_world()
+        response.result = _result() if ok else _result(Result.RESULT_OPERATION_FAILED, message)
+        return response
+
+    async def _step(self, steps, feedback=None, cancelled=None):
+        """Step a paused world `steps` times; returns (steps done, Result)."""
+        node = self.node
+        if not node.paused:
+            return 0, _result(Result.RESULT_INCORRECT_STATE, 'the simulation is playing; '
+                              'pause it first (SetSimulationState PAUSED)')
+        if self._stepping:
+            return 0, _result(Result.RESULT_INCORRECT_STATE, 'another StepSimulation or '
+                              'SimulateSteps is stepping this world')
+        self._stepping = True
+        segment = self.simulation.segment
+        done = 0
+        try:
+            while done < steps:
+                for _ in range(min(STEPS_PER_TURN, steps - done)):
+                    if node.finished:
+                        return done, _result(Result.RESULT_OPERATION_FAILED,
+                                             f'the run ended after {done} steps')
+                    node.step_once()
+                    done += 1
+                    if feedback is not None:
+                        feedback(done, steps - done)
+                if done == steps:
+                    break
+                node.wake()
+                await _NextTurn()
+                if cancelled is not None and cancelled():
+                    return done, None
+                if not node.paused or self.simulation.segment != segment:
+                    return done, _result(Result.RESULT_OPERATION_FAILED,
+                                         f'stopped after {done} of {steps} steps: the '
+                                         'simulation was resumed or reset')
+            return done, _result()
+        finally:
+            self._stepping = False
+
+    async def step_simulation(self, request, response):
+        _, response.result = await self._step(request.steps)
+        return response
+
+    async def simulate_steps(self, goal_handle):
+        steps = goal_handle.request.steps
+
+        def feedback(completed, remaining):
+            goal_handle.publish_feedback(SimulateSteps.Feedback(
+                completed_steps=completed, remaining_steps=remaining))
+
+        done, result = await self._step(steps, feedback,
+                                        lambda: goal_handle.is_cancel_requested)
+        answer = SimulateSteps.Result()
+        if result is None:
+            goal_handle.canceled()
+            answer.result = _result(Result.RESULT_OK, f'cancelled after {done} steps')
+        elif result.result == Result.RESULT_OK:
+            goal_handle.succeed()
+            answer.result = result
+        else:
+            goal_handle.abort()
+            answer.result = result
+        return answer
