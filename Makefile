@@ -17,6 +17,9 @@ run: setup
 	$(VENV)/bin/ball_world --ros-args --params-file config/ball_world.yaml -p max_steps:=$(STEPS) \
 	  -p record.overwrite:=true -p record.mcap:=runs/ball_world.mcap -p record.rerun:=runs/ball_world.rrd
 	$(VENV)/bin/ball_world_info runs/ball_world.mcap
+	@echo 'Look at the run: $(VENV)/bin/rerun runs/ball_world.rrd  (Rerun viewer)'
+	@echo '  or open runs/ball_world.mcap in Foxglove with foxglove/ball_world.json (layout),'
+	@echo '  or play it: ros2 bag play runs/ball_world.mcap  (ROS 2 Jazzy with rosbag2)'
 
 # The default world live in a browser: prints the address; Ctrl-C stops the node and the server.
 view: setup

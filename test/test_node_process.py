@@ -91,7 +91,7 @@ def test_help_prints_usage_and_starts_nothing():
     code, out, _ = run_tool('ball_world', '--help')
     assert code == 0
     assert out.startswith('usage: ball_world')
-    assert 'random.count (integer, default 20; 0 to 100000)' in out
+    assert 'random.count (integer, default 20; 0 to 100,000)' in out
 
 
 def test_installed_defaults_file_starts_the_node():

@@ -49,6 +49,8 @@ class ParameterError(ValueError):
 
 def number_text(value):
     """A number as users write it: 0.5, 10, 1e-06; never np.float64(0.5)."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        return f'{value:,}'
     value = float(value)
     return str(int(value)) if value.is_integer() and abs(value) < 1e15 else repr(value)
 
@@ -226,7 +228,7 @@ PARAMETERS = (
               'least 1 ns); 0 means 1 / rate_hz.', ON_RESET, 0.0, limits.MAX_DT),
     Parameter('max_steps', INTEGER, 0, 'Stop after this many steps, close the recordings and '
               'exit 0; 0 runs until shutdown.', AT_ONCE, 0, _INT64_MAX),
-    Parameter('frame_id', STRING, 'world', 'Frame of balls and markers.', AT_ONCE,
+    Parameter('frame_id', STRING, 'world', 'Frame of balls, markers and entity states.', AT_ONCE,
               max_length=limits.MAX_NAME_LENGTH, rule=_frame),
     Parameter('start_paused', BOOL, False, 'Start paused at step 0 (resume with ~/pause '
               'false), so clients can connect before anything moves.', AT_START),
@@ -290,6 +292,31 @@ DEFAULTS = {parameter.name: parameter.default for parameter in PARAMETERS}
 
 #: The six lists that describe explicit balls, one entry per ball in each.
 BALL_FIELDS = ('balls.x', 'balls.y', 'balls.vx', 'balls.vy', 'balls.radius', 'balls.mass')
+
+
+_WHEN_TEXT = {ON_RESET: 'on reset', AT_ONCE: 'at once', AT_START: 'read-only'}
+
+
+def _default_text(parameter):
+    value = parameter.default
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, str):
+        return f'`{value}`' if value else '""'
+    if isinstance(value, list):
+        return '[' + ', '.join(str(v) for v in value) + ']'
+    return str(value)
+
+
+def markdown_table():
+    """The README's parameter table, made from PARAMETERS (a test keeps the README equal)."""
+    lines = ['| name | type | default | range | takes effect | meaning |',
+             '|---|---|---|---|---|---|']
+    for parameter in PARAMETERS:
+        lines.append(f'| `{parameter.name}` | {parameter.kind} | {_default_text(parameter)} | '
+                     f'{parameter.range_text() or "any"} | {_WHEN_TEXT[parameter.applies]} | '
+                     f'{parameter.description} |')
+    return '\n'.join(lines)
 
 
 def check(name, value):

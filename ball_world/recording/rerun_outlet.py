@@ -42,6 +42,8 @@ VIEW_PATIENCE = 10.0
 CLOSE_TIMEOUT = 10.0
 #: Calls that may wait for the worker (a logged step makes a few per 64 steps).
 MAX_QUEUED_CALLS = 256
+#: Streams of failed outlets, never touched again and never destroyed before the process ends.
+_ABANDONED = []
 #: Longest wait for a viewer's port to accept the liveness probe.
 PROBE_TIMEOUT = 1.0
 
@@ -216,7 +218,10 @@ class Outlet:
         while True:
             call, args = self._queue.get()
             if call is None:
-                self._disconnect_quietly()
+                # A failed stream is left as it is: disconnecting one whose file writer
+                # died can abort the process (seen with rerun-sdk 0.41). It is kept alive
+                # here, so no destructor of it runs before the process ends.
+                _ABANDONED.append(self.stream)
                 return
             if self._error is not None:
                 continue
@@ -251,12 +256,6 @@ class Outlet:
     def _close(self):
         self.stream.flush(timeout_sec=FLUSH_TIMEOUT)
         self.stream.disconnect()
-
-    def _disconnect_quietly(self):
-        try:
-            self.stream.disconnect()
-        except Exception:  # noqa: B902,S110 - the outlet already failed and was reported
-            pass
 
 
 def _probe(address, reason):

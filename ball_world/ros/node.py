@@ -6,6 +6,7 @@ messages into queued impulses (or counted rejections), serves ~/reset, ~/pause a
 ~/step, and hands every step to the recording sinks.
 """
 import difflib
+import os
 import signal
 import sys
 import threading
@@ -603,7 +604,13 @@ def run(args=None):
 
 
 def main(args=None):
-    sys.exit(run(args))
+    code = run(args)
+    # Everything is closed by now. Leave without the interpreter's teardown: a recording
+    # stream abandoned after a failure (a full disk) may abort the process if a destructor
+    # touches it, which would turn a clean exit into SIGABRT.
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 
 
 if __name__ == '__main__':
