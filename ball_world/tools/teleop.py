@@ -18,9 +18,10 @@ from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
+from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
 from ball_world.msgs.cdr import decode_pose_array
@@ -89,10 +90,10 @@ class Selection:
 
 
 def names_for(count):
-    """Entity names of the balls in pose order.
+    """Entity names of the balls in pose order, until the world's entity_names arrives.
 
-    Today the world names its balls ball_<i> in pose order; when it publishes a latched topic
-    of names, its messages replace this function.
+    A world that has spawned or deleted nothing names its balls ball_<i> in pose order; the
+    latched `entity_names` topic gives the names of any world, and replaces these.
     """
     return [f'ball_{i}' for i in range(count)]
 
@@ -135,6 +136,11 @@ class Teleop(Node):
             PoseArray, 'balls', self._on_balls,
             QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE), raw=True)
         self.balls_topic = self.resolve_topic_name('balls')
+        self.names = None  # from entity_names, once heard
+        self.create_subscription(
+            String, 'entity_names', self._on_names,
+            QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.pause_client = self.create_client(SetBool, f'{WORLD_NODE}/pause')
         self.step_client = self.create_client(Trigger, f'{WORLD_NODE}/step')
         self.reset_client = self.create_client(Trigger, f'{WORLD_NODE}/reset')
@@ -146,8 +152,13 @@ class Teleop(Node):
             self.status = f'ignored a bad message on {self.balls_topic}: {error}'
             return
         self.stamp_ns, self.positions = stamp_ns, positions
-        if len(positions) != len(self.selection.names):  # names are rebuilt on change only
+        if self.names is None and len(positions) != len(self.selection.names):
             self.selection.update(names_for(len(positions)))
+
+    def _on_names(self, msg):
+        """The world's balls by name, in pose order (sent when they change)."""
+        self.names = msg.data.split('\n') if msg.data else []
+        self.selection.update(self.names)
 
     # Keys -------------------------------------------------------------------------------
 
