@@ -199,7 +199,9 @@ class RealTimeFactor:
     """Simulated over wall time over the last `window` s of arrivals, plus the step before.
 
     Keeping the last step before the window means a stall longer than the window still
-    shows (one step over the whole stall) and low rates still get a value.
+    shows (one step over the whole stall) and low rates still get a value. Nothing is
+    reported until the steps span half a window: the first few steps of a run (or after a
+    reset) come at uneven times, and a factor over 20 ms of them would read as 2 or 3.
     """
 
     def __init__(self, clock, window=RTF_WINDOW):
@@ -220,7 +222,7 @@ class RealTimeFactor:
         if len(steps) < 2:
             return None
         (wall0, sim0), (wall1, sim1) = steps[0], steps[-1]
-        if wall1 <= wall0:
+        if wall1 - wall0 < 0.5 * self.window:
             return None
         return (sim1 - sim0) * 1e-9 / (wall1 - wall0)
 
