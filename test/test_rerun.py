@@ -23,7 +23,7 @@ from ball_world.recording import rerun_outlet
 from ball_world.recording.mcap_writer import McapSink
 from ball_world.recording.rerun_log import (ARENA, ARROW_MAX_FRACTION, ARROW_MIN_FRACTION,
                                             ARROW_SECONDS, BALLS, COLLISIONS, ENERGY,
-                                            IMPULSE_COLOR, IMPULSES, REAL_TIME_FACTOR,
+                                            IMPULSE_COLOR, IMPULSES, MOMENTUM, REAL_TIME_FACTOR,
                                             RealTimeFactor, RerunSink, scene_bounds, SIM_TIME,
                                             STEP, TRAILS, VELOCITIES, VELOCITY_SECONDS, WALLS)
 from ball_world.recording.rerun_outlet import Outlet, OutletFailed, parse_view
@@ -131,7 +131,8 @@ def test_recording_verifies_and_reads_back_exactly(tmp_path):
     labels = content[(f'/{BALLS}', 'Points2D:labels')][0]
     assert labels == [f'ball_{i}' for i in range(len(world.radii))]
     assert (f'/{ARENA}', 'Transform3D:rotation_axis_angle') in content
-    assert not any(entity.startswith('/plots/momentum') for entity, _ in content)
+    momentum = scalars(content, MOMENTUM)
+    assert momentum == {r.step: r.momentum.tolist() for r in records}
     assert not any(entity in (f'/{VELOCITIES}', f'/{TRAILS}') for entity, _ in content)
 
 

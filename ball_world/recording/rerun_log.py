@@ -29,8 +29,9 @@ Layout of the recording (application id 'ball_world'):
   of wall clock (from step 1 of a segment on) when the sink is given a clock (live), else
   the record's own value (conversions of a recording show what was recorded).
 
-Momentum is not logged: in a walled box every wall bounce changes it, so its plot is noise
-to a reader; it stays in the `stats` topic and the MCAP.
+- `plots/momentum` (Scalars x, y): total momentum. In a walled box every wall bounce changes
+  it, so its plot is mostly noise to a reader: the blueprint keeps it in a tab behind the
+  collisions.
 
 Timelines: `sim_time`, the record's log time (simulation time plus the segment offset, so it
 never goes back across resets), and `step`, a step counter over the whole recording: the
@@ -74,6 +75,7 @@ VELOCITIES = 'arena/velocities'
 TRAILS = 'arena/trails'
 ENERGY = 'plots/energy_change'
 COLLISIONS = 'plots/collisions'
+MOMENTUM = 'plots/momentum'
 REAL_TIME_FACTOR = 'plots/real_time_factor'
 
 SIM_TIME = 'sim_time'
@@ -162,7 +164,7 @@ def scene_bounds(world):
 
 
 def blueprint(world):
-    """The arena large on the left (+y up, bounds fitted), three plots stacked on the right.
+    """The arena large on the left (+y up, bounds fitted), the plots stacked on the right.
 
     The 2D view's origin is the root, above the `arena` flip, so its visual bounds are in the
     flipped frame: world y in [ymin, ymax] is view y in [-ymax, -ymin].
@@ -173,7 +175,10 @@ def blueprint(world):
         visual_bounds=rrb.VisualBounds2D(x_range=[xmin, xmax], y_range=[-ymax, -ymin]))
     plots = rrb.Vertical(
         rrb.TimeSeriesView(origin=f'/{ENERGY}', name='kinetic energy change since step 0 [%]'),
-        rrb.TimeSeriesView(origin=f'/{COLLISIONS}', name='collisions since step 0'),
+        # Momentum is logged (it is part of the recording) but, in a walled box, mostly
+        # the walls' doing: it sits in a tab behind the collisions.
+        rrb.Tabs(rrb.TimeSeriesView(origin=f'/{COLLISIONS}', name='collisions since step 0'),
+                 rrb.TimeSeriesView(origin=f'/{MOMENTUM}', name='momentum [kg m/s]')),
         rrb.TimeSeriesView(origin=f'/{REAL_TIME_FACTOR}',
                            name=f'real-time factor (last {RTF_WINDOW:g} s)'))
     return rrb.Blueprint(
@@ -239,6 +244,7 @@ class _Pending:
         self.positions = []
         self.velocities = []
         self.energy = []
+        self.momentum = []
         self.collisions = []
         self.rtf_steps = []
         self.rtf_times_ns = []
@@ -398,6 +404,8 @@ class RerunSink:
             aggregation_policy='Max', interpolation_mode='StepAfter'), static=True)
         self._emit('log', REAL_TIME_FACTOR, rr.SeriesLines(
             names='real-time factor', colors=(180, 120, 230)), static=True)
+        self._emit('log', MOMENTUM, rr.SeriesLines(
+            names=['x', 'y'], colors=[(230, 80, 80), (80, 200, 90)]), static=True)
 
     def _emit(self, name, *args, **kwargs):
         """Queue the same SDK call on every destination (failures surface at flush)."""
@@ -446,6 +454,7 @@ class RerunSink:
         pending.position_count += len(record.positions)
         pending.energy.append(energy_change(record.kinetic_energy, self._energy0))
         pending.collisions.append(self._totals.copy())
+        pending.momentum.append(np.asarray(record.momentum, dtype=np.float64))
         if rtf is not None and math.isfinite(rtf):
             pending.rtf_steps.append(step)
             pending.rtf_times_ns.append(record.log_time_ns)
@@ -540,6 +549,8 @@ class RerunSink:
             scalars=np.array(pending.energy, dtype=np.float64)))
         self._emit('send_columns', COLLISIONS, index, rr.Scalars.columns(
             scalars=np.array(pending.collisions, dtype=np.float64).reshape(-1, 2)))
+        self._emit('send_columns', MOMENTUM, index, rr.Scalars.columns(
+            scalars=np.array(pending.momentum, dtype=np.float64).reshape(-1, 2)))
         if pending.rtf:
             self._emit('send_columns', REAL_TIME_FACTOR,
                        self._index(pending.rtf_steps, pending.rtf_times_ns),
