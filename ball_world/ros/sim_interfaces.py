@@ -341,14 +341,22 @@ class SimulationInterfaces:
             indices = [i for i in indices if inside[i]]
         return list(indices)
 
-    def get_entities(self, request, response):
-        matching = self._matching(request.filters)
+    def _answer_matching(self, filters, response):
+        """Fill response.entities (and result) with the matching names; return their indices.
+
+        None when the filters cannot be applied (the result then says why).
+        """
+        matching = self._matching(filters)
         if isinstance(matching, Result):
             response.result = matching
-            return response
+            return None
         names = self.simulation.names
         response.entities = [names[i] for i in matching]
         response.result = _result()
+        return matching
+
+    def get_entities(self, request, response):
+        self._answer_matching(request.filters, response)
         return response
 
     def _state(self, index):
@@ -364,14 +372,9 @@ class SimulationInterfaces:
         return state
 
     def get_entities_states(self, request, response):
-        matching = self._matching(request.filters)
-        if isinstance(matching, Result):
-            response.result = matching
-            return response
-        names = self.simulation.names
-        response.entities = [names[i] for i in matching]
-        response.states = [self._state(i) for i in matching]
-        response.result = _result()
+        matching = self._answer_matching(request.filters, response)
+        if matching is not None:
+            response.states = [self._state(i) for i in matching]
         return response
 
     def get_entity_state(self, request, response):
