@@ -25,7 +25,7 @@ from ball_world.step_record import (AppliedEdit, AppliedImpulse, RunInfo, STATS_
                                     StepRecord, WorldSnapshot)
 
 DEFAULT_TOPICS = {'balls': '/balls', 'state': '/state', 'stats': '/stats',
-                  'impulse': '/impulse'}
+                  'impulse': '/impulse', 'edits': '/edits'}
 
 
 @dataclass(frozen=True)

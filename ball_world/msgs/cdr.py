@@ -195,6 +195,11 @@ def encode_vector3_stamped(stamp_ns: int, frame_id: str, x: float, y: float,
             + _VEC3.pack(float(x), float(y), float(z)))
 
 
+def encode_string(text: str) -> bytes:
+    """std_msgs/msg/String: how world edits are published and recorded (one JSON text each)."""
+    return ENCAPSULATION + _string_bytes(text, 0)
+
+
 def encode_clock(stamp_ns: int) -> bytes:
     """rosgraph_msgs/msg/Clock: what /clock carries when the node drives simulated time."""
     return ENCAPSULATION + _STAMP.pack(*_split_stamp(stamp_ns))
@@ -292,3 +297,8 @@ def decode_vector3_stamped(data: bytes) -> tuple:
     frame_id = reader.string()
     x, y, z = (float(v) for v in reader.f64(3))
     return stamp_ns, frame_id, x, y, z
+
+
+def decode_string(data: bytes) -> str:
+    """std_msgs/msg/String bytes -> its text (bad UTF-8 raises ValueError too)."""
+    return _Reader(data).string()

@@ -13,8 +13,16 @@ stopping at the first record that is not complete (every complete chunk is still
 `problem` says where reading stopped). A record that is complete but corrupt is an error,
 not an end: ball_world_repair keeps what comes before it.
 
+World edits are read the same way: each recorded `edits` text is bounded in size, parsed
+as JSON within a bounded nesting, and every field is checked (kind, an entity name, finite
+numbers, radius and mass within core.limits, impulses_before within the step's impulses)
+before any tool acts on it.
+
 feed_sinks() turns a recording back into the WorldSnapshot / RunInfo / StepRecord stream the
-node produced, so any Sink (the Rerun logger, a second MCAP) can be fed from a file.
+node produced, so any Sink (the Rerun logger, a second MCAP) can be fed from a file. It
+follows each segment's balls through its edits (BallRoster): which names exist, in which
+order, with which radii and masses, so impulses find their ball by name and every record
+carries the balls as they were at its step.
 """
 import bisect
 from dataclasses import dataclass
@@ -38,15 +46,16 @@ import numpy as np
 import yaml
 
 from ball_world.core import limits
-from ball_world.core.impulses import ImpulseRejected, parse_ball
+from ball_world.core.edits import NAME_PATTERN
 from ball_world.core.parameters import checked, ParameterError
 from ball_world.core.scenario import build_world, step_duration_ns
 from ball_world.msgs.cdr import (decode_pose_array, decode_state, decode_state_layout,
-                                 decode_vector3_stamped)
+                                 decode_string, decode_vector3_stamped)
 from ball_world.recording.files import open_regular
 from ball_world.recording.mcap_writer import (EVENT_ROLES, flatten_parameters, METADATA_NAME,
                                               NODE_NAME, STEP_TOPICS)
-from ball_world.step_record import AppliedImpulse, RunInfo, STATS_FIELDS, StepRecord, WorldSnapshot
+from ball_world.step_record import (AppliedEdit, AppliedImpulse, RunInfo, STATS_FIELDS,
+                                    StepRecord, WorldSnapshot)
 
 MAGIC = b'\x89MCAP0\r\n'
 _RECORD_HEAD = struct.Struct('<BQ')
@@ -66,6 +75,15 @@ MAX_SMALL_TEXT = 64 << 10
 #: Parameter names have at most two dots ('balls.x'): the parameters document nests at most
 #: this deep below ros__parameters.
 MAX_PARAMETER_NESTING = 3
+#: Longest recorded edit (its JSON text). The node writes about 250 characters plus the
+#: name (at most limits.MAX_NAME_LENGTH); anything much longer was not written by it.
+MAX_EDIT_TEXT = 4096
+#: An edit's kinds and fields, exactly as step_record.AppliedEdit has them.
+EDIT_KINDS = ('spawn', 'delete', 'set_state')
+_EDIT_NUMBERS = ('x', 'y', 'vx', 'vy', 'radius', 'mass')
+_EDIT_FIELDS = frozenset(('kind', 'name', *_EDIT_NUMBERS, 'impulses_before'))
+#: Roles a segment's topics may lack: recordings made before edits were recorded.
+_OPTIONAL_ROLES = ('edits',)
 _WHOLE_NUMBER = re.compile(r'-?[0-9]{1,19}')
 _TOPIC_NAME = re.compile(r'/?[A-Za-z_~{][A-Za-z0-9_/{}~]{0,255}')
 
@@ -352,12 +370,82 @@ def _topics(values):
         return {role: f'/{role}' for role in STEP_TOPICS}
     topics = load_untrusted(values['topics'], "'topics'", MAX_SMALL_TEXT)
     if not isinstance(topics, dict) or any(
-            role not in topics for role in STEP_TOPICS) or not all(
+            role not in topics for role in STEP_TOPICS
+            if role not in _OPTIONAL_ROLES) or not all(
             isinstance(topic, str) and _TOPIC_NAME.fullmatch(topic)
             for topic in topics.values()):
         raise RecordingError(f"'topics' is not a map of every role to a topic name: "
                              f'{_text(topics)}')
     return topics
+
+
+# Untrusted edits -----------------------------------------------------------------------
+
+def _edit_number(fields, key):
+    value = fields[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise RecordingError(f'{key} is {_text(value)}, not a number')
+    try:
+        value = float(value)
+    except OverflowError:
+        raise RecordingError(f'{key} is too large for a float') from None
+    if not math.isfinite(value):
+        raise RecordingError(f'{key} is {value}, not a finite number')
+    return value
+
+
+def parse_edit(data, impulse_count):
+    """The AppliedEdit a recorded `edits` message holds, checked as untrusted input.
+
+    data: the message's CDR bytes (std_msgs/String). impulse_count: how many impulses its
+    step recorded, the most impulses_before may be. Raises RecordingError naming the field.
+    """
+    if len(data) > MAX_EDIT_TEXT + 16:  # the CDR header, length and NUL around the text
+        raise RecordingError(f'the message is {len(data):,} bytes long; an edit is at most '
+                             f'{MAX_EDIT_TEXT:,} characters')
+    try:
+        text = decode_string(data)
+    except ValueError as error:
+        raise RecordingError(f'not a std_msgs/String: {error}') from None
+    fields = load_untrusted(text, 'the text', MAX_EDIT_TEXT)
+    if not isinstance(fields, dict) or set(fields) != _EDIT_FIELDS:
+        shown = sorted(map(str, fields)) if isinstance(fields, dict) else fields
+        raise RecordingError(f'not an edit with the fields {", ".join(sorted(_EDIT_FIELDS))}: '
+                             f'{_text(shown)}')
+    kind, name, before = fields['kind'], fields['name'], fields['impulses_before']
+    if kind not in EDIT_KINDS:
+        raise RecordingError(f'kind is {_text(kind)}, not one of {", ".join(EDIT_KINDS)}')
+    if not (isinstance(name, str) and len(name) <= limits.MAX_NAME_LENGTH
+            and NAME_PATTERN.fullmatch(name)):
+        raise RecordingError(f'name {_text(name)} is not an entity name (a letter, then '
+                             f'letters, digits or underscores, at most '
+                             f'{limits.MAX_NAME_LENGTH} characters)')
+    numbers = {key: _edit_number(fields, key) for key in _EDIT_NUMBERS}
+    if kind == 'spawn':
+        for key, low, high in (('radius', limits.MIN_RADIUS, limits.MAX_RADIUS),
+                               ('mass', limits.MIN_MASS, limits.MAX_MASS)):
+            if not low <= numbers[key] <= high:
+                raise RecordingError(f'{key} {numbers[key]:g} is outside {low:g} to {high:g}')
+    if isinstance(before, bool) or not isinstance(before, int) \
+            or not 0 <= before <= impulse_count:
+        raise RecordingError(f'impulses_before is {_text(before)}, not a count from 0 to the '
+                             f'{impulse_count} impulses of its step')
+    return AppliedEdit(kind=kind, name=name, impulses_before=before, text=text, **numbers)
+
+
+def parse_edits(messages, impulse_count):
+    """The AppliedEdits of one step's `edits` messages, in order (see parse_edit)."""
+    edits = []
+    for position, data in enumerate(messages):
+        try:
+            edit = parse_edit(data, impulse_count)
+            if edits and edit.impulses_before < edits[-1].impulses_before:
+                raise RecordingError(f'impulses_before goes back from '
+                                     f'{edits[-1].impulses_before} to {edit.impulses_before}')
+        except RecordingError as error:
+            raise RecordingError(f'edit {position}: {error}') from None
+        edits.append(edit)
+    return tuple(edits)
 
 
 # What a recording holds ---------------------------------------------------------------
@@ -481,6 +569,7 @@ class RecordedStep:
     state_cdr: Optional[bytes]
     stats_cdr: Optional[bytes]
     balls_stamp_ns: Optional[int]  # header.stamp of the balls message
+    edits: tuple = ()  # AppliedEdit applied before this step, in order (checked)
 
     @property
     def complete(self):
@@ -711,6 +800,24 @@ class Recording:
                                  'before the first segment')
         return position
 
+    def edits(self):
+        """(segment position, step, AppliedEdit) of every recorded edit, in order.
+
+        Each is checked as steps() checks it, but only the impulse and edit topics are
+        read: counting edits decodes no poses.
+        """
+        topics = {topic: role for topic, role in self.roles.items() if role in EVENT_ROLES}
+        builder = None
+        for message in self.messages(topics):
+            if builder is None or message.log_time_ns != builder.log_time_ns:
+                if builder is not None:
+                    yield from builder.edits()
+                position = self.segment_at(message.log_time_ns)
+                builder = _StepBuilder(position, self.segments[position], message.log_time_ns)
+            builder.add(topics[message.topic], message.data)
+        if builder is not None:
+            yield from builder.edits()
+
     def steps(self):
         """RecordedSteps in order: every log time of the ball_world topics, decoded."""
         builder = None
@@ -739,6 +846,25 @@ class _StepBuilder:
         else:
             self.data[role] = data
 
+    @property
+    def step(self):
+        return (self.log_time_ns - self.segment.log_offset_ns) // self.segment.dt_ns
+
+    def _edits(self, impulse_count):
+        try:
+            return parse_edits(self.events['edits'], impulse_count)
+        except RecordingError as error:
+            raise RecordingError(f'segment {self.segment.index} step {self.step}: recorded '
+                                 f'{error}') from None
+
+    def edits(self):
+        """(segment position, step, AppliedEdit) of this log time's edits."""
+        if not self.events['edits']:
+            return []
+        step = self.step
+        return [(self.position, step, edit)
+                for edit in self._edits(len(self.events['impulse']))]
+
     def build(self):
         stamp_ns = self.log_time_ns - self.segment.log_offset_ns
         positions = state = stats = balls_stamp = None
@@ -758,11 +884,11 @@ class _StepBuilder:
             raise RecordingError(f'at log time {self.log_time_ns} ns balls has '
                                  f'{len(positions)} poses but state {len(state)} rows')
         return RecordedStep(
-            segment=self.position, step=stamp_ns // self.segment.dt_ns, stamp_ns=stamp_ns,
+            segment=self.position, step=self.step, stamp_ns=stamp_ns,
             log_time_ns=self.log_time_ns, positions=positions, state=state, stats=stats,
             impulses=impulses, balls_cdr=self.data.get('balls'),
             state_cdr=self.data.get('state'), stats_cdr=self.data.get('stats'),
-            balls_stamp_ns=balls_stamp)
+            balls_stamp_ns=balls_stamp, edits=self._edits(len(impulses)))
 
 
 # Feeding sinks -------------------------------------------------------------------------
@@ -790,11 +916,109 @@ def snapshot_and_info(segment, first_step=None):
     snapshot = WorldSnapshot(radii=world.radii.copy(), masses=world.masses.copy(),
                              walls=world.walls.segments.copy(), positions=positions,
                              velocities=velocities, dt_ns=segment.dt_ns,
-                             frame_id=segment.frame_id)
+                             frame_id=segment.frame_id,
+                             names=tuple(f'ball_{i}' for i in range(len(world))))
     info = RunInfo(parameters=dict(segment.parameters), topics=dict(segment.topics),
                    segment=segment.index, log_offset_ns=segment.log_offset_ns,
                    package_version=segment.package_version)
     return snapshot, info
+
+
+class BallRoster:
+    """The balls of one segment as its recorded edits change them: names, radii, masses.
+
+    It starts from the segment's WorldSnapshot and applies every step's edits in the order
+    the node applied them, between that step's impulses, so each impulse finds its ball by
+    name where it was when it was applied (AppliedImpulse.ball, as the node recorded it).
+    The recording is untrusted: an edit that the node could not have applied (a spawn
+    under a name the segment already used, a deletion or state set of a ball that is not
+    there, more than limits.MAX_BALLS balls) or an impulse for a ball that is not there is
+    a RecordingError. names, radii and masses are new objects only after a spawn or a
+    deletion, as the node hands them on; `changed` says so until a record takes it.
+    """
+
+    def __init__(self, snapshot, segment_index):
+        self.segment_index = segment_index
+        self.names = tuple(snapshot.names)
+        self.radii = snapshot.radii
+        self.masses = snapshot.masses
+        self.changed = False
+        self._index_of = None  # name -> index, built when first needed
+        self._used = None  # every name the segment has given, deleted ones included
+        self._lists = None  # (names, radii, masses) as lists while a step edits them
+
+    def __len__(self):
+        return len(self.names)
+
+    def follow(self, step):
+        """Apply the step's edits; returns its impulses as AppliedImpulses."""
+        if not step.edits and not step.impulses:
+            return ()
+        where = f'segment {self.segment_index} step {step.step}'
+        if self._index_of is None:
+            self._index_of = {name: i for i, name in enumerate(self.names)}
+            self._used = set(self.names)
+        edits = step.edits
+        done = 0
+        impulses = []
+        for position, impulse in enumerate(step.impulses):
+            while done < len(edits) and edits[done].impulses_before <= position:
+                self._apply(edits[done], where)
+                done += 1
+            ball = self._index_of.get(impulse.frame_id)
+            if ball is None:
+                raise RecordingError(f'{where}: a recorded impulse is for '
+                                     f'{_text(impulse.frame_id)}, which is no ball then')
+            impulses.append(AppliedImpulse(ball=ball, jx=impulse.x, jy=impulse.y,
+                                           frame_id=impulse.frame_id, cdr=impulse.cdr))
+        for edit in edits[done:]:
+            self._apply(edit, where)
+        if self._lists is not None:
+            names, radii, masses = self._lists
+            self.names = tuple(names)
+            self.radii = np.array(radii, dtype=np.float64)
+            self.masses = np.array(masses, dtype=np.float64)
+            self._lists = None
+            self.changed = True
+        return tuple(impulses)
+
+    def take_changed(self):
+        """Whether the balls changed since the last call (a record's world_changed)."""
+        changed, self.changed = self.changed, False
+        return changed
+
+    def _apply(self, edit, where):
+        name = edit.name
+        index_of = self._index_of
+        if edit.kind == 'set_state':
+            if name not in index_of:
+                raise RecordingError(f"{where}: a recorded edit sets the state of '{name}', "
+                                     'which is no ball then')
+            return
+        if self._lists is None:
+            self._lists = (list(self.names), self.radii.tolist(), self.masses.tolist())
+        names, radii, masses = self._lists
+        if edit.kind == 'spawn':
+            if name in self._used:
+                raise RecordingError(f"{where}: a recorded edit spawns '{name}', a name its "
+                                     'segment already used')
+            if len(names) >= limits.MAX_BALLS:
+                raise RecordingError(f'{where}: a recorded spawn would make more than '
+                                     f'{limits.MAX_BALLS:,} balls')
+            index_of[name] = len(names)
+            self._used.add(name)
+            names.append(name)
+            radii.append(edit.radius)
+            masses.append(edit.mass)
+            return
+        index = index_of.pop(name, None)
+        if index is None:
+            raise RecordingError(f"{where}: a recorded edit deletes '{name}', which is no "
+                                 'ball then')
+        for values in (names, radii, masses):
+            del values[index]
+        for position in range(index, len(names)):
+            index_of[names[position]] = position
 
 
 def _count(step, name):
@@ -805,17 +1029,11 @@ def _count(step, name):
     return int(value)
 
 
-def step_record(step):
-    """The StepRecord the node wrote for a complete RecordedStep."""
-    ball_count = len(step.positions)
-    impulses = []
-    for impulse in step.impulses:
-        try:
-            ball = parse_ball(impulse.frame_id, ball_count)
-        except ImpulseRejected as error:
-            raise RecordingError(f'recorded impulse at step {step.step}: {error}') from None
-        impulses.append(AppliedImpulse(ball=ball, jx=impulse.x, jy=impulse.y,
-                                       frame_id=impulse.frame_id, cdr=impulse.cdr))
+def step_record(step, impulses, roster):
+    """The StepRecord the node wrote for a complete RecordedStep.
+
+    impulses: what roster.follow(step) returned; the roster then holds the step's balls.
+    """
     rtf = step.stat('real_time_factor')
     return StepRecord(
         step=step.step, stamp_ns=step.stamp_ns, log_time_ns=step.log_time_ns,
@@ -824,34 +1042,40 @@ def step_record(step):
         kinetic_energy=step.stat('kinetic_energy'),
         momentum=np.array([step.stat('momentum_x'), step.stat('momentum_y')]),
         balls_cdr=step.balls_cdr, state_cdr=step.state_cdr, stats_cdr=step.stats_cdr,
-        impulses=tuple(impulses), real_time_factor=None if math.isnan(rtf) else rtf)
+        impulses=impulses, real_time_factor=None if math.isnan(rtf) else rtf,
+        edits=step.edits, names=roster.names, radii=roster.radii, masses=roster.masses,
+        world_changed=roster.take_changed())
 
 
 def feed_sinks(path, sinks, close=True):
     """Replay a recording into Sinks as the node would have: returns the steps fed.
 
     Each segment starts with start_segment(WorldSnapshot, RunInfo), then every complete
-    step goes to write_step in order (a step cut off by a crash is skipped). The sinks
-    are flushed at the end, and closed unless close=False.
+    step goes to write_step in order (a step cut off by a crash is skipped, but its edits
+    still count). The sinks are flushed at the end, and closed unless close=False.
     """
     recording = path if isinstance(path, Recording) else Recording(path)
-    current = None
-    balls = 0
+    current = started = None  # segment positions: followed, and begun in the sinks
+    roster = snapshot = info = None
     fed = 0
     for step in recording.steps():
+        if step.segment != current:
+            segment = recording.segments[step.segment]
+            snapshot, info = snapshot_and_info(segment, step)
+            roster = BallRoster(snapshot, segment.index)
+            current = step.segment
+        impulses = roster.follow(step)
         if not step.complete:
             continue
-        if step.segment != current:
-            snapshot, info = snapshot_and_info(recording.segments[step.segment], step)
+        if started != current:
             for sink in sinks:
                 sink.start_segment(snapshot, info)
-            current = step.segment
-            balls = len(snapshot.radii)
-        if len(step.positions) != balls:
+            started = current
+        if len(step.positions) != len(roster):
             raise RecordingError(f'step {step.step} of segment '
                                  f'{recording.segments[current].index} has '
-                                 f'{len(step.positions)} balls, not {balls}')
-        record = step_record(step)
+                                 f'{len(step.positions)} balls, not {len(roster)}')
+        record = step_record(step, impulses, roster)
         for sink in sinks:
             sink.write_step(record)
         fed += 1

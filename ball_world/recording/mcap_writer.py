@@ -7,13 +7,19 @@ topic_type_hash) lets `ros2 bag info/play`, Foxglove, mcap_ros2 and rosbags open
 
 Besides the messages, every segment (start, and each reset) gets a metadata record named
 'ball_world' with the effective parameters, so a recording is enough to re-simulate its run.
+World edits (spawn, delete, set_state) are recorded on `edits` as the node publishes them
+(std_msgs/String, one JSON object each: step_record.AppliedEdit.text), at the log time of
+the step they were applied before, interleaved with that step's impulses in the order both
+were applied (each edit's impulses_before says so too); with the parameters they make the
+run re-simulable through any number of spawns, deletions and state sets.
 
 Two topics are recorded for viewers and players only (the tools never read them back):
 `markers`, the MarkerArray the node publishes for RViz (a sphere per ball sized by its
 radius, the walls as a line list), so Foxglove's 3D panel shows the world from the file
 alone; and `/clock` when `publish_clock` is on, as the node publishes it. Markers are written
-when a segment starts (after a DELETEALL, so a reset clears the old world) and then every
-MARKERS_PERIOD_NS of simulated time, not every step: see MARKERS_PERIOD_NS for the cost.
+when a segment starts and at the first step after a spawn or deletion (each time after a
+DELETEALL, so a reset or an edit clears the old balls), and then every MARKERS_PERIOD_NS of
+simulated time, not every step: see MARKERS_PERIOD_NS for the cost.
 
 The file is claimed first (recording.files): an existing file is refused unless
 overwrite=True, and the file stays locked until the sink is closed.
@@ -23,6 +29,7 @@ it to the OS. After a SIGKILL the file has no summary, but every chunk before th
 flush() is complete; `ball_world_repair` turns such a file into a complete one.
 """
 import array
+import dataclasses
 import json
 import os
 
@@ -32,7 +39,7 @@ import numpy as np
 import yaml
 
 from ball_world import __version__
-from ball_world.msgs.cdr import encode_clock
+from ball_world.msgs.cdr import encode_clock, encode_string
 from ball_world.msgs.definitions import message_definition, type_hash
 from ball_world.recording.files import claim_output, OutputClaim
 from ball_world.step_record import PACKAGE_NAME
@@ -54,15 +61,16 @@ DEFAULT_COMPRESSION = 'lz4'
 CHUNK_BYTES = 4 << 20
 
 #: What each logical topic carries: the messages of every step, which the tools read back.
-#: A new kind of recorded event (world edits) is one more entry here and in EVENT_ROLES.
+#: A new kind of recorded event is one more entry here and in EVENT_ROLES.
 STEP_TOPICS = {
     'balls': 'geometry_msgs/msg/PoseArray',
     'state': 'std_msgs/msg/Float64MultiArray',
     'stats': 'std_msgs/msg/Float64MultiArray',
     'impulse': 'geometry_msgs/msg/Vector3Stamped',
+    'edits': 'std_msgs/msg/String',
 }
 #: Roles of which a step may hold any number of messages (the others hold one each).
-EVENT_ROLES = ('impulse',)
+EVENT_ROLES = ('impulse', 'edits')
 #: Topics for viewers and players only: the tools never read them back.
 VIEW_TOPICS = {
     'markers': 'visualization_msgs/msg/MarkerArray',
@@ -111,10 +119,12 @@ def offered_qos_profiles(depth, reliability='reliable', durability='volatile'):
 
 #: The node's step publishers: reliable, volatile, keep_last 10.
 OFFERED_QOS_PROFILES = offered_qos_profiles(10)
-#: What each role's publisher offers in the node (markers: transient local for late RViz
-#: and Foxglove subscribers; /clock: best effort, depth 1).
+#: What each role's publisher offers in the node (edits: depth 1000 for a burst of spawns;
+#: markers: transient local for late RViz and Foxglove subscribers; /clock: best effort,
+#: depth 1).
 ROLE_QOS = {
     **{role: OFFERED_QOS_PROFILES for role in STEP_TOPICS},
+    'edits': offered_qos_profiles(1000),
     'markers': offered_qos_profiles(1, durability='transient_local'),
     'clock': offered_qos_profiles(1, reliability='best_effort'),
 }
@@ -188,11 +198,12 @@ def flatten_parameters(document):
 def segment_topics(info, clock):
     """The recorded topic of each role in a segment: step roles, markers, and /clock if on.
 
-    Markers live beside `balls` (the node names both relatively) unless the run says where.
+    A role the run does not name (markers, or edits in runs fed from recordings made before
+    edits were recorded) lives beside `balls`, as the node names them all relatively.
     """
-    topics = {role: info.topics[role] for role in STEP_TOPICS}
-    namespace = topics['balls'].rpartition('/')[0]
-    topics['markers'] = info.topics.get('markers', f'{namespace}/markers')
+    namespace = info.topics['balls'].rpartition('/')[0]
+    topics = {role: info.topics.get(role, f'{namespace}/{role}')
+              for role in (*STEP_TOPICS, 'markers')}
     if clock:
         topics['clock'] = CLOCK_TOPIC
     return topics
@@ -271,6 +282,7 @@ class McapSink:
         self._pending = 0  # uncompressed bytes in the open chunk
         self._last_log_ns = None
         self._clock = False  # whether this segment records /clock
+        self._world = None  # the segment's WorldSnapshot: its walls and frame for markers
         self._markers = None if markers_period_ns is None else _Markers(markers_period_ns)
         self._file = claim.writer()
         self._closed = False
@@ -321,6 +333,7 @@ class McapSink:
     # Implementation ---------------------------------------------------------------------
 
     def _start_segment(self, world, info):
+        self._world = world
         self._clock = bool(info.parameters.get('publish_clock'))
         topics = segment_topics(info, self._clock)
         self._roles = {role: self._channel(topic, role) for role, topic in topics.items()}
@@ -334,8 +347,9 @@ class McapSink:
     def _restart_markers(self, world, log_time_ns):
         """Clear the old world in viewers and record the new one's markers at its next step.
 
-        Called at every segment start; any other change of the balls or walls (a recorded
-        world edit) needs the same.
+        Called at every segment start, and at the first step after a spawn or a deletion
+        (with the balls' new radii): marker ids follow pose order, so after an edit the old
+        set must go before the new one is drawn.
         """
         if self._markers is not None:
             self._markers.reset(world)
@@ -366,9 +380,20 @@ class McapSink:
 
     def _write_step(self, record):
         log_time_ns = record.log_time_ns
-        # Impulses come first: they were applied before the step whose stamp they carry.
-        for impulse in record.impulses:
+        # Impulses and edits come first, in the order they were applied: all of them were
+        # applied before the step whose stamp they carry.
+        impulses = record.impulses
+        done = 0
+        for edit in record.edits:
+            for impulse in impulses[done:edit.impulses_before]:
+                self._add('impulse', log_time_ns, impulse.cdr)
+            done = max(done, edit.impulses_before)
+            self._add('edits', log_time_ns, encode_string(edit.text))
+        for impulse in impulses[done:]:
             self._add('impulse', log_time_ns, impulse.cdr)
+        if record.world_changed:
+            self._restart_markers(dataclasses.replace(self._world, radii=record.radii),
+                                  log_time_ns)
         self._add('balls', log_time_ns, record.balls_cdr)
         self._add('state', log_time_ns, record.state_cdr)
         self._add('stats', log_time_ns, record.stats_cdr)

@@ -272,10 +272,10 @@ class RerunSink:
 
     path: the .rrd file, or None. view: None, 'spawn' (start the native viewer) or a
     rerun+http://HOST:PORT/proxy URL. every=k logs every k-th step of a segment, plus step
-    0, every step with impulses and the last step before a reset or close; collision totals
-    stay exact. velocities, trail_seconds: the optional layers. clock: a wall clock in
-    seconds (time.monotonic) to measure the real-time factor over the last second; without
-    it the record's value is logged. report: called with one line when one destination
+    0, every step with impulses or edits and the last step before a reset or close;
+    collision totals stay exact. velocities, trail_seconds: the optional layers. clock: a
+    wall clock in seconds (time.monotonic) to measure the real-time factor over the last
+    second; without it the record's value is logged. report: called with one line when one destination
     fails while another goes on (when the last one fails, the sink raises instead, so its
     owner drops it and says so).
     """
@@ -353,7 +353,7 @@ class RerunSink:
             # Step 0 is the initial state, written when the world is built, not a step: the
             # pause before the first step (the node starting up) is no slowness.
             rtf = self._rtf.add(record.log_time_ns) if record.step else None
-        if record.step % self.every == 0 or record.impulses:
+        if record.step % self.every == 0 or record.impulses or record.edits:
             self._log(record, rtf)
         else:
             self._unlogged = (record, rtf)
@@ -486,11 +486,19 @@ class RerunSink:
         shown = [i for i in self._impulses if i[0] > now]
         changed = len(shown) != len(self._impulses) or bool(record.impulses)
         masses = getattr(record, 'masses', None)
+        index_of = None
         for impulse in record.impulses:
-            name = names[impulse.ball]
-            mass = masses[impulse.ball] if masses is not None else self._segment.mass[name]
+            ball = impulse.ball  # its index when it was applied
+            if record.edits:  # a later edit of the step may have moved or deleted the ball
+                if index_of is None:
+                    index_of = {name: i for i, name in enumerate(names)}
+                ball = index_of.get(impulse.frame_id)
+                if ball is None:
+                    continue
+            name = names[ball]
+            mass = masses[ball] if masses is not None else self._segment.mass[name]
             shown.append((now + round(IMPULSE_SECONDS * 1e9),
-                          np.asarray(record.positions[impulse.ball], dtype=np.float64),
+                          np.asarray(record.positions[ball], dtype=np.float64),
                           self._arrow(impulse.jx / mass, impulse.jy / mass),
                           f'{name}: J = ({impulse.jx:.3g}, {impulse.jy:.3g}) N s'))
         self._impulses = shown

@@ -143,7 +143,7 @@ class BallWorld(Node):
         values = current_values(self)
         failures = []
         topics = {name: self.resolve_topic_name(name)
-                  for name in ('balls', 'state', 'stats', 'impulse', 'markers')}
+                  for name in ('balls', 'state', 'stats', 'impulse', 'edits', 'markers')}
         try:
             # The world first: a start refused for its parameters creates no file, and a
             # signal while a large world builds leaves none half-written.

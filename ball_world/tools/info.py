@@ -8,7 +8,7 @@ import argparse
 import sys
 
 from ball_world.msgs.cdr import decode_pose_array, decode_vector3_stamped
-from ball_world.recording.mcap_reader import decode_stats, Recording, RecordingError
+from ball_world.recording.mcap_reader import decode_stats, EDIT_KINDS, Recording, RecordingError
 from ball_world.step_record import STATS_FIELDS
 
 
@@ -85,6 +85,7 @@ def describe(recording):
     for info in recording.topics.values():
         lines.append(f'  {_shown(info.topic)}  {_shown(info.type)}  {info.message_count}')
     lines.extend(_impulse_lines(recording))
+    lines.extend(_edit_lines(recording))
     lines.extend(_energy_lines(recording))
     return lines
 
@@ -121,6 +122,34 @@ def _impulse_lines(recording, shown=10):
             lines.append(f'  segment {segment.index} step {stamp_ns // segment.dt_ns} '
                          f'({_seconds(stamp_ns)}): {_shown(frame_id)} J = ({x:.6g}, {y:.6g}) '
                          'N s')
+    return lines
+
+
+def _edit_lines(recording, shown=10):
+    """How many world edits of each kind, and the first few: where, what, which ball.
+
+    Every edit is read and checked (as resim and to_rrd check it), so a crafted edit is
+    refused here too.
+    """
+    counts = dict.fromkeys(EDIT_KINDS, 0)
+    listed = []
+    for position, step, edit in recording.edits():
+        counts[edit.kind] += 1
+        if len(listed) < shown:
+            what = {'spawn': f'at ({edit.x:.6g}, {edit.y:.6g}), v ({edit.vx:.6g}, '
+                             f'{edit.vy:.6g}), radius {edit.radius:.6g} m, mass '
+                             f'{edit.mass:.6g} kg',
+                    'set_state': f'to ({edit.x:.6g}, {edit.y:.6g}), v ({edit.vx:.6g}, '
+                                 f'{edit.vy:.6g})',
+                    'delete': ''}[edit.kind]
+            listed.append(f'  segment {recording.segments[position].index} step {step}: '
+                          f'{edit.kind} {edit.name} {what}'.rstrip())
+    total = sum(counts.values())
+    lines = [f'edits:       {total}' + (' (' + ', '.join(
+        f'{count} {kind}' for kind, count in counts.items() if count) + ')' if total else '')]
+    lines.extend(listed)
+    if total > len(listed):
+        lines.append(f'  ... and {total - len(listed)} more')
     return lines
 
 

@@ -1,11 +1,15 @@
-"""ball_world_resim: re-run a recording from its parameters and impulses, and compare bits.
+"""ball_world_resim: re-run a recording from its parameters, impulses and edits; compare bits.
 
 This is the determinism contract checked end to end: each segment's world is rebuilt from
-the parameters in its metadata record, every recorded impulse is queued just before the step
-whose stamp it carries, and every recorded pose, state row and stats entry (except the
-real-time factor, which depends on the wall clock) must be bit-identical to the
-re-simulated one. Exit status: 0 all identical, 1 a difference, 2 an unreadable recording
-or parameters that no longer build a world (one line on stderr).
+the parameters in its metadata record; before each step, its recorded impulses and world
+edits (spawn, delete, set_state) are applied in the order the node applied them (an edit's
+impulses_before says how many of the step's impulses came before it), through the same
+Simulation calls the node makes; and every recorded pose, state row and stats entry (except
+the real-time factor, which depends on the wall clock), every impulse and every edit
+message must be bit-identical to the re-simulated one. An edit the re-simulation refuses,
+or a spawn that gets another name, is a difference too. Exit status: 0 all identical, 1 a
+difference, 2 an unreadable recording or parameters that no longer build a world (one line
+on stderr).
 
 The recording is untrusted: its parameters were checked by the reader as the node checks
 them, and a segment whose first recorded step has another ball count than its parameters
@@ -19,11 +23,11 @@ from typing import Optional
 
 import numpy as np
 
-from ball_world.core.impulses import ImpulseRejected, lookup_ball
+from ball_world.core.edits import Ball, EditRefused
 from ball_world.core.scenario import ScenarioError
-from ball_world.msgs.cdr import decode_state_layout
+from ball_world.msgs.cdr import decode_state_layout, decode_vector3_stamped
 from ball_world.recording.mcap_reader import Recording, RecordingError
-from ball_world.simulation import Simulation
+from ball_world.simulation import Simulation, SpawnRequest
 from ball_world.step_record import STATS_FIELDS
 from ball_world.tools.progress import Progress
 
@@ -41,7 +45,7 @@ class Difference:
 
     segment: int
     step: int
-    what: str  # 'balls x', 'state vy', 'stats kinetic_energy', 'impulse', ...
+    what: str  # 'balls x', 'state vy', 'stats kinetic_energy', 'edit refused', ...
     ball: Optional[int]
     recorded: object
     resimulated: object
@@ -61,6 +65,7 @@ class SegmentResult:
     position: int  # in Recording.segments
     steps: int = 0
     impulses: int = 0
+    edits: int = 0
     last_step: int = 0
     differing_steps: int = 0
 
@@ -121,27 +126,74 @@ def _rebuild(segment, first_step):
 
 
 def _advance(simulation, step, comparison, segment_index):
-    """Step the simulation once to `step` (the next one), with its recorded impulses queued."""
+    """Step the simulation once to `step` (the next one), its impulses and edits applied first.
+
+    Impulses are queued up to each edit's impulses_before, then the edit is made (which
+    applies them first, as in the node); the rest are applied by the step.
+    """
     if step.step == 0:
+        _compare_events(simulation.last_record, step, comparison, segment_index)
         return simulation.last_record
-    for impulse in step.impulses:
-        try:
-            lookup_ball(impulse.frame_id, simulation.index_of)
-        except ImpulseRejected as error:
-            comparison.add(Difference(segment_index, step.step, 'impulse', None,
-                                      impulse.frame_id, str(error), math.inf))
-            continue
+    impulses = step.impulses
+    queued = 0
+    for edit in step.edits:
+        for impulse in impulses[queued:edit.impulses_before]:
+            simulation.queue_impulse(impulse.frame_id, impulse.x, impulse.y)
+        queued = max(queued, edit.impulses_before)
+        _edit(simulation, edit, step.step, comparison, segment_index)
+    for impulse in impulses[queued:]:
         simulation.queue_impulse(impulse.frame_id, impulse.x, impulse.y)
     result, rejected = simulation.step()
-    for rejection in rejected:
-        comparison.add(Difference(segment_index, step.step, 'impulse rejected', None,
-                                  'applied', str(rejection), math.inf))
-    recorded = tuple(impulse.cdr for impulse in step.impulses)
-    resimulated = tuple(impulse.cdr for impulse in result.impulses)
-    if not rejected and recorded != resimulated:
-        comparison.add(Difference(segment_index, step.step, 'impulse message', None,
-                                  len(recorded), len(resimulated), math.inf))
+    _report_rejected(rejected, step.step, comparison, segment_index)
+    _compare_events(result, step, comparison, segment_index)
     return result
+
+
+def _edit(simulation, edit, k, comparison, segment_index):
+    """Make one recorded edit through the Simulation as the node did; differences noted."""
+    try:
+        if edit.kind == 'spawn':
+            ball = Ball(x=edit.x, y=edit.y, vx=edit.vx, vy=edit.vy, radius=edit.radius,
+                        mass=edit.mass)
+            # Renaming allowed: a name taken in the re-simulation shows as another name.
+            [got], rejected = simulation.spawn([SpawnRequest(edit.name, True, ball)])
+            if isinstance(got, EditRefused):
+                raise got
+            if got != edit.name:
+                comparison.add(Difference(segment_index, k, 'spawned name', None, edit.name,
+                                          got, math.inf))
+        elif edit.kind == 'delete':
+            rejected = simulation.delete(edit.name)
+        else:
+            rejected = simulation.set_state(edit.name, edit.x, edit.y, edit.vx, edit.vy)
+    except EditRefused as refusal:
+        comparison.add(Difference(segment_index, k, f'{edit.kind} refused', None, edit.name,
+                                  str(refusal), math.inf))
+        return
+    _report_rejected(rejected, k, comparison, segment_index)
+
+
+def _report_rejected(rejected, k, comparison, segment_index):
+    for rejection in rejected:
+        comparison.add(Difference(segment_index, k, 'impulse rejected', None, 'applied',
+                                  str(rejection), math.inf))
+
+
+def _compare_events(record, step, comparison, segment_index):
+    """The impulse and edit messages the re-simulation made must be the recorded ones."""
+    for what, recorded, resimulated, shown in (
+            ('impulse message', [i.cdr for i in step.impulses],
+             [i.cdr for i in record.impulses], decode_vector3_stamped),
+            ('edit message', [e.text for e in step.edits], [e.text for e in record.edits],
+             str)):
+        if recorded == resimulated:
+            continue
+        position = next((i for i, (a, b) in enumerate(zip(recorded, resimulated)) if a != b),
+                        min(len(recorded), len(resimulated)))
+        values = [shown(items[position]) if position < len(items) else f'none of {len(items)}'
+                  for items in (recorded, resimulated)]
+        comparison.add(Difference(segment_index, step.step, f'{what} {position}', None,
+                                  *values, math.inf))
 
 
 def _compare_step(step, record, comparison, segment_index):
@@ -196,6 +248,7 @@ def resimulate(recording, progress=None):
         record = _advance(simulation, step, comparison, segment.index)
         result.steps += 1
         result.impulses += len(step.impulses)
+        result.edits += len(step.edits)
         result.last_step = step.step
         if not _compare_step(step, record, comparison, segment.index):
             result.differing_steps += 1
@@ -208,7 +261,8 @@ def describe(comparison):
         verdict = ('identical' if not result.differing_steps
                    else f'{result.differing_steps} steps differ')
         lines.append(f'segment {result.index}: {result.steps} steps compared (last step '
-                     f'{result.last_step}), {result.impulses} impulses: {verdict}')
+                     f'{result.last_step}), {result.impulses} impulses, {result.edits} edits: '
+                     f'{verdict}')
     total = sum(result.steps for result in comparison.segments)
     if comparison.identical:
         lines.append(f'all {total} recorded steps re-simulate bit-identically (largest '
@@ -223,9 +277,9 @@ def describe(comparison):
 def main(argv=None):
     parser = argparse.ArgumentParser(
         prog=PROG,
-        description='Re-simulate a recording from its parameters and impulses and check that '
-                    'every recorded pose and state row is bit-identical. Exit 0 if so, 1 if '
-                    'not, 2 if the recording cannot be read or rebuilt.')
+        description='Re-simulate a recording from its parameters, impulses and world edits '
+                    'and check that every recorded pose and state row is bit-identical. Exit '
+                    '0 if so, 1 if not, 2 if the recording cannot be read or rebuilt.')
     parser.add_argument('file', help='the .mcap recording')
     args = parser.parse_args(argv)
     progress = None
