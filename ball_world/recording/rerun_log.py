@@ -275,9 +275,9 @@ class RerunSink:
     0, every step with impulses or edits and the last step before a reset or close;
     collision totals stay exact. velocities, trail_seconds: the optional layers. clock: a
     wall clock in seconds (time.monotonic) to measure the real-time factor over the last
-    second; without it the record's value is logged. report: called with one line when one destination
-    fails while another goes on (when the last one fails, the sink raises instead, so its
-    owner drops it and says so).
+    second; without it the record's value is logged. report: called with one line when one
+    destination fails while another goes on (when the last one fails, the sink raises
+    instead, so its owner drops it and says so).
     """
 
     def __init__(self, path=None, every=1, view=None, velocities=False, trail_seconds=0.0,
