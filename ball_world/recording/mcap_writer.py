@@ -71,6 +71,11 @@ STEP_TOPICS = {
 }
 #: Roles of which a step may hold any number of messages (the others hold one each).
 EVENT_ROLES = ('impulse', 'edits')
+#: Roles whose channel is declared at its first message, not at the segment start: a run
+#: without world edits records no `edits` topic, so its file holds the topics it held
+#: before edits were recorded (and `ball_world_replay --wait-for-subscribers` waits for
+#: no subscriber of a topic that has nothing to play).
+LAZY_ROLES = ('edits',)
 #: Topics for viewers and players only: the tools never read them back.
 VIEW_TOPICS = {
     'markers': 'visualization_msgs/msg/MarkerArray',
@@ -278,6 +283,7 @@ class McapSink:
         self._schemas = {}  # type name -> schema id
         self._channels = {}  # topic -> channel id
         self._roles = {}  # logical name -> channel id, for the current segment
+        self._topics = {}  # logical name -> recorded topic, for the current segment
         self._sequences = {}  # channel id -> last sequence number
         self._pending = 0  # uncompressed bytes in the open chunk
         self._last_log_ns = None
@@ -336,7 +342,9 @@ class McapSink:
         self._world = world
         self._clock = bool(info.parameters.get('publish_clock'))
         topics = segment_topics(info, self._clock)
-        self._roles = {role: self._channel(topic, role) for role, topic in topics.items()}
+        self._topics = topics
+        self._roles = {role: self._channel(topic, role) for role, topic in topics.items()
+                       if role not in LAZY_ROLES}
         # Close the previous segment's chunk first, so that in file order the metadata
         # record sits between the two segments' messages.
         self._writer.flush()
@@ -371,7 +379,9 @@ class McapSink:
         return channel
 
     def _add(self, role, log_time_ns, data):
-        channel = self._roles[role]
+        channel = self._roles.get(role)
+        if channel is None:  # a LAZY_ROLES topic's first message
+            channel = self._roles[role] = self._channel(self._topics[role], role)
         sequence = (self._sequences.get(channel, 0) + 1) % _SEQUENCE_MODULO
         self._sequences[channel] = sequence
         self._writer.add_message(channel, log_time=log_time_ns, data=data,

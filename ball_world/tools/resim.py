@@ -260,9 +260,9 @@ def describe(comparison):
     for result in comparison.segments:
         verdict = ('identical' if not result.differing_steps
                    else f'{result.differing_steps} steps differ')
+        edits = f', {result.edits} edits' if result.edits else ''
         lines.append(f'segment {result.index}: {result.steps} steps compared (last step '
-                     f'{result.last_step}), {result.impulses} impulses, {result.edits} edits: '
-                     f'{verdict}')
+                     f'{result.last_step}), {result.impulses} impulses{edits}: {verdict}')
     total = sum(result.steps for result in comparison.segments)
     if comparison.identical:
         lines.append(f'all {total} recorded steps re-simulate bit-identically (largest '
