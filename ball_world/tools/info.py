@@ -133,7 +133,9 @@ def _edit_lines(recording, shown=10):
     """
     counts = dict.fromkeys(EDIT_KINDS, 0)
     listed = []
-    for position, step, edit in recording.edits():
+    topic = recording.topic_of('edits')
+    recorded = recording.topics[topic].message_count if topic in recording.topics else 0
+    for position, step, edit in recording.edits() if recorded else ():
         counts[edit.kind] += 1
         if len(listed) < shown:
             what = {'spawn': f'at ({edit.x:.6g}, {edit.y:.6g}), v ({edit.vx:.6g}, '
