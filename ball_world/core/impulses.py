@@ -10,12 +10,8 @@ A name is looked up, never parsed into a number: whatever a publisher puts in fr
 rejection.
 """
 import math
-import re
 
 from ball_world.core.limits import MAX_NAME_LENGTH
-
-#: 'ball_<i>' with i an index that fits in int64 (recordings of worlds without renames).
-_BALL_FRAME = re.compile(r'ball_(0|[1-9][0-9]{0,17})')
 
 #: A non-zero header.stamp further than this from both the simulation time and the wall
 #: clock is taken for a mistake (a stale or corrupt message), not an order for now.
@@ -52,20 +48,6 @@ def lookup_ball(frame_id, index_of):
     if ball is None:
         raise ImpulseRejected('unknown_ball', f"no ball '{_shown(frame_id)}': the world has "
                                               f'{len(index_of)} balls')
-    return ball
-
-
-def parse_ball(frame_id, ball_count):
-    """Ball index named by a frame_id 'ball_<i>' in a world of ball_count unrenamed balls."""
-    _check_name(frame_id)
-    match = _BALL_FRAME.fullmatch(frame_id)
-    if match is None:
-        raise ImpulseRejected('unknown_ball', f"no ball '{_shown(frame_id)}': the world has "
-                                              f'balls ball_0 to ball_{ball_count - 1}')
-    ball = int(match.group(1))
-    if ball >= ball_count:
-        raise ImpulseRejected('unknown_ball', f"no ball '{frame_id}': the world has "
-                                              f'{ball_count} balls')
     return ball
 
 
