@@ -14,6 +14,9 @@ if 'BALL_WORLD_TEST_DOMAIN' not in os.environ:
 os.environ['ROS_DOMAIN_ID'] = os.environ['BALL_WORLD_TEST_DOMAIN']
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
+# The Rerun SDK logs its own errors (a viewer a test left unreachable on purpose, retried
+# until the process ends) after pytest's summary; ball_world reports such failures itself.
+os.environ.setdefault('RUST_LOG', 'off')
 
 
 @pytest.fixture
