@@ -9,12 +9,15 @@ import errno
 import io
 import os
 from pathlib import Path
+import shlex
 import shutil
 import signal
+import subprocess
 import sys
 import textwrap
 
-from ball_world_testing.harness import rewrite_recording, ROSBAGS_TYPES, Truth
+from ball_world_testing.harness import (DEADLINE, executable, rewrite_recording, ROSBAGS_TYPES,
+                                        Truth)
 from mcap.reader import make_reader, SeekingReader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
@@ -489,3 +492,15 @@ def test_fsync_flush_and_scan_of_a_file_cut_in_a_record_header(tmp_path):
     assert sum(type(r).__name__ == 'Message' for r in scan.records()) == messages
     assert scan.end == size and 'cut off in its header' in scan.problem
     simulation.close()
+
+
+@pytest.mark.parametrize('tool', ['ball_world_info', 'ball_world_resim'])
+def test_a_reader_that_stops_early_is_no_error(recorded, tool):
+    """`ball_world_info run.mcap | head -1`: the tool ends quietly when the pipe closes."""
+    path, _ = recorded
+    command = f'{shlex.quote(executable(tool))} {shlex.quote(str(path))} | head -c 1'
+    done = subprocess.run(['bash', '-o', 'pipefail', '-c', command], capture_output=True,
+                          text=True, timeout=DEADLINE)
+    assert done.returncode == 0, done.stderr
+    assert 'Traceback' not in done.stderr and 'Broken pipe' not in done.stderr
+    assert len(done.stdout) == 1

@@ -10,6 +10,7 @@ import sys
 from ball_world.msgs.cdr import decode_pose_array, decode_vector3_stamped
 from ball_world.recording.mcap_reader import decode_stats, EDIT_KINDS, Recording, RecordingError
 from ball_world.step_record import STATS_FIELDS
+from ball_world.tools import print_report
 
 
 def _shown(text):
@@ -169,7 +170,7 @@ def main(argv=None):
     except ValueError as error:  # an undecodable message
         print(f'ball_world_info: {args.file}: {error}', file=sys.stderr)
         return 2
-    print('\n'.join(lines))
+    print_report('\n'.join(lines))
     return 0
 
 

@@ -24,6 +24,7 @@ from mcap.writer import CompressionType, Writer
 
 from ball_world.recording.files import open_regular, PartialOutput, same_path
 from ball_world.recording.mcap_reader import METADATA_NAME, RecordingError, Scan, Segment
+from ball_world.tools import print_report
 from ball_world.tools.progress import Progress
 
 PROG = 'ball_world_repair'
@@ -193,7 +194,7 @@ def main(argv=None):
     except OSError as error:
         print(f'{PROG}: {error}', file=sys.stderr)
         return 2
-    print(describe(report, args.input, target))
+    print_report(describe(report, args.input, target))
     return 0
 
 

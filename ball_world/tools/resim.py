@@ -29,6 +29,7 @@ from ball_world.msgs.cdr import decode_state_layout, decode_vector3_stamped
 from ball_world.recording.mcap_reader import Recording, RecordingError
 from ball_world.simulation import Simulation, SpawnRequest
 from ball_world.step_record import STATS_FIELDS
+from ball_world.tools import print_report
 from ball_world.tools.progress import Progress
 
 PROG = 'ball_world_resim'
@@ -299,7 +300,7 @@ def main(argv=None):
         print(f'{PROG}: {args.file}: cannot rebuild the world: {error}', file=sys.stderr)
         return 2
     progress.finish()
-    print('\n'.join(describe(comparison)))
+    print_report('\n'.join(describe(comparison)))
     return 0 if comparison.identical else 1
 
 
