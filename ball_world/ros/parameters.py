@@ -6,8 +6,7 @@ not make: integers given for doubles (`-p rate_hz:=60`, `arena:=[0, 0, 10, 10]`,
 `ros2 param set /ball_world rate_hz 30`) are converted, and an empty list (`-p arena:=[]`,
 `arena: []` in a file, which rcl hands over untyped) means an empty double array.
 """
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                ParameterType)
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.parameter import Parameter
 
 from ball_world.core import parameters as table
@@ -126,12 +125,3 @@ def current_values(node):
             value = [float(v) for v in value]
         values[parameter.name] = value
     return values
-
-
-def is_parameter_type(item, parameter):
-    """Whether an rclpy Parameter has the ROS type the table declares."""
-    return item.type_ == _ROS_TYPES[parameter.kind]
-
-
-__all__ = ['ParameterType', 'as_ros_value', 'converted', 'current_values', 'declare_all',
-           'descriptor', 'is_parameter_type', 'ParameterError']
