@@ -116,7 +116,7 @@ class Simulation:
             self.log_offset_ns = self.last_log_ns + dt_ns
         info = RunInfo(parameters=dict(parameters), topics=dict(self.topics),
                        segment=self.segment, log_offset_ns=self.log_offset_ns,
-                       package_version=__version__)
+                       package_version=__version__, backend=world.backend)
         snapshot = WorldSnapshot(
             radii=world.radii.copy(), masses=world.masses.copy(),
             walls=world.walls.segments.copy(), positions=world.positions.copy(),

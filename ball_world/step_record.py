@@ -81,6 +81,7 @@ class RunInfo:
     segment: int
     log_offset_ns: int
     package_version: str
+    backend: str = ''  # the backend physics.backend resolved to (auto: numba or numpy)
 
 
 @dataclass(frozen=True)

@@ -187,6 +187,7 @@ def test_file_has_ros2_profile_channel_metadata_and_segment_records(recorded):
     assert (first['segment'], second['segment']) == ('0', '1')
     assert int(second['log_offset_ns']) == truth.records[30].log_time_ns + 50_000_000
     assert second['dt_ns'] == '50000000' and second['frame_id'] == 'world'
+    assert second['backend'] == Simulation({}).world.backend  # what auto resolved to
     assert yaml.safe_load(second['parameters']) == yaml.safe_load(second['parameters_json'])
     params = yaml.safe_load(second['parameters'])['ball_world']['ros__parameters']
     assert params['arena'] == [0.0, 0.0, 6.0, 5.0] and params['random']['count'] == 8

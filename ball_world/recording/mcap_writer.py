@@ -223,6 +223,8 @@ def segment_metadata(world, info, topics):
         'dt_ns': str(world.dt_ns),
         'frame_id': world.frame_id,
         'package_version': info.package_version,
+        # Which backend stepped it; both give the same bits, so re-simulation may use either.
+        'backend': info.backend,
         'parameters': yaml.dump(document, Dumper=_ParamsDumper, sort_keys=False),
         'parameters_json': json.dumps(document),
         'topics': json.dumps(topics),
