@@ -23,6 +23,7 @@ import math
 import multiprocessing
 import os
 from pathlib import Path
+import re
 import shutil
 import signal
 import sys
@@ -37,6 +38,9 @@ from ball_world.msgs.cdr import decode_pose_array, decode_state_layout
 DT = 0.01
 #: Seconds to wait for DDS discovery, a node to start or to stop, before calling it a hang.
 DEADLINE = 120.0
+#: The real-time factor in the node's progress line ('step 1000: 99.9 steps/s, real-time
+#: factor 0.999; impulses applied ...').
+REAL_TIME_FACTOR = re.compile(r'real-time factor (\d+(?:\.\d*)?)')
 TABLE_HEADER = '| case | what happened | figure |\n|---|---|---|'
 
 
@@ -101,14 +105,7 @@ class NodeProcess:
 
     def real_time_factors(self):
         """The real-time factors of the node's 10 s progress lines."""
-        factors = []
-        for line in self.log().splitlines():
-            if 'real-time factor' in line:
-                try:
-                    factors.append(float(line.split('real-time factor ')[1].split(',')[0]))
-                except (IndexError, ValueError):
-                    pass
-        return factors
+        return [float(value) for value in REAL_TIME_FACTOR.findall(self.log())]
 
 
 def world_parameters(args, seed=0):
