@@ -4,11 +4,12 @@ Why a tool and not a note: speed claims rot. This runs every engine in one proce
 same scene (the issue's: equal balls of radius 0.5 m at a 20% area fraction, all at 24 m/s,
 dt 1/240 s, elastic, no gravity), so the numbers in docs/bench.md can be re-made on any
 machine with one command. The default backend (`physics.backend: auto`) is named in the
-report and compared with pymunk. Besides steps per second it measures what the node spends
-per step around the physics (CDR encoding, publishing, MCAP recording), the energy drift of
-each engine, and optionally: memory growth over a long recorded run, the time from process
-start to the first step (numba kernels cached or not), and worst-case worlds at the size
-limits of `core.limits`.
+report and compared with pymunk. Exact mode is timed beside seed mode on the gas scenes of
+benchmarks.exact_speed (the same code, not a copy). Besides steps per second it measures what
+the node spends per step around the physics (CDR encoding, publishing, MCAP recording), the
+energy drift of each engine, and optionally: memory growth over a long recorded run, the
+time from process start to the first step (numba kernels cached or not), and worst-case
+worlds at the size limits of `core.limits`.
 
 An all-pairs numpy baseline used to sit here; it was dropped: it carried a third copy of
 the contact resolution, and what it showed (O(N^2) detection loses) the N sweep shows too.
@@ -26,6 +27,7 @@ import sys
 import tempfile
 import time
 
+from benchmarks import exact_speed
 import numpy as np
 
 from ball_world.core import limits
@@ -42,6 +44,8 @@ SPEED = 24.0
 DT = 1.0 / 240.0
 MASS = 1.0
 FRAME_ID = 'world'
+#: Issue 11: the default backend at least this many times as fast as pymunk at every N.
+TARGET_VS_PYMUNK = 2.0
 
 OURS_NUMPY = 'ball_world (numpy)'
 OURS_NUMBA = 'ball_world (numba)'
@@ -548,12 +552,22 @@ def markdown(results, args, pymunk, allocator, command):
                   for name in ours]
         lines.append(f'| {n:,} | ' + ' | '.join(_rate(row.get(name)) for name in engines)
                      + ''.join(f' | {ratio}' for ratio in ratios) + ' |')
-    lines += ['', 'Ratios: against the faster pymunk index at that N, measured in the same run.']
+    lines += ['', 'Ratios: against the faster pymunk index at that N, measured in the same run. '
+              + default_target_line(results, args)]
     smallest = min(args.n)
     row = results['rates'].get(smallest, {})
     lines += ['', f'## Fixed per-step cost at N = {smallest:,} (median time per step)', '',
               '| engine | us per step |', '|---|---:|']
     lines += [f'| {name} | {1e6 / row[name]:,.1f} |' for name in engines if row.get(name)]
+    if results.get('exact'):
+        lines += ['', '## Exact mode beside seed mode (numba backend)', '',
+                  exact_speed.HEADER, *results['exact'], '',
+                  f'Median of {args.repeats} alternating rounds of about '
+                  f'{args.seconds / 2:g} s of CPU time each (`benchmarks/exact_speed.py`: '
+                  'process CPU time, so waiting for a busy core does not count), after '
+                  f'{exact_warm_up(args)} untimed steps. Equal disks of r = '
+                  f'{exact_speed.RADIUS} m on a jittered lattice, all at one speed; targets '
+                  'from issue 14.']
     if results['energy']:
         lines += ['', '## Kinetic energy', '',
                   '| engine | N | steps | relative change | balls outside the box |',
@@ -616,6 +630,24 @@ def markdown(results, args, pymunk, allocator, command):
     return '\n'.join(lines) + '\n'
 
 
+def default_target_line(results, args):
+    """Whether the default backend is at least TARGET_VS_PYMUNK x pymunk at every N."""
+    default = OURS[resolve_backend(AUTO)]
+    ratios = {}
+    for n in args.n:
+        row = results['rates'].get(n, {})
+        pymunks = [row[name] for name in (PYMUNK_TREE, PYMUNK_HASH) if row.get(name)]
+        if pymunks and row.get(default):
+            ratios[n] = row[default] / max(pymunks)
+    if not ratios:
+        return ''
+    missed = [f'N = {n:,} ({ratio:.2f}x)' for n, ratio in ratios.items()
+              if ratio < TARGET_VS_PYMUNK]
+    return (f'Target (issue 11): the default backend ({default}) at least '
+            f'{TARGET_VS_PYMUNK:g}x pymunk at every N: '
+            + (f'missed at {", ".join(missed)}.' if missed else 'met at every N timed.'))
+
+
 def plot(results, args, path):
     """steps/s against N, log-log, one line per engine, and ideal O(N) from our N=1000."""
     from matplotlib.figure import Figure
@@ -667,6 +699,11 @@ def parse_args(argv):
     parser.add_argument('--cdr-poses', type=int, default=10000)
     parser.add_argument('--budget-n', type=int, nargs='*', default=[1000, 10000],
                         help='N of the per-step budget (default 1000 10000; none to skip)')
+    parser.add_argument('--exact-n', type=int, nargs='*', default=[1000, 10000],
+                        help='N of the dilute and dense scenes of exact mode beside seed mode '
+                             '(default 1000 10000; none to skip them)')
+    parser.add_argument('--no-exact', action='store_true',
+                        help='do not time exact mode beside seed mode')
     parser.add_argument('--no-extras', action='store_true',
                         help='time the engines only: no energy, CDR or budget sections')
     parser.add_argument('--memory-minutes', type=float, default=0.0,
@@ -681,18 +718,25 @@ def parse_args(argv):
                         help="leave glibc malloc's thresholds at their defaults")
     parser.add_argument('--seed', type=int, default=1)
     parser.add_argument('--plot', type=Path, default=Path('docs/bench.png'))
-    parser.add_argument('--markdown', type=Path, help='also write the tables to this file')
+    parser.add_argument('--markdown', type=Path, default=Path('docs/bench.md'),
+                        help='write the tables to this file (default docs/bench.md)')
     parser.add_argument('--quick', action='store_true',
                         help='a tiny configuration (N = 100, 300; short runs) for tests')
     args = parser.parse_args(argv)
     if args.quick:
         args.n, args.repeats, args.seconds, args.warmup_steps = [100, 300], 2, 0.05, 20
         args.energy_n, args.energy_steps, args.cdr_poses, args.budget_n = 300, 500, 1000, [300]
+        args.exact_n = [300]
     if (any(n < 1 for n in args.n) or args.repeats < 1 or args.seconds <= 0.0
             or args.warmup_steps < 0):
         parser.error('--n values and --repeats must be >= 1, --seconds > 0 and '
                      '--warmup-steps >= 0')
     return args
+
+
+def exact_warm_up(args):
+    """Untimed steps before exact and seed mode are timed: enough to mix the lattice start."""
+    return min(args.warmup_steps, 50)
 
 
 def _import_pymunk():
@@ -735,7 +779,8 @@ def run_engines(args, pymunk):
 
 def main(argv=None):
     args = parse_args(argv)
-    command = ' '.join(['ball_world_bench', *(sys.argv[1:] if argv is None else argv)])
+    command = ' '.join(['python -m benchmarks.bench',
+                        *(sys.argv[1:] if argv is None else argv)])
     if args.no_tune_allocator:
         allocator = 'glibc defaults (--no-tune-allocator)'
     elif tune_allocator():
@@ -745,6 +790,12 @@ def main(argv=None):
         allocator = 'not tuned (not glibc, or mallopt refused)'
     pymunk = _import_pymunk()
     results = run_engines(args, pymunk)
+    if not args.no_exact and numba_installed():
+        results['exact'] = []
+        for line in exact_speed.rows(args.exact_n, args.repeats, args.seconds / 2,
+                                     exact_warm_up(args)):
+            print(f'exact beside seed: {line}', flush=True)
+            results['exact'].append(line)
     if not args.no_extras:
         results['cdr'] = bench_cdr(args.cdr_poses, args.repeats)
         with tempfile.TemporaryDirectory() as directory:

@@ -3,9 +3,12 @@
 The test suite checks each failure mode once, quickly; these runs repeat them long enough to
 give figures: how much a SIGKILL loses over many kills, whether an impulse flood is applied
 in full, whether the core stays exact over a million steps, whether memory grows over
-minutes of recording. Every case prints progress to stderr and one Markdown table row
-(case | what happened | figure) to stdout, and exits 0 when its checks held, 1 when one
-failed, 2 when it could not run.
+minutes of recording, what a full disk under both recordings does to the node. Two cases
+measure the node's speed the way a user meets it: `rtf` (the real-time factor of a 10,000
+ball world at 100 Hz while publishing and recording, with the CPU time of each thread) and
+`startup` (process start to the first `balls` message a probe hears). Every case prints
+progress to stderr and one Markdown table row (case | what happened | figure) to stdout, and
+exits 0 when its checks held, 1 when one failed, 2 when it could not run.
 
 The node runs as a subprocess (the installed `ball_world`, found as the tests find it), in its
 own namespace /soak_<pid>, so a soak never hears another ball_world on the same ROS domain.
@@ -20,6 +23,7 @@ import math
 import multiprocessing
 import os
 from pathlib import Path
+import re
 import shutil
 import signal
 import sys
@@ -34,6 +38,9 @@ from ball_world.msgs.cdr import decode_pose_array, decode_state_layout
 DT = 0.01
 #: Seconds to wait for DDS discovery, a node to start or to stop, before calling it a hang.
 DEADLINE = 120.0
+#: The real-time factor in the node's progress line ('step 1000: 99.9 steps/s, real-time
+#: factor 0.999; impulses applied ...').
+REAL_TIME_FACTOR = re.compile(r'real-time factor (\d+(?:\.\d*)?)')
 TABLE_HEADER = '| case | what happened | figure |\n|---|---|---|'
 
 
@@ -73,11 +80,12 @@ def _harness():
 class NodeProcess:
     """The node in a subprocess, with its output in a log file (a pipe could fill and block)."""
 
-    def __init__(self, workdir, namespace, name, parameters):
+    def __init__(self, workdir, namespace, name, parameters, **options):
+        """options: the harness's start() options (env, limit_file_size...)."""
         self.log_path = Path(workdir) / f'{name}.log'
         self.process = _harness().start_node(
             *(f'{key}:={value}' for key, value in parameters.items()),
-            ros_args=['-r', f'__ns:={namespace}'], log=self.log_path)
+            ros_args=['-r', f'__ns:={namespace}'], log=self.log_path, **options)
         self.pid = self.process.pid
 
     def log(self):
@@ -97,14 +105,7 @@ class NodeProcess:
 
     def real_time_factors(self):
         """The real-time factors of the node's 10 s progress lines."""
-        factors = []
-        for line in self.log().splitlines():
-            if 'real-time factor' in line:
-                try:
-                    factors.append(float(line.split('real-time factor ')[1].split(',')[0]))
-                except (IndexError, ValueError):
-                    pass
-        return factors
+        return [float(value) for value in REAL_TIME_FACTOR.findall(self.log())]
 
 
 def world_parameters(args, seed=0):
@@ -112,7 +113,7 @@ def world_parameters(args, seed=0):
     side = arena_side(args.balls)
     return {'random.count': args.balls, 'random.seed': seed,
             'arena': f'[0.0, 0.0, {side}, {side}]', 'markers.rate_hz': 0.0, 'dt': DT,
-            'physics.backend': args.backend}
+            'physics.backend': args.backend, 'physics.mode': args.mode}
 
 
 def arena_side(balls):
@@ -135,6 +136,8 @@ class Listener:
         self.probe = _harness().Probe('soak_listener')
         self.last_step = -1
         self.heard = 0
+        #: time.perf_counter() at the first two `balls` messages (step 0, then step 1).
+        self.first_arrivals = []
         self.real_time_factor = math.nan
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         self.probe.node.create_subscription(PoseArray, f'{namespace}/balls', self._on_balls,
@@ -144,6 +147,8 @@ class Listener:
                                                 self._on_stats, qos, raw=True)
 
     def _on_balls(self, data):
+        if len(self.first_arrivals) < 2:
+            self.first_arrivals.append(time.perf_counter())
         stamp_ns = decode_pose_array(data)[0]
         self.last_step = max(self.last_step, round(stamp_ns / (DT * 1e9)))
         self.heard += 1
@@ -494,7 +499,7 @@ def run_steps(args, workdir):
     side = arena_side(args.balls)
     simulation = Simulation({'random.count': args.balls, 'random.seed': args.seed,
                              'arena': [0.0, 0.0, side, side], 'dt': DT,
-                             'physics.backend': args.backend})
+                             'physics.backend': args.backend, 'physics.mode': args.mode})
     world = simulation.world
     energy = world.kinetic_energy()
     rss_start = rss_mb()
@@ -521,11 +526,12 @@ def run_steps(args, workdir):
     elapsed = time.monotonic() - began
     drift = (world.kinetic_energy() - energy) / energy
     rss_end = rss_mb()
-    what = (f'Simulation ({args.backend}), {args.balls} balls in a {side:g} m box, '
+    what = (f'Simulation ({world.backend}, {args.mode} mode), {args.balls} balls in a '
+            f'{side:g} m box, '
             f'{simulation.step_index:,} steps in {elapsed:.0f} s '
             f'({simulation.step_index / elapsed:,.0f} steps/s): '
             + (bad or 'no NaN, every centre inside the arena'))
-    row(f'steps --count {args.count:,}', what,
+    row(f'steps --count {args.count:,} --mode {args.mode}', what,
         f'energy drift {drift:.2e} (largest at the 10% marks '
         f'{max(worst_drift, abs(drift)):.2e}); RSS '
         f'{rss_start:.0f} -> {rss_end:.0f} MB')
@@ -604,6 +610,264 @@ def _size_mb(path):
     return path.stat().st_size / 2**20 if path.exists() else 0.0
 
 
+# rtf ------------------------------------------------------------------------------------------
+
+def thread_cpu(pid):
+    """CPU seconds (user + system) of each thread of a process, by thread id, with its name."""
+    import psutil
+    times = {}
+    for thread in psutil.Process(pid).threads():
+        try:
+            name = Path(f'/proc/{pid}/task/{thread.id}/comm').read_text().strip()
+        except OSError:  # the thread ended meanwhile
+            continue
+        times[thread.id] = (name, thread.user_time + thread.system_time)
+    return times
+
+
+def cpu_by_part(pid, before, after, seconds):
+    """Share of one core each part of the node used between two thread_cpu() samples.
+
+    The main thread steps, encodes and publishes; the node's other Python threads (named as
+    the process: Python 3.12 does not name them for the OS) write the recordings; the rest
+    are the middleware's (DDS), named by it.
+    """
+    main_name = after.get(pid, before.get(pid, ('', 0.0)))[0]
+    parts = {}
+    for tid, (name, cpu) in after.items():
+        used = cpu - before.get(tid, (name, 0.0))[1]
+        part = ('main (step, encode, publish)' if tid == pid else
+                'other threads named as the process (recording writer...)' if name == main_name
+                else 'DDS')
+        parts[part] = parts.get(part, 0.0) + used / seconds
+    return parts
+
+
+def rtf_parameters(args, path):
+    """The node scene: equal balls of radius 0.5 m at 20% of a square box, 100 Hz."""
+    side = round(0.5 * math.sqrt(args.balls * math.pi / 0.2), 3)
+    parameters = {'random.count': args.balls, 'random.radius': '[0.5, 0.5]',
+                  'random.speed': args.speed, 'arena': f'[0.0, 0.0, {side}, {side}]',
+                  'dt': DT, 'rate_hz': 100.0, 'physics.backend': args.backend,
+                  'physics.mode': args.mode}
+    if args.record:
+        parameters['record.mcap'] = path
+    return parameters, side
+
+
+def run_rtf(args, workdir):
+    import psutil
+    ns = namespace()
+    path = Path(workdir) / f'rtf-{args.mode}.mcap'
+    parameters, side = rtf_parameters(args, path)
+    node = NodeProcess(workdir, ns, f'rtf-{args.mode}', parameters)
+    listener = Listener(ns, stats=True)
+    me = psutil.Process()
+    try:
+        listener.spin_until(lambda: listener.heard > 0, 'the first step', node)
+        listener.probe.spin_for(2.0)  # past the first steps (lists built, writer started)
+        first_step, began = listener.last_step, time.monotonic()
+        threads_before, mine_before = thread_cpu(node.pid), sum(me.cpu_times()[:2])
+        rss_start = rss_mb(node.pid)
+        end = began + args.seconds
+        while time.monotonic() < end:
+            node.check_alive()
+            listener.spin(0.05)
+        elapsed = time.monotonic() - began
+        steps = listener.last_step - first_step
+        threads_after, mine_after = thread_cpu(node.pid), sum(me.cpu_times()[:2])
+        rss_end = rss_mb(node.pid)
+        stats_rtf = listener.real_time_factor
+        code = node.stop(signal.SIGINT)
+    finally:
+        node.kill()
+        listener.close()
+    parts = cpu_by_part(node.pid, threads_before, threads_after, elapsed)
+    windows = node.real_time_factors()
+    size = _size_mb(path)
+    if path.exists() and not args.keep:
+        path.unlink()
+    overall = steps * DT / elapsed
+    what = (f'{args.balls:,} balls (r 0.5 m, 20% of a {side:g} m box, speeds up to '
+            f'{args.speed:g} m/s), {args.mode} mode ({args.backend} backend), rate_hz 100, '
+            f'dt {DT:g} s, markers at their default rate, a probe subscribed to `balls` and '
+            '`stats`' + (f', recording MCAP ({size:,.0f} MB)' if args.record else '')
+            + f'; {steps:,} steps in {elapsed:.1f} s; node exit {code}; CPU (share of one '
+            'core): ' + ', '.join(f'{part} {share:.2f}' for part, share in sorted(parts.items()))
+            + f', this probe {(mine_after - mine_before) / elapsed:.2f}; node RSS '
+            f'{rss_start:.0f} -> {rss_end:.0f} MB')
+    figure = (f'real-time factor {overall:.3f} over {elapsed:.0f} s (probe: steps heard x dt / '
+              'wall time); node log, every 10 s window: '
+              + (', '.join(f'{rtf:.3f}' for rtf in windows) if windows else 'none')
+              + f'; `stats` since start {stats_rtf:.3f}')
+    row(f'rtf --mode {args.mode} --balls {args.balls} --speed {args.speed:g}', what, figure)
+    return 0 if code == 0 and overall >= args.target else 1
+
+
+# startup --------------------------------------------------------------------------------------
+
+def first_messages(workdir, label, backend, environment):
+    """Seconds from starting the node process to the first two `balls` messages a probe hears
+    (step 0, published once the world is built; step 1, the first step taken)."""
+    ns = namespace()
+    listener = Listener(ns)  # subscribed before the node starts: its start-up is not timed
+    began = time.perf_counter()
+    node = NodeProcess(workdir, ns, f'startup-{label}', {'physics.backend': backend},
+                       env=environment)
+    try:
+        listener.spin_until(lambda: len(listener.first_arrivals) >= 2, 'step 1', node)
+        code = node.stop(signal.SIGINT)
+    finally:
+        node.kill()
+        listener.close()
+    if code != 0:
+        raise SoakError(f'the node ({label}) exited with {code}: {node.log()[-500:]}')
+    return [arrival - began for arrival in listener.first_arrivals]
+
+
+def run_startup(args, workdir):
+    """The default world, process start to first messages: numba kernels cached (as `make
+    setup` leaves them), numba with an empty cache (NUMBA_CACHE_DIR), and numpy."""
+    cold_cache = Path(workdir) / 'empty_numba_cache'
+    cold_cache.mkdir()
+    cases = [('numba, kernels cached', 'numba', {}),
+             ('numba, no kernel cache (first run ever)', 'numba',
+              {'NUMBA_CACHE_DIR': str(cold_cache)}),
+             ('numpy', 'numpy', {})]
+    rows = []
+    for label, backend, extra in cases:
+        times = []
+        # Only the first run with an empty cache is cold: it fills the cache.
+        for attempt in range(1 if 'NUMBA_CACHE_DIR' in extra else args.repeats):
+            if extra:
+                shutil.rmtree(cold_cache)
+                cold_cache.mkdir()
+            times.append(first_messages(workdir, f'{backend}{attempt}', backend,
+                                        {**os.environ, **extra}))
+            progress(f'startup, {label}: step 0 heard after {times[-1][0]:.2f} s, step 1 after '
+                     f'{times[-1][1]:.2f} s')
+        rows.append((label, times))
+    for label, times in rows:
+        step0 = sorted(t[0] for t in times)
+        step1 = sorted(t[1] for t in times)
+        spread = (lambda values: f'{values[len(values) // 2]:.2f} s' + (
+            f' (runs {values[0]:.2f}-{values[-1]:.2f})' if len(values) > 1 else ''))
+        row(f'startup: {label}', f'default world (20 balls, 60 Hz), {len(times)} run(s); '
+            'a probe subscribed before the node process starts',
+            f'first `balls` (step 0) after {spread(step0)}; step 1 after {spread(step1)}')
+    return 0
+
+
+# fulldisk -------------------------------------------------------------------------------------
+
+@contextlib.contextmanager
+def small_disk(directory, size_mb):
+    """A tmpfs of size_mb mounted at directory (needs root), unmounted at the end; yields
+    None, or the file size limit to use instead when it cannot be mounted."""
+    import subprocess
+    directory.mkdir()
+    size = f'size={round(size_mb * 1024)}k'
+    done = subprocess.run(['mount', '-t', 'tmpfs', '-o', size, 'tmpfs', str(directory)],
+                          capture_output=True, text=True)
+    if done.returncode != 0:
+        progress(f'fulldisk: no tmpfs ({done.stderr.strip()}); using RLIMIT_FSIZE instead')
+        yield int(size_mb * 2**20)
+        return
+    try:
+        yield None
+    finally:
+        subprocess.run(['umount', str(directory)], check=True)
+
+
+def mcap_findings(path, workdir):
+    """What the tools make of an MCAP left by a full disk: as it is, then after repair."""
+    from ball_world.recording.mcap_reader import Recording, RecordingError
+    from ball_world.tools import repair
+    findings = {}
+    try:
+        recording = Recording(path)
+        steps = [step.step for step in recording.steps() if step.complete]
+        findings['steps'] = (len(steps), steps == list(range(len(steps))))
+        findings['summary'] = recording.has_summary
+        findings['readers'] = check_readers(path, recording.topic_of('balls'))
+    except RecordingError as error:
+        findings['steps'] = f'ball_world cannot read it: {error}'
+    repaired = Path(workdir) / f'{path.parent.name}-{path.stem}.repaired.mcap'
+    try:
+        repair.repair(str(path), str(repaired))
+        recording = Recording(repaired)
+        findings['repaired_readers'] = check_readers(repaired, recording.topic_of('balls'))
+        findings['repaired_steps'] = sum(1 for step in recording.steps() if step.complete)
+    except RecordingError as error:
+        findings['repaired_readers'] = f'repair failed: {error}'
+    return findings
+
+
+def run_fulldisk_once(args, workdir, sig):
+    name = signal.Signals(sig).name
+    disk = Path(workdir) / f'disk-{name}'
+    with small_disk(disk, args.size_mb) as size_limit:
+        mcap, rrd = disk / 'full.mcap', disk / 'full.rrd'
+        options = {} if size_limit is None else {'limit_file_size': size_limit}
+        ns = namespace()
+        node = NodeProcess(workdir, ns, f'fulldisk-{name}',
+                           {**world_parameters(args), 'rate_hz': args.rate,
+                            'record.mcap': mcap, 'record.rerun': rrd}, **options)
+        listener = Listener(ns)
+        failures = ('recording to McapSink stopped', 'recording to RerunSink stopped')
+        try:
+            listener.spin_until(lambda: listener.heard > 0, 'the first step', node)
+            listener.spin_until(lambda: all(f in node.log() for f in failures),
+                                'both recorders to report the full disk', node)
+            failed_at = listener.last_step
+            listener.probe.spin_for(1.0)
+            first_step, began = listener.last_step, time.monotonic()
+            listener.probe.spin_for(args.seconds)
+            rate = (listener.last_step - first_step) / (time.monotonic() - began)
+            signalled = time.monotonic()
+            code = node.stop(sig)
+            exit_seconds = time.monotonic() - signalled
+        finally:
+            node.kill()
+            listener.close()
+        log = node.log()
+        counts = [log.count(f) for f in failures]
+        findings = mcap_findings(mcap, workdir)
+        rrd_verify = rerun_cli('rrd', 'verify', rrd) if rrd.exists() else (None, 'no file')
+        sizes = (_size_mb(mcap), _size_mb(rrd))
+    how = 'RLIMIT_FSIZE' if size_limit else 'tmpfs'
+    readable = (isinstance(findings['steps'], tuple) and findings['steps'][1]
+                and all(isinstance(v, int) and v == findings['steps'][0]
+                        for v in findings['readers'].values()))
+    repaired = findings['repaired_readers']
+    repaired_ok = isinstance(repaired, dict) and all(isinstance(v, int) for v in repaired.values())
+    what = (f'{args.balls:,} balls at {args.rate:g} Hz recording MCAP and .rrd onto a '
+            f'{args.size_mb:g} MB {how}: failures logged {counts[0]}x (MCAP) and {counts[1]}x '
+            f'(.rrd), both by step {failed_at}; stepping went on at {rate:.1f} steps/s; '
+            f'{name}: exit {code} after {exit_seconds:.1f} s; '
+            f'{"Traceback in the log; " if "Traceback" in log else ""}'
+            f'MCAP {sizes[0]:.2f} MB, summary {findings.get("summary")}, '
+            + (f'{findings["steps"][0]} steps read by ball_world, as is mcap / mcap_ros2 / '
+               f'rosbags read {findings["readers"]}'
+               if isinstance(findings['steps'], tuple) else findings['steps'])
+            + f'; after ball_world_repair {repaired}; .rrd {sizes[1]:.2f} MB, `rerun rrd '
+            f'verify` exit {rrd_verify[0]}')
+    fine = (counts == [1, 1] and code == 0 and exit_seconds < 10.0
+            and rate >= 0.9 * args.rate and (readable or repaired_ok))
+    return what, fine, rate, exit_seconds
+
+
+def run_fulldisk(args, workdir):
+    fine = True
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        what, ok, rate, exit_seconds = run_fulldisk_once(args, workdir, sig)
+        fine = fine and ok
+        row(f'fulldisk --balls {args.balls} ({signal.Signals(sig).name})', what,
+            f'{rate:.1f} steps/s after the failure; exit {exit_seconds:.1f} s after '
+            f'{signal.Signals(sig).name}')
+    return 0 if fine else 1
+
+
 # Command line ---------------------------------------------------------------------------------
 
 def main(argv=None):
@@ -640,14 +904,37 @@ def main(argv=None):
     memory.add_argument('--balls', type=int, default=1000)
     memory.add_argument('--record', choices=('both', 'mcap', 'rrd', 'none'), default='both',
                         help='what the node records (default both), to tell whose memory grows')
-    for case in (kill, flood, steps, memory):
-        case.add_argument('--backend', choices=('numpy', 'numba'), default='numpy',
-                          help='physics.backend of the world (default numpy)')
+    rtf = cases.add_parser('rtf', help='real-time factor of a 10,000-ball node at 100 Hz, '
+                                       'publishing and recording MCAP')
+    rtf.add_argument('--balls', type=int, default=10_000)
+    rtf.add_argument('--speed', type=float, default=24.0,
+                     help='random.speed: largest initial speed, m/s (default 24)')
+    rtf.add_argument('--seconds', type=float, default=60.0)
+    rtf.add_argument('--no-record', dest='record', action='store_false',
+                     help='record nothing (default: record MCAP)')
+    rtf.add_argument('--target', type=float, default=0.99,
+                     help='least real-time factor that passes (default 0.99)')
+    startup = cases.add_parser('startup', help='process start to the first `balls` message of '
+                                               'the default world, numba cached and cold, numpy')
+    startup.add_argument('--repeats', type=int, default=3)
+    fulldisk = cases.add_parser('fulldisk', help='record MCAP and .rrd onto a tiny tmpfs (or '
+                                                 'under RLIMIT_FSIZE), then SIGINT and SIGTERM')
+    fulldisk.add_argument('--balls', type=int, default=3000)
+    fulldisk.add_argument('--rate', type=float, default=100.0, help='rate_hz of the node')
+    fulldisk.add_argument('--size-mb', type=float, default=2.0, help='size of the tmpfs, MB')
+    fulldisk.add_argument('--seconds', type=float, default=5.0,
+                          help='how long to count steps after the failure')
+    for case in (kill, flood, steps, memory, rtf, fulldisk):
+        case.add_argument('--backend', choices=('auto', 'numpy', 'numba'), default='auto',
+                          help='physics.backend of the world (default auto, as the node)')
+        case.add_argument('--mode', choices=('seed', 'exact'), default='seed',
+                          help='physics.mode of the world (default seed, as the node)')
     args = parser.parse_args(argv)
-    for name in ('times', 'balls', 'count', 'senders'):
+    for name in ('times', 'balls', 'count', 'senders', 'repeats'):
         if getattr(args, name, 1) < 1:
             parser.error(f'--{name} must be at least 1')
-    runs = {'kill': run_kill, 'flood': run_flood, 'steps': run_steps, 'memory': run_memory}
+    runs = {'kill': run_kill, 'flood': run_flood, 'steps': run_steps, 'memory': run_memory,
+            'rtf': run_rtf, 'startup': run_startup, 'fulldisk': run_fulldisk}
     workdir = args.dir or tempfile.mkdtemp(prefix='ball_world_soak_')
     os.makedirs(workdir, exist_ok=True)
     try:

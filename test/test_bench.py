@@ -1,8 +1,8 @@
 """ball_world_bench runs end to end in its quick configuration and reports what it promises.
 
 No timing is asserted (machines differ); only that every section is produced, that both
-backends have a number at every N, that the default backend is named, and that the energy
-change is rounding noise.
+backends have a number at every N, that exact mode is timed beside seed mode on every gas
+scene, that the default backend is named, and that the energy change is rounding noise.
 """
 from benchmarks.bench import bench_worst_case, main, many_walls_world, radius_spread_world
 import numpy as np
@@ -46,6 +46,20 @@ def test_quick_benchmark_writes_table_and_plot(tmp_path, capsys):
         for column in ours + ratios:
             assert float(row[column].replace(',', '')) > 0.0
     assert '- Default backend: physics.backend auto = numba' in text
+
+    exact = [_cells(line) for line in _section(text, 'Exact mode beside seed mode')
+             if line.startswith('| ')]
+    header, rows = exact[0], exact[1:]
+    seed_column, exact_column, ratio_column = (header.index('seed (numba) steps/s'),
+                                               header.index('exact steps/s'),
+                                               header.index('exact / seed'))
+    assert [(row[0].split(' (')[0], row[1]) for row in rows] == [
+        ('dilute', '300'), ('dense, fast', '300'), ('node scene', '10,000')]
+    for row in rows:
+        seed_rate, exact_rate, ratio = (float(row[column].replace(',', ''))
+                                        for column in (seed_column, exact_column, ratio_column))
+        assert seed_rate > 0.0 and exact_rate > 0.0
+        assert abs(ratio - exact_rate / seed_rate) <= 0.01 * ratio + 0.01  # rounding only
 
     printed = capsys.readouterr().out
     energy = [_cells(line) for line in _section(printed, 'Kinetic energy')
