@@ -868,6 +868,100 @@ def run_fulldisk(args, workdir):
     return 0 if fine else 1
 
 
+# viewer ---------------------------------------------------------------------------------------
+
+#: A subscriber in a process of its own, taking `balls`, `state` and `markers` as rclpy
+#: messages (reliable, as RViz and Foxglove subscribe), so that SIGSTOP freezes a real reader.
+FROZEN_SUBSCRIBER = """
+import sys
+import rclpy
+from geometry_msgs.msg import PoseArray
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64MultiArray
+from visualization_msgs.msg import MarkerArray
+rclpy.init()
+node = rclpy.create_node('soak_frozen_subscriber')
+qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+for kind, topic in ((PoseArray, 'balls'), (Float64MultiArray, 'state'),
+                    (MarkerArray, 'markers')):
+    node.create_subscription(kind, sys.argv[1] + '/' + topic, lambda message: None, qos)
+rclpy.spin(node)
+"""
+
+
+def start_viewer(workdir):
+    """`rerun --save` on a free port, which takes the stream as a viewer does: (process, url)."""
+    import socket
+    harness = _harness()
+    with socket.socket() as probe:
+        probe.bind(('127.0.0.1', 0))
+        port = probe.getsockname()[1]
+    viewer = harness.start([str(harness.RERUN), '--bind', '127.0.0.1', '--port', str(port),
+                            '--save', str(Path(workdir) / 'viewer.rrd')],
+                           log=Path(workdir) / 'viewer.log')
+    deadline = time.monotonic() + DEADLINE
+    while True:
+        try:
+            socket.create_connection(('127.0.0.1', port), timeout=1.0).close()
+            return viewer, f'rerun+http://127.0.0.1:{port}/proxy'
+        except OSError:
+            if time.monotonic() > deadline or viewer.poll() is not None:
+                raise SoakError('rerun --save did not listen')
+            time.sleep(0.1)
+
+
+def run_viewer(args, workdir):
+    """The node streaming to a live viewer beside a reliable subscriber: the real-time factor
+    while both take the data, while both are frozen (SIGSTOP), and after both are killed."""
+    ns = namespace()
+    harness = _harness()
+    viewer, url = start_viewer(workdir)
+    subscriber = harness.start([sys.executable, '-c', FROZEN_SUBSCRIBER, ns],
+                               log=Path(workdir) / 'subscriber.log')
+    node = NodeProcess(workdir, ns, 'viewer', {**world_parameters(args), 'rate_hz': 100.0,
+                                               'markers.rate_hz': 10.0, 'view.rerun': url})
+    listener = Listener(ns)
+    factors = {}
+    try:
+        listener.spin_until(lambda: listener.heard > 0, 'the first step', node)
+        listener.probe.spin_for(2.0)
+
+        def phase(name):
+            first_step, began = listener.last_step, time.monotonic()
+            while time.monotonic() < began + args.seconds:
+                node.check_alive()
+                listener.spin(0.05)
+            factors[name] = (listener.last_step - first_step) * DT / (time.monotonic() - began)
+            progress(f'viewer: {name}: real-time factor {factors[name]:.3f}')
+
+        phase('viewer and subscriber taking the data')
+        for process in (viewer, subscriber):
+            process.send_signal(signal.SIGSTOP)
+        phase('both frozen (SIGSTOP)')
+        for process in (viewer, subscriber):
+            harness.kill(process)
+        phase('both killed')
+        code = node.stop(signal.SIGINT)
+    finally:
+        node.kill()
+        listener.close()
+        for process in (viewer, subscriber):
+            with contextlib.suppress(ProcessLookupError):
+                process.send_signal(signal.SIGCONT)
+            harness.kill(process)
+    log = node.log()
+    told = log.count('going on without it')
+    what = (f'{args.balls:,} balls at 100 Hz streaming to `rerun --save` as a live viewer, '
+            'a reliable rclpy subscriber to `balls`, `state` and `markers` in another process; '
+            f'each phase {args.seconds:g} s; the node said the view was gone {told}x; '
+            f'node exit {code}' + ('; Traceback in the log' if 'Traceback' in log else ''))
+    figure = 'real-time factor: ' + '; '.join(f'{name} {value:.3f}'
+                                              for name, value in factors.items())
+    row(f'viewer --balls {args.balls}', what, figure)
+    fine = code == 0 and told == 1 and all(v >= args.target for v in factors.values())
+    return 0 if fine else 1
+
+
 # Command line ---------------------------------------------------------------------------------
 
 def main(argv=None):
@@ -924,7 +1018,13 @@ def main(argv=None):
     fulldisk.add_argument('--size-mb', type=float, default=2.0, help='size of the tmpfs, MB')
     fulldisk.add_argument('--seconds', type=float, default=5.0,
                           help='how long to count steps after the failure')
-    for case in (kill, flood, steps, memory, rtf, fulldisk):
+    viewer = cases.add_parser('viewer', help='real-time factor while a live Rerun viewer and '
+                                             'a subscriber take the data, are frozen, are killed')
+    viewer.add_argument('--balls', type=int, default=1000)
+    viewer.add_argument('--seconds', type=float, default=20.0, help='length of each phase')
+    viewer.add_argument('--target', type=float, default=0.99,
+                        help='least real-time factor of every phase that passes (default 0.99)')
+    for case in (kill, flood, steps, memory, rtf, fulldisk, viewer):
         case.add_argument('--backend', choices=('auto', 'numpy', 'numba'), default='auto',
                           help='physics.backend of the world (default auto, as the node)')
         case.add_argument('--mode', choices=('seed', 'exact'), default='seed',
@@ -934,7 +1034,8 @@ def main(argv=None):
         if getattr(args, name, 1) < 1:
             parser.error(f'--{name} must be at least 1')
     runs = {'kill': run_kill, 'flood': run_flood, 'steps': run_steps, 'memory': run_memory,
-            'rtf': run_rtf, 'startup': run_startup, 'fulldisk': run_fulldisk}
+            'rtf': run_rtf, 'startup': run_startup, 'fulldisk': run_fulldisk,
+            'viewer': run_viewer}
     workdir = args.dir or tempfile.mkdtemp(prefix='ball_world_soak_')
     os.makedirs(workdir, exist_ok=True)
     try:

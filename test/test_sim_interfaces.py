@@ -14,13 +14,13 @@ from simulation_interfaces.msg import (Bounds, EntityCategory, Result, Simulatio
                                        SimulatorFeatures, SpawnEntity as SpawnEntityMsg,
                                        SpawnResult)
 from simulation_interfaces.srv import (DeleteEntity, GetEntities, GetEntitiesStates,
-                                       GetEntityInfo, GetEntityState, GetSimulationState,
-                                       GetSimulatorFeatures, GetSpawnables, ResetSimulation,
-                                       SetEntityState, SetSimulationState, SpawnEntities,
-                                       SpawnEntity, StepSimulation)
+                                       GetEntityBounds, GetEntityInfo, GetEntityState,
+                                       GetSimulationState, GetSimulatorFeatures, GetSpawnables,
+                                       ResetSimulation, SetEntityState, SetSimulationState,
+                                       SpawnEntities, SpawnEntity, StepSimulation)
 from std_msgs.msg import String
 
-from ball_world.ros.sim_interfaces import name_filter
+from ball_world.ros.sim_interfaces import name_filter, UNSUPPORTED
 
 THREE_BALLS = {'random.count': 0, 'rate_hz': 100.0, 'markers.rate_hz': 0.0,
                'balls.x': [2.0, 8.0, 5.0], 'balls.y': [2.0, 2.0, 8.0],
@@ -73,7 +73,7 @@ def test_features_list_exactly_what_is_served_and_spawnables_name_the_ball(world
         F.ENTITY_STATE_GETTING, F.ENTITY_STATE_SETTING, F.ENTITY_INFO_GETTING, F.SPAWNABLES,
         F.SIMULATION_RESET, F.SIMULATION_STATE_GETTING, F.SIMULATION_STATE_SETTING,
         F.SIMULATION_STATE_PAUSE, F.STEP_SIMULATION_SINGLE, F.STEP_SIMULATION_MULTIPLE,
-        F.STEP_SIMULATION_ACTION, F.SPAWNING_ENTITIES])
+        F.STEP_SIMULATION_ACTION, F.SPAWNING_ENTITIES, F.ENTITY_BOUNDS])
     assert list(features.spawn_formats) == ['ball']
     spawnables = world.call(GetSpawnables, 'get_spawnables', GetSpawnables.Request())
     assert spawnables.result.result == OK
@@ -87,8 +87,31 @@ def test_features_list_exactly_what_is_served_and_spawnables_name_the_ball(world
     for name in ('spawn_entity', 'spawn_entities', 'delete_entity', 'get_entities',
                  'get_entities_states', 'get_entity_state', 'set_entity_state',
                  'get_entity_info', 'get_spawnables', 'reset_simulation', 'step_simulation',
-                 'get_simulation_state', 'set_simulation_state', 'get_simulator_features'):
+                 'get_simulation_state', 'set_simulation_state', 'get_simulator_features',
+                 'get_entity_bounds'):
         assert f'/ball_world/{name}' in node_services, name
+
+
+def test_entity_bounds_are_the_balls_sphere(world):
+    bounds = world.call(GetEntityBounds, 'get_entity_bounds',
+                        GetEntityBounds.Request(entity='ball_2'))
+    assert bounds.result.result == OK
+    assert bounds.bounds.type == Bounds.TYPE_SPHERE
+    assert [(p.x, p.y, p.z) for p in bounds.bounds.points] == [(0.0, 0.0, 0.0), (0.4, 0.0, 0.0)]
+    missing = world.call(GetEntityBounds, 'get_entity_bounds',
+                         GetEntityBounds.Request(entity='ball_9'))
+    assert missing.result.result == Result.RESULT_NOT_FOUND
+    assert 'ball_9' in missing.result.error_message
+
+
+@pytest.mark.parametrize('srv_type, name, why', UNSUPPORTED)
+def test_services_of_what_a_ball_world_lacks_answer_unsupported_at_once(world, srv_type, name,
+                                                                        why):
+    """A client written for Gazebo that asks for worlds or named poses gets an answer, and
+    the feature is not listed."""
+    answer = world.call(srv_type, name, srv_type.Request())
+    assert answer.result.result == Result.RESULT_FEATURE_UNSUPPORTED
+    assert answer.result.error_message == why
 
 
 def test_spawn_places_a_named_ball_that_steps_and_is_published(world):

@@ -20,25 +20,31 @@ What the standard means in a ball world:
   state or spawned entities alone cannot be reset without breaking re-simulation).
 - StepSimulation and the SimulateSteps action step a paused world; they go on step by step
   between other callbacks, and stop early if the world is resumed, stopped or reset.
-Features not listed in FEATURES are answered with RESULT_FEATURE_UNSUPPORTED.
+- GetEntityBounds answers a ball's sphere: centre at its origin, x of the second point its
+  radius.
+Features not listed in FEATURES are answered with RESULT_FEATURE_UNSUPPORTED: filters by tags,
+and the services of named poses, worlds and SetEntityInfo, which are served so that a client
+written for a bigger simulator gets that answer at once instead of waiting for a service.
 """
 import math
 import re
 from re import _constants as sre_constants  # what sre_constants became (3.11+)
 from re import _parser as sre_parse  # what sre_parse became (3.11+)
 
-from geometry_msgs.msg import Point
+from geometry_msgs.msg import Point, Vector3
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from simulation_interfaces.action import SimulateSteps
 from simulation_interfaces.msg import (Bounds, EntityCategory, EntityState, Result,
                                        SimulationState, SimulatorFeatures, Spawnable,
                                        SpawnResult)
-from simulation_interfaces.srv import (DeleteEntity, GetEntities, GetEntitiesStates,
-                                       GetEntityInfo, GetEntityState, GetSimulationState,
-                                       GetSimulatorFeatures, GetSpawnables, ResetSimulation,
-                                       SetEntityState, SetSimulationState, SpawnEntities,
-                                       SpawnEntity, StepSimulation)
+from simulation_interfaces.srv import (DeleteEntity, GetAvailableWorlds, GetCurrentWorld,
+                                       GetEntities, GetEntitiesStates, GetEntityBounds,
+                                       GetEntityInfo, GetEntityState, GetNamedPoseBounds,
+                                       GetNamedPoses, GetSimulationState, GetSimulatorFeatures,
+                                       GetSpawnables, LoadWorld, ResetSimulation,
+                                       SetEntityInfo, SetEntityState, SetSimulationState,
+                                       SpawnEntities, SpawnEntity, StepSimulation, UnloadWorld)
 
 from ball_world.core import edits
 from ball_world.core.parameters import number_text
@@ -50,7 +56,24 @@ FEATURES = (_F.SPAWNING, _F.DELETING, _F.ENTITY_CATEGORIES, _F.SPAWNING_RESOURCE
             _F.ENTITY_STATE_GETTING, _F.ENTITY_STATE_SETTING, _F.ENTITY_INFO_GETTING,
             _F.SPAWNABLES, _F.SIMULATION_RESET, _F.SIMULATION_STATE_GETTING,
             _F.SIMULATION_STATE_SETTING, _F.SIMULATION_STATE_PAUSE, _F.STEP_SIMULATION_SINGLE,
-            _F.STEP_SIMULATION_MULTIPLE, _F.STEP_SIMULATION_ACTION, _F.SPAWNING_ENTITIES)
+            _F.STEP_SIMULATION_MULTIPLE, _F.STEP_SIMULATION_ACTION, _F.SPAWNING_ENTITIES,
+            _F.ENTITY_BOUNDS)
+#: Services of the standard for what a ball world does not have: (type, name, why), each
+#: answered with RESULT_FEATURE_UNSUPPORTED and the reason.
+UNSUPPORTED = (
+    (GetNamedPoses, 'get_named_poses', 'a ball world has no named poses'),
+    (GetNamedPoseBounds, 'get_named_pose_bounds', 'a ball world has no named poses'),
+    (GetAvailableWorlds, 'get_available_worlds',
+     'worlds are made from parameters (see ~/reset and reset_simulation), not loaded'),
+    (GetCurrentWorld, 'get_current_world',
+     'worlds are made from parameters (see ~/reset and reset_simulation), not loaded'),
+    (LoadWorld, 'load_world',
+     'worlds are made from parameters (see ~/reset and reset_simulation), not loaded'),
+    (UnloadWorld, 'unload_world',
+     'worlds are made from parameters (see ~/reset and reset_simulation), not loaded'),
+    (SetEntityInfo, 'set_entity_info',
+     'a ball is always a DYNAMIC_OBJECT described by its radius and mass'),
+)
 CATEGORY = EntityCategory.CATEGORY_DYNAMIC_OBJECT
 #: Longest name filter accepted, characters.
 MAX_FILTER_LENGTH = 256
@@ -74,6 +97,14 @@ _SPAWN_CODES = {
 
 def _result(code=Result.RESULT_OK, message=''):
     return Result(result=code, error_message=message)
+
+
+def _unsupported(why):
+    """A service callback that answers RESULT_FEATURE_UNSUPPORTED, saying why."""
+    def answer(request, response):
+        response.result = _result(Result.RESULT_FEATURE_UNSUPPORTED, why)
+        return response
+    return answer
 
 
 class _NextTurn:
@@ -206,6 +237,7 @@ class SimulationInterfaces:
             (GetEntityState, 'get_entity_state', self.get_entity_state),
             (SetEntityState, 'set_entity_state', self.set_entity_state),
             (GetEntityInfo, 'get_entity_info', self.get_entity_info),
+            (GetEntityBounds, 'get_entity_bounds', self.get_entity_bounds),
             (GetSpawnables, 'get_spawnables', self.get_spawnables),
             (GetSimulationState, 'get_simulation_state', self.get_simulation_state),
         )
@@ -217,6 +249,8 @@ class SimulationInterfaces:
             node.create_service(srv_type, f'~/{name}', callback)
         for srv_type, name, callback in long_services:
             node.create_service(srv_type, f'~/{name}', callback, callback_group=long_calls)
+        for srv_type, name, why in UNSUPPORTED:
+            node.create_service(srv_type, f'~/{name}', _unsupported(why))
         #: The services' names, for the node's start-up line.
         self.names = [name for _, name, _ in services + long_services]
         # Its own reentrant group: cancel requests must get through while a goal steps.
@@ -412,6 +446,17 @@ class SimulationInterfaces:
         radius = number_text(world.radii[index])
         response.info.description = (f'ball, radius {radius} m, mass '
                                      f'{number_text(world.masses[index])} kg')
+        response.result = _result()
+        return response
+
+    def get_entity_bounds(self, request, response):
+        try:
+            index = self.simulation.entities.index(request.entity)
+        except edits.EditRefused as refusal:
+            response.result = _result(Result.RESULT_NOT_FOUND, str(refusal))
+            return response
+        response.bounds.type = Bounds.TYPE_SPHERE
+        response.bounds.points = [Vector3(), Vector3(x=float(self.simulation.world.radii[index]))]
         response.result = _result()
         return response
 
