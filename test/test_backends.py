@@ -184,6 +184,34 @@ def test_a_dense_cluster_needs_many_rounds_and_stays_identical():
     assert totals[0] > 1000
 
 
+def test_candidate_lists_that_outgrow_their_buffers_are_regrown_and_stay_identical():
+    """A packed cluster has about 7 candidate pairs per ball (the buffer starts at 4), and
+    balls running between rails have six ball-wall pairs each (the buffer starts at one):
+    the step that outgrows a buffer still uses its lists, later steps rebuild into grown
+    buffers, and the backends still agree to the bit."""
+    rng = np.random.default_rng(3)
+    packed = lattice(rng, 300, 0.1, 1.0)
+    cluster = make_pair((packed, rng.normal(0.0, 0.05, (300, 2)), np.full(300, 0.1),
+                         np.ones(300), BOX))
+    n = 16
+    rails = [[0.0, 5.0 + dy, BOX_SIDE, 5.0 + dy] for dy in (-0.25, -0.2, -0.15, 0.15, 0.2, 0.25)]
+    between_rails = make_pair((np.column_stack((np.linspace(0.5, 9.5, n), np.full(n, 5.0))),
+                               np.column_stack((rng.normal(0.0, 2.0, n), np.zeros(n))),
+                               np.full(n, 0.1), np.ones(n), BOX + rails))
+    for worlds, grown in ((cluster, numba_backend.PAIRS),
+                          (between_rails, numba_backend.NEAR_WALLS)):
+        run_pair(worlds, 60, rng, 0)
+        pair_rows, wall_rows, lists = worlds[1]._stepper._prepared[7:10]
+        balls = len(worlds[1])
+        assert lists[numba_backend.FRESH] == 1
+        assert len(pair_rows) >= lists[numba_backend.PAIRS]
+        assert len(wall_rows) >= lists[numba_backend.NEAR_WALLS]
+        if grown == numba_backend.PAIRS:
+            assert len(pair_rows) > 4 * balls and lists[grown] > 4 * balls
+        else:
+            assert len(wall_rows) > balls and lists[grown] > balls
+
+
 def test_many_oblique_walls_unequal_masses_and_impulses_stay_identical():
     worlds = make_pair(random_world(11, 200, 'gas', 3.0, 1e4, 40))
     totals, _ = run_pair(worlds, 300, np.random.default_rng(11), 5)
