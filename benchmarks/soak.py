@@ -950,10 +950,10 @@ def run_viewer(args, workdir):
                 process.send_signal(signal.SIGCONT)
             harness.kill(process)
     log = node.log()
-    told = log.count('going on without it')
+    told = sum('recording to RerunSink stopped: live view' in line for line in log.splitlines())
     what = (f'{args.balls:,} balls at 100 Hz streaming to `rerun --save` as a live viewer, '
             'a reliable rclpy subscriber to `balls`, `state` and `markers` in another process; '
-            f'each phase {args.seconds:g} s; the node said the view was gone {told}x; '
+            f'each phase {args.seconds:g} s; the node reported the view lost {told}x; '
             f'node exit {code}' + ('; Traceback in the log' if 'Traceback' in log else ''))
     figure = 'real-time factor: ' + '; '.join(f'{name} {value:.3f}'
                                               for name, value in factors.items())

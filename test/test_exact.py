@@ -436,3 +436,21 @@ def test_gas_keeps_energy_never_overlaps_and_collides_at_the_enskog_rate(area_fr
     eta_bulk = n_bulk * math.pi * sigma * sigma / 4.0
     wall_rate = n_bulk * henderson_z(eta_bulk) * math.sqrt(kt_over_m / (2.0 * math.pi))
     assert rates.wall_rate() == pytest.approx(wall_rate * 4.0 * (side - sigma), rel=0.03)
+
+
+def test_cells_are_one_ball_wide_in_an_even_gas_and_narrow_otherwise():
+    """_cell_width widens cells only where that cannot crowd them: an even dilute gas gets
+    about its area per ball, a cluster with one far ball and a line of balls keep cells a
+    little over the largest diameter."""
+    from ball_world.core.exact_kernel import _cell_width, CELL_MARGIN
+    narrowest = 1.0 * CELL_MARGIN
+    even = Gas(2000, 0.1, 1.0, 0.5).world('numba').positions
+    low, high = even.min(axis=0), even.max(axis=0)
+    per_ball = math.sqrt(np.prod(high - low) / len(even))
+    assert per_ball > 2.0 * narrowest
+    assert _cell_width(even, narrowest) == per_ball
+    cluster = np.vstack((np.random.default_rng(1).uniform(0.0, 30.0, (2000, 2)), [[1e5, 1e5]]))
+    assert _cell_width(cluster, narrowest) == narrowest
+    line = np.column_stack((np.linspace(0.0, 1e4, 500), np.zeros(500)))
+    assert _cell_width(line, narrowest) == narrowest
+    assert _cell_width(np.array([[3.0, 4.0]]), narrowest) == narrowest
