@@ -470,7 +470,7 @@ def run_flood(args, workdir):
               f'(cumulative per `stats` {stats_rtf:.2f}'
               + (f', 10 s log lines {min(log_rtf):.2f}-{max(log_rtf):.2f}' if log_rtf else '')
               + f'); node peak RSS {peak_rss:.0f} MB')
-    row(f'flood --rate {args.rate:g} --senders {args.senders}', what, figure)
+    row(f'flood --rate {args.rate:g} --senders {args.senders} --mode {args.mode}', what, figure)
     return 0 if fine else 1
 
 
