@@ -15,7 +15,6 @@ import time
 from geometry_msgs.msg import PoseArray, Vector3Stamped
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
-from rclpy._rclpy_pybind11 import RCLError
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
@@ -589,8 +588,9 @@ def run(args=None):
         code = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except RCLError:
-        # A signal shut the context down in the middle of a callback (a publish then fails):
+    except Exception:  # noqa: B902
+        # A signal shut the context down in the middle of a callback (a publish then fails
+        # with RCLError; a message being taken, with a RuntimeError from its conversion):
         # that is a shutdown too. With the context still valid it is a real error.
         if rclpy.ok():
             raise

@@ -154,6 +154,11 @@ def main(args=None):
         fail(error)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass  # Ctrl-C or SIGTERM: a normal way to stop
+    except Exception:  # noqa: B902
+        # A signal that lands while rclpy takes a message surfaces as whatever that call
+        # raises (a RuntimeError from its conversion): a stop too, once the context is down.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()
