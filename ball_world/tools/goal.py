@@ -149,7 +149,10 @@ def main(args=None):
     try:
         rclpy.init(args=argv)
         node = GoalController()
-        rclpy.spin(node)
+        # Short waits, as the world node does: a shut-down context ends the loop within
+        # 0.1 s even if the wake-up of a signal that shut it down was missed.
+        while rclpy.ok():
+            rclpy.spin_once(node, timeout_sec=0.1)
     except ParameterError as error:
         fail(error)
     except (KeyboardInterrupt, ExternalShutdownException):
