@@ -1054,6 +1054,10 @@ def main(argv=None):
         case.add_argument('--mode', choices=('seed', 'exact'), default='seed',
                           help='physics.mode of the world (default seed, as the node)')
     args = parser.parse_args(argv)
+    # Started as a background job (nohup, `make soak &`), this process ignores SIGINT and its
+    # children would inherit that: the node could then not be stopped as Ctrl-C stops it.
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     for name in ('times', 'balls', 'count', 'senders', 'repeats'):
         if getattr(args, name, 1) < 1:
             parser.error(f'--{name} must be at least 1')

@@ -5,6 +5,7 @@ a subprocess inherit these variables, so two test runs on one machine (or a user
 can never hear each other.
 """
 import os
+import signal
 
 from ball_world_testing.harness import Children, Probe
 import pytest
@@ -17,6 +18,11 @@ os.environ.setdefault('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
 # The Rerun SDK logs its own errors (a viewer a test left unreachable on purpose, retried
 # until the process ends) after pytest's summary; ball_world reports such failures itself.
 os.environ.setdefault('RUST_LOG', 'off')
+# A test run started as a background job (`make test &`, nohup) ignores SIGINT, and children
+# inherit an ignored signal: the nodes, viewers and tools that tests stop with SIGINT, as a
+# user's Ctrl-C would, then never stop. Give them the default disposition back.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture
