@@ -442,15 +442,16 @@ def test_cells_are_one_ball_wide_in_an_even_gas_and_narrow_otherwise():
     """_cell_width widens cells only where that cannot crowd them: an even dilute gas gets
     about its area per ball, a cluster with one far ball and a line of balls keep cells a
     little over the largest diameter."""
-    from ball_world.core.exact_kernel import _cell_width, CELL_MARGIN
+    from ball_world.core.exact_kernel import _cell_width, _extent, CELL_MARGIN
     narrowest = 1.0 * CELL_MARGIN
     even = Gas(2000, 0.1, 1.0, 0.5).world('numba').positions
     low, high = even.min(axis=0), even.max(axis=0)
     per_ball = math.sqrt(np.prod(high - low) / len(even))
     assert per_ball > 2.0 * narrowest
-    assert _cell_width(even, narrowest) == per_ball
+    assert _cell_width(even, _extent(even), narrowest) == per_ball
     cluster = np.vstack((np.random.default_rng(1).uniform(0.0, 30.0, (2000, 2)), [[1e5, 1e5]]))
-    assert _cell_width(cluster, narrowest) == narrowest
+    assert _cell_width(cluster, _extent(cluster), narrowest) == narrowest
     line = np.column_stack((np.linspace(0.0, 1e4, 500), np.zeros(500)))
-    assert _cell_width(line, narrowest) == narrowest
-    assert _cell_width(np.array([[3.0, 4.0]]), narrowest) == narrowest
+    assert _cell_width(line, _extent(line), narrowest) == narrowest
+    one = np.array([[3.0, 4.0]])
+    assert _cell_width(one, _extent(one), narrowest) == narrowest

@@ -465,7 +465,20 @@ def _register_walls(cell, column_mask, row_bits, starts, directions, lengths):
 
 
 @compile_kernel
-def _cell_width(x, narrowest):
+def _extent(x):
+    """The balls' bounding box: (low x, low y, width, height), taken once per build."""
+    low_x = high_x = x[0, 0]
+    low_y = high_y = x[0, 1]
+    for i in range(x.shape[0]):
+        low_x = min(low_x, x[i, 0])
+        high_x = max(high_x, x[i, 0])
+        low_y = min(low_y, x[i, 1])
+        high_y = max(high_y, x[i, 1])
+    return low_x, low_y, high_x - low_x, high_y - low_y
+
+
+@compile_kernel
+def _cell_width(x, extent, narrowest):
     """The cell width: the area per ball of the balls' bounding box, when wider than
     `narrowest` (a little over the largest diameter) and when the balls are spread evenly
     enough that a ball shares its cell with at most MAX_CROWDING balls on average; else
@@ -479,18 +492,12 @@ def _cell_width(x, narrowest):
     at 10,000 balls, dense unchanged.
     """
     n = x.shape[0]
-    low_x = high_x = x[0, 0]
-    low_y = high_y = x[0, 1]
-    for i in range(n):
-        low_x = min(low_x, x[i, 0])
-        high_x = max(high_x, x[i, 0])
-        low_y = min(low_y, x[i, 1])
-        high_y = max(high_y, x[i, 1])
-    width = math.sqrt((high_x - low_x) * (high_y - low_y) / n)
+    low_x, low_y, span_x, span_y = extent
+    width = math.sqrt(span_x * span_y / n)
     if not width > narrowest:  # also a line of balls, one ball, or an overflow to inf
         return narrowest
-    columns = int((high_x - low_x) / width) + 1
-    rows = int((high_y - low_y) / width) + 1
+    columns = int(span_x / width) + 1
+    rows = int(span_y / width) + 1
     if columns * rows > 4 * n + 4:  # rounding at most: the box holds about n cells
         return narrowest
     counts = np.zeros(columns * rows, dtype=np.int64)
@@ -503,23 +510,15 @@ def _cell_width(x, narrowest):
 
 
 @compile_kernel
-def _torus(x, cell):
-    """The bucket torus (column_mask, row_bits): as large as the balls' extent, in cells,
-    within BUCKETS_PER_BALL buckets per ball; beyond that distant cells share buckets."""
-    n = x.shape[0]
-    low_x = high_x = x[0, 0]
-    low_y = high_y = x[0, 1]
-    for i in range(n):
-        low_x = min(low_x, x[i, 0])
-        high_x = max(high_x, x[i, 0])
-        low_y = min(low_y, x[i, 1])
-        high_y = max(high_y, x[i, 1])
+def _torus(n, extent, cell):
+    """The bucket torus (column_mask, row_bits): as large as the balls' extent (_extent), in
+    cells, within BUCKETS_PER_BALL buckets per ball; beyond that distant cells share buckets."""
     limit = 64
     while limit < BUCKETS_PER_BALL * n:
         limit *= 2
     # Compare extents as floats: a world far wider than the torus needs no exact count.
-    wide = (high_x - low_x) / cell + 3.0
-    tall = (high_y - low_y) / cell + 3.0
+    wide = extent[2] / cell + 3.0
+    tall = extent[3] / cell + 3.0
     columns = 1
     while columns < wide and columns < limit:
         columns *= 2
@@ -541,8 +540,9 @@ def build(x, v, radii, segments, starts, ends, directions, lengths):
     largest = 0.0
     for i in range(n):
         largest = max(largest, radii[i])
-    cell = _cell_width(x, 2.0 * largest * CELL_MARGIN)
-    column_mask, row_bits = _torus(x, cell)
+    extent = _extent(x)
+    cell = _cell_width(x, extent, 2.0 * largest * CELL_MARGIN)
+    column_mask, row_bits = _torus(n, extent, cell)
     leaves = 1
     while leaves < n:
         leaves *= 2
