@@ -88,6 +88,15 @@ def grid_shape(extent_x, extent_y, cell, count):
     return cell, int(extent_x / cell) + 1, int(extent_y / cell) + 1
 
 
+def _cell_ranges(a, b, reach, origin, cell, cells):
+    """First and last cell (arrays) within reach of each interval [min(a, b), max(a, b)] along
+    one axis, clipped to the grid's `cells`: numba_backend._cell_range for arrays."""
+    first = np.floor(np.clip((np.minimum(a, b) - reach - origin) / cell, -1, cells))
+    last = np.floor(np.clip((np.maximum(a, b) + reach - origin) / cell, -1, cells))
+    return (np.maximum(first.astype(np.intp), 0),
+            np.minimum(last.astype(np.intp), cells - 1))
+
+
 def _expand(owners, low, high):
     """For each owner k and each i in [low[k], high[k]): the pair (owner, i), as two arrays."""
     counts = high - low
@@ -182,10 +191,7 @@ class LevelGrid:
         y0 = walls.starts[:, 1]
         x1 = walls.ends[:, 0]
         y1 = walls.ends[:, 1]
-        first_col = np.floor(np.clip((np.minimum(x0, x1) - reach - ox) / cell, -1, self.nx))
-        last_col = np.floor(np.clip((np.maximum(x0, x1) + reach - ox) / cell, -1, self.nx))
-        first_col = np.maximum(first_col.astype(np.intp), 0)
-        last_col = np.minimum(last_col.astype(np.intp), self.nx - 1)
+        first_col, last_col = _cell_ranges(x0, x1, reach, ox, cell, self.nx)
         wall, col = _expand(np.arange(len(walls)), first_col,
                             np.maximum(last_col + 1, first_col))
         if len(wall) == 0:
@@ -205,10 +211,7 @@ class LevelGrid:
         t_high = np.where(vertical, 1.0, np.clip(np.maximum(ta, tb), 0.0, 1.0))
         ya = y0 + t_low * dy
         yb = y0 + t_high * dy
-        first_row = np.floor(np.clip((np.minimum(ya, yb) - reach - oy) / cell, -1, self.ny))
-        last_row = np.floor(np.clip((np.maximum(ya, yb) + reach - oy) / cell, -1, self.ny))
-        first_row = np.maximum(first_row.astype(np.intp), 0)
-        last_row = np.minimum(last_row.astype(np.intp), self.ny - 1)
+        first_row, last_row = _cell_ranges(ya, yb, reach, oy, cell, self.ny)
         entry, row = _expand(np.arange(len(wall)), first_row,
                              np.maximum(last_row + 1, first_row))
         keys = (np.take(col, entry) + PAD) * self.stride + row + PAD
