@@ -185,8 +185,17 @@ rclpy.spin(node)
 
 
 def start_subscribers(count, processes):
-    """SUBSCRIBER processes, returned once each has heard the node."""
-    started = [processes.start([sys.executable, '-c', SUBSCRIBER], stderr=None)
+    """SUBSCRIBER processes, returned once each has heard the node.
+
+    They talk to it over UDP only: a process frozen while Fast DDS's shared-memory transport
+    delivers to it can stall delivery to every other reader of the topic, this test's probes
+    included (Fast DDS's behaviour, not the node's: docs/reliability.md), and the probes must
+    go on hearing the node for the test to pace itself. The node still has a reliable reader
+    that never answers, and one that vanished.
+    """
+    environment = dict(os.environ, FASTDDS_BUILTIN_TRANSPORTS='UDPv4')
+    started = [processes.start([sys.executable, '-c', SUBSCRIBER], stderr=None,
+                               env=environment)
                for _ in range(count)]
     for process in started:
         assert process.stdout.readline().strip() == 'heard'  # or it died: readline gives ''
