@@ -12,11 +12,16 @@ load cannot change these figures; the limits below leave about a factor of two.
 """
 import math
 import signal
+import time
 
 from ball_world_testing.harness import executable, finish, Probe, RECEIVE_QOS, run_tool
 from geometry_msgs.msg import PoseArray, Vector3Stamped
 import numpy as np
 import pytest
+from simulation_interfaces.msg import Result
+from simulation_interfaces.srv import DeleteEntity
+
+from ball_world.tools.goal import REPORT_SECONDS
 
 GOAL = (6.0, 7.0)
 MASS, KICKER_MASS, KICK_SPEED = 0.5, 0.1, 3.0
@@ -127,7 +132,11 @@ def test_help_prints_usage_and_parameters():
 
 
 @pytest.mark.parametrize('args, problem', [
-    (('--ros-args', '-p', 'kp:=-1.0'), "parameter 'kp': expected a number >= 0, got -1.0"),
+    (('--ros-args', '-p', 'kp:=-1.0'),
+     "parameter 'kp': expected a number >= 0 and <= 1e+06, got -1.0"),
+    (('--ros-args', '-p', 'kp:=1e308'),
+     "parameter 'kp': expected a number >= 0 and <= 1e+06, got 1e+308"),
+    (('--ros-args', '-p', 'kd:=inf'), "parameter 'kd': expected a number >= 0 and <= 1e+06"),
     (('--ros-args', '-p', 'goal:=[1.0]'), "parameter 'goal': expected two numbers [x, y]"),
     (('--ros-args', '-p', 'mass:=0'), "parameter 'mass': expected a number > 0, got 0"),
     (('--ros-args', '-p', 'rate_hz:=fast'), "parameter 'rate_hz'"),
@@ -140,3 +149,73 @@ def test_bad_start_is_one_line_and_exit_2(args, problem):
     code, out, err = run_goal(*args)
     assert code == 2
     assert problem in err and len(err.strip().splitlines()) == 1, err
+
+
+# Balls that come and go ---------------------------------------------------------------------
+
+THREE = ['-p', 'publish_clock:=true', '-p', 'markers.rate_hz:=0.0', '-p', 'random.count:=0',
+         '-p', 'balls.x:=[2.0, 2.0, 8.0]', '-p', 'balls.y:=[2.0, 8.0, 3.0]',
+         '-p', 'balls.vx:=[0.0, 0.0, 0.0]', '-p', 'balls.vy:=[0.0, 0.0, 0.0]',
+         '-p', 'balls.radius:=[0.3, 0.3, 0.2]', '-p', f'balls.mass:=[0.3, {MASS}, 0.1]']
+
+
+def test_goal_follows_its_ball_by_name_when_rows_move_and_holds_while_it_is_gone(
+        watch, processes):
+    """ball_1 is held; deleting ball_0 moves ball_1 to row 0 and ball_2 (at rest far away)
+    to row 1. A controller taking row 1 as ball_1 would push ball_1 by ball_2's state and
+    throw it off its goal; one that reads entity_names keeps it there. Deleting ball_1 then
+    stops its pushes (one warning) instead of pushing a ball that is gone."""
+    controller = processes.start([executable('ball_world_goal'), '--ros-args', *CONTROLLER,
+                                  '-p', 'ball:=ball_1'])
+    world = processes.start([executable('ball_world'), '--ros-args', *THREE])
+    pushes = []
+    watch.node.create_subscription(
+        Vector3Stamped, 'impulse', lambda msg: pushes.append(
+            (time.monotonic(), msg.header.frame_id)), RECEIVE_QOS)
+
+    def distance_of(index):
+        return math.dist(watch.positions[-1][index], GOAL)
+
+    watch.spin_until(lambda: watch.positions and (
+        distance_of(1) < TOLERANCE or watch.times[-1] > REACH_S), 'the goal', process=world)
+    assert distance_of(1) < TOLERANCE
+
+    deleted = watch.call(DeleteEntity, '/ball_world/delete_entity',
+                         DeleteEntity.Request(entity='ball_0'))
+    assert deleted.result.result == Result.RESULT_OK, deleted.result.error_message
+    watch.spin_until(lambda: len(watch.positions[-1]) == 2, 'the deletion', process=world)
+    since = watch.times[-1]
+    first = len(watch.times)
+    watch.spin_until(lambda: watch.times[-1] >= since + HOLD_S, 'the hold', process=world)
+    held = [math.dist(positions[0], GOAL) for positions in watch.positions[first:]]
+    assert max(held) < HOLD_TOLERANCE, f'ball_1 went {max(held):.3f} m from its goal'
+    assert max(math.dist(positions[1], (8.0, 3.0)) for positions in
+               watch.positions[first:]) < 1e-12  # nothing pushed ball_2
+
+    deleted = watch.call(DeleteEntity, '/ball_world/delete_entity',
+                         DeleteEntity.Request(entity='ball_1'))
+    assert deleted.result.result == Result.RESULT_OK, deleted.result.error_message
+    gone = time.monotonic()
+    watch.spin_for(3.0)
+    # A push already on its way when ball_1 went may arrive within a second; none later.
+    late = [t - gone for t, name in pushes if t > gone + 1.0]
+    assert late == [], f'{len(late)} pushes at a ball that is gone'
+
+    for process in (controller, world):
+        process.send_signal(signal.SIGINT)
+    code, _, err = finish(controller)
+    assert code == 0 and 'Traceback' not in err, err
+    assert err.count('ball_1 is not in the world') == 1, err
+    assert 'm from the goal, at (' in err  # the periodic report
+    assert finish(world)[0] == 0
+
+
+def test_without_a_world_it_says_what_it_waits_for(processes):
+    controller = processes.start([executable('ball_world_goal'), '--ros-args',
+                                  '-r', '__ns:=/nobody_here'])
+    time.sleep(REPORT_SECONDS + 2.0)  # a warning is due after REPORT_SECONDS
+    controller.send_signal(signal.SIGINT)
+    code, _, err = finish(controller)
+    assert code == 0, err
+    assert err.count('waiting for /nobody_here/state and /nobody_here/entity_names') == 1, err
+    assert 'no ball_world heard yet on /nobody_here/state' in err, err

@@ -6,6 +6,8 @@ viewer shows at a step is the latest value logged at or before it (Rerun's lates
 `shown_at` answers "what is on screen at step k" from the chunks.
 """
 from dataclasses import replace
+import inspect
+import os
 import signal
 import socket
 import subprocess
@@ -19,7 +21,7 @@ import numpy as np
 import pytest
 import rerun as rr
 
-from ball_world.recording import rerun_outlet
+from ball_world.recording import rerun_log, rerun_outlet
 from ball_world.recording.mcap_writer import McapSink
 from ball_world.recording.rerun_log import (ARENA, ARROW_MAX_FRACTION, ARROW_MIN_FRACTION,
                                             ARROW_SECONDS, BALLS, COLLISIONS, ENERGY,
@@ -661,3 +663,129 @@ def test_node_refuses_a_bad_view_with_one_line(value):
     assert result.stderr.strip().splitlines() == [
         f"ball_world: parameter 'view.rerun': expected 'spawn' or a URL like "
         f"rerun+http://127.0.0.1:9876/proxy, got '{value}'"]
+
+
+# The native viewer (view.rerun:=spawn) ------------------------------------------------------
+
+def test_spawn_arguments_bind_to_the_installed_sdk():
+    """What Outlet.view('spawn') calls must be callable on the installed rerun-sdk as is."""
+    stream = rerun_outlet.new_stream('ball_world', 'spawn-signature')
+    function, arguments = rerun_outlet.spawn_call(stream, None, viewer=RERUN)
+    bound = inspect.signature(function).bind(**arguments)
+    assert bound.arguments['executable_path'] == str(RERUN)
+    assert bound.arguments['recording'] is stream  # the outlet's stream, not a global one
+    assert bound.arguments['port'] == rerun_outlet.SPAWN_PORT
+
+
+FAKE_VIEWER = """#!/bin/sh
+# Records how it was started, then serves as the real Rerun CLI would (saving what it gets).
+case "$1" in --*version*) exec "{rerun}" "$@";; esac
+echo $$ > "{pid}"
+echo "$@" > "{args}"
+exec "{rerun}" --bind 127.0.0.1 --save "{saved}" "$@"
+"""
+
+
+def test_spawn_starts_the_viewer_beside_python_and_streams_to_it(tmp_path, monkeypatch):
+    """view.rerun:=spawn through the real SDK, with a viewer executable that saves to a file.
+
+    The viewer taken is the `rerun` beside sys.executable (the .venv's); here a script that
+    stands in for it on a free port, so the test neither opens a window nor needs port 9876.
+    """
+    bin_dir = tmp_path / 'bin'
+    bin_dir.mkdir()
+    pid_file, args_file, saved = tmp_path / 'pid', tmp_path / 'args', tmp_path / 'seen.rrd'
+    viewer = bin_dir / 'rerun'
+    viewer.write_text(FAKE_VIEWER.format(pid=pid_file, args=args_file, rerun=RERUN,
+                                         saved=saved))
+    viewer.chmod(0o755)
+    port = free_port()
+    monkeypatch.setattr(sys, 'executable', str(bin_dir / 'python3'))
+    monkeypatch.setattr(rerun_outlet, 'SPAWN_PORT', port)
+    reports = []
+    try:
+        run([RerunSink(view='spawn', report=reports.append)], steps=30)
+        assert reports == []
+        assert f'--port={port}' in args_file.read_text().split()
+        deadline = time.monotonic() + LIVENESS_SECONDS
+        while not (saved.exists() and saved.stat().st_size):
+            assert time.monotonic() < deadline, 'the viewer received nothing'
+            time.sleep(0.2)
+    finally:
+        if pid_file.exists():
+            pid = int(pid_file.read_text())
+            stop_listener(SimpleNamespace(send_signal=lambda s: os.kill(pid, s),
+                                          wait=lambda timeout: _wait_gone(pid, timeout)),
+                          saved)
+    _, content, _, _ = read(saved)
+    assert sorted(content[(f'/{BALLS}', 'Points2D:positions')]) == list(range(31))
+
+
+def _wait_gone(pid, timeout):
+    deadline = time.monotonic() + timeout
+    while True:
+        try:  # the SDK may start the viewer as this process's child: reap it
+            if os.waitpid(pid, os.WNOHANG)[0] == pid:
+                return
+        except ChildProcessError:
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                return
+        assert time.monotonic() < deadline, f'viewer {pid} did not stop'
+        time.sleep(0.1)
+
+
+# A signal in the middle of logging a step ---------------------------------------------------
+
+class InterruptAt:
+    """A tracer that raises KeyboardInterrupt at the n-th line run in rerun_log (as SIGINT's
+    handler would between two bytecodes), or with n None just counts those lines."""
+
+    def __init__(self, n=None):
+        self.n = n
+        self.lines = 0
+
+    def __call__(self, frame, event, arg):
+        if frame.f_code.co_filename != rerun_log.__file__:
+            return None
+        if event == 'line':
+            self.lines += 1
+            if self.lines == self.n:
+                raise KeyboardInterrupt
+        return self
+
+
+def test_an_interrupt_anywhere_in_logging_a_step_loses_no_buffered_step(tmp_path):
+    """Every line of write_step (and what it calls in rerun_log) is interrupted in turn; the
+    buffered steps before it must all reach the file, in columns of one length."""
+
+    def logged_until_interrupt(n, path):
+        simulation = Simulation({}, sinks=[RerunSink(path, velocities=True, trail_seconds=0.1)])
+        for _ in range(10):
+            simulation.queue_impulse('ball_1', 0.01, 0.0)
+            simulation.step(real_time_factor=1.0)
+        tracer = InterruptAt(n)
+        simulation.queue_impulse('ball_2', 0.0, 0.01)
+        sys.settrace(tracer)
+        try:
+            simulation.step(real_time_factor=1.0)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            sys.settrace(None)
+        simulation.close()  # a sink that raised here would be dropped and reported
+        assert simulation.sinks == []
+        return tracer.lines
+
+    lines = logged_until_interrupt(None, tmp_path / 'whole.rrd')
+    assert lines > 20
+    for n in range(1, lines + 1):
+        path = tmp_path / f'cut_{n}.rrd'
+        logged_until_interrupt(n, path)
+        _, content, _, _ = read(path)
+        steps = sorted(content[(f'/{BALLS}', 'Points2D:positions')])
+        assert steps[:11] == list(range(11)), n  # every step buffered before the interrupt
+        for column in ((f'/{VELOCITIES}', 'Arrows2D:vectors'), (f'/{ENERGY}', 'Scalars:scalars'),
+                       (f'/{MOMENTUM}', 'Scalars:scalars')):
+            assert sorted(content[column]) == steps, (n, column)

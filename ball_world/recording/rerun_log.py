@@ -233,26 +233,38 @@ class RealTimeFactor:
 
 
 class _Pending:
-    """Logged steps not yet sent: one row per step, sent as columns by _send."""
+    """Logged steps not yet sent: one row per step, sent as columns by _send.
+
+    A step is one tuple appended to one list, a single operation that a signal (SIGINT's
+    KeyboardInterrupt runs between two bytecodes) either lets happen or not: the columns
+    built from the rows always have equal lengths. With one list per column, an interrupt
+    between two appends left them unequal, and the SDK refused the whole buffer at close.
+    """
 
     def __init__(self):
-        self.clear()
+        self.rows = []  # (step, log ns, positions, velocities or None, energy, collisions,
+        #                  momentum, real-time factor or None)
+        self.position_count = 0  # a hint for when to send, never used to build a column
+
+    def add(self, row):
+        self.rows.append(row)
+        self.position_count += len(row[2])
 
     def clear(self):
-        self.steps = []
-        self.times_ns = []
-        self.positions = []
-        self.velocities = []
-        self.energy = []
-        self.momentum = []
-        self.collisions = []
-        self.rtf_steps = []
-        self.rtf_times_ns = []
-        self.rtf = []
+        self.rows = []
         self.position_count = 0
 
+    def columns(self):
+        """The rows as columns: steps, times, positions, velocities, energy, collisions,
+        momentum, and (steps, times, values) of the real-time factor where it is known."""
+        steps, times, positions, velocities, energy, collisions, momentum, rtf = \
+            zip(*self.rows)
+        known = [(s, t, f) for s, t, f in zip(steps, times, rtf) if f is not None]
+        return (steps, times, positions, [v for v in velocities if v is not None], energy,
+                collisions, momentum, tuple(zip(*known)) if known else ((), (), ()))
+
     def __len__(self):
-        return len(self.steps)
+        return len(self.rows)
 
 
 class _Segment:
@@ -446,19 +458,12 @@ class RerunSink:
         if names != self._shown_names:
             self._log_balls(record, names, step)
         pending = self._pending
-        pending.steps.append(step)
-        pending.times_ns.append(record.log_time_ns)
-        pending.positions.append(np.asarray(record.positions, dtype=np.float32))
-        if self.velocities:
-            pending.velocities.append(np.asarray(record.velocities, dtype=np.float32))
-        pending.position_count += len(record.positions)
-        pending.energy.append(energy_change(record.kinetic_energy, self._energy0))
-        pending.collisions.append(self._totals.copy())
-        pending.momentum.append(np.asarray(record.momentum, dtype=np.float64))
-        if rtf is not None and math.isfinite(rtf):
-            pending.rtf_steps.append(step)
-            pending.rtf_times_ns.append(record.log_time_ns)
-            pending.rtf.append(rtf)
+        pending.add((
+            step, record.log_time_ns, np.asarray(record.positions, dtype=np.float32),
+            np.asarray(record.velocities, dtype=np.float32) if self.velocities else None,
+            energy_change(record.kinetic_energy, self._energy0), self._totals.copy(),
+            np.asarray(record.momentum, dtype=np.float64),
+            rtf if rtf is not None and math.isfinite(rtf) else None))
         self._log_impulses(record, names, step)
         if self.trail_seconds:
             self._log_trails(record, names, step)
@@ -540,29 +545,31 @@ class RerunSink:
         pending = self._pending
         if not len(pending):
             return
-        index = self._index(pending.steps, pending.times_ns)
-        sizes = [len(p) for p in pending.positions]
-        positions = np.concatenate(pending.positions)
+        steps, times, positions, velocities, energy, collisions, momentum, rtf = \
+            pending.columns()
+        index = self._index(steps, times)
+        sizes = [len(p) for p in positions]
+        positions = np.concatenate(positions)
         self._emit('send_columns', BALLS, index, [rr.ComponentColumn(
             rr.Points2D.descriptor_positions(), rr.components.Position2DBatch(positions),
             lengths=sizes)])
-        if pending.velocities:
-            vectors = np.concatenate(pending.velocities) * np.float32(VELOCITY_SECONDS)
+        if velocities:
+            vectors = np.concatenate(velocities) * np.float32(VELOCITY_SECONDS)
             self._emit('send_columns', VELOCITIES, index, [
                 rr.ComponentColumn(rr.Arrows2D.descriptor_origins(),
                                    rr.components.Position2DBatch(positions), lengths=sizes),
                 rr.ComponentColumn(rr.Arrows2D.descriptor_vectors(),
                                    rr.components.Vector2DBatch(vectors), lengths=sizes)])
         self._emit('send_columns', ENERGY, index, rr.Scalars.columns(
-            scalars=np.array(pending.energy, dtype=np.float64)))
+            scalars=np.array(energy, dtype=np.float64)))
         self._emit('send_columns', COLLISIONS, index, rr.Scalars.columns(
-            scalars=np.array(pending.collisions, dtype=np.float64).reshape(-1, 2)))
+            scalars=np.array(collisions, dtype=np.float64).reshape(-1, 2)))
         self._emit('send_columns', MOMENTUM, index, rr.Scalars.columns(
-            scalars=np.array(pending.momentum, dtype=np.float64).reshape(-1, 2)))
-        if pending.rtf:
-            self._emit('send_columns', REAL_TIME_FACTOR,
-                       self._index(pending.rtf_steps, pending.rtf_times_ns),
-                       rr.Scalars.columns(scalars=np.array(pending.rtf, dtype=np.float64)))
+            scalars=np.array(momentum, dtype=np.float64).reshape(-1, 2)))
+        rtf_steps, rtf_times, rtf_values = rtf
+        if rtf_values:
+            self._emit('send_columns', REAL_TIME_FACTOR, self._index(rtf_steps, rtf_times),
+                       rr.Scalars.columns(scalars=np.array(rtf_values, dtype=np.float64)))
         pending.clear()
 
     @staticmethod

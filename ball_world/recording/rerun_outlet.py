@@ -77,6 +77,22 @@ def parse_view(value):
     return parts.hostname, port or VIEW_SCHEMES[parts.scheme]
 
 
+def spawn_call(stream, blueprint, viewer=None):
+    """(function, keyword arguments) that start a native viewer and connect `stream` to it.
+
+    The viewer is the `rerun` beside this Python (the SDK's own, in the .venv) when there is
+    one, else the first on PATH. Only the SDK's module-level rr.spawn takes
+    `executable_path` (RecordingStream.spawn of rerun-sdk 0.41 has no such argument), and it
+    connects the stream given as `recording`; test_rerun binds these arguments to the
+    installed SDK's signature.
+    """
+    viewer = Path(sys.executable).parent / 'rerun' if viewer is None else Path(viewer)
+    arguments = dict(port=SPAWN_PORT, default_blueprint=blueprint, recording=stream)
+    if viewer.exists():
+        arguments['executable_path'] = str(viewer)
+    return rr.spawn, arguments
+
+
 def new_stream(application_id, recording_id):
     """A stream with the simulation's timelines only (no wall-clock log_time, no log_tick)."""
     stream = rr.RecordingStream(application_id, recording_id=recording_id,
@@ -122,12 +138,10 @@ class Outlet:
         """Stream to a viewer: target is 'spawn' or a URL (checked with parse_view)."""
         address = parse_view(target)
         if target == SPAWN:
-            rerun_cli = Path(sys.executable).parent / 'rerun'
+            spawn, arguments = spawn_call(stream, blueprint)
 
             def connect():
-                stream.spawn(port=SPAWN_PORT, default_blueprint=blueprint,
-                             **({'executable_path': str(rerun_cli)}
-                                if rerun_cli.exists() else {}))
+                spawn(**arguments)
             description = f'live view in the viewer spawned on port {SPAWN_PORT}'
         else:
             def connect():

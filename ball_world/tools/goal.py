@@ -1,22 +1,30 @@
 """ball_world_goal: bring one ball to a goal point and hold it there, pushing with impulses.
 
 This node is also a tutorial: it is the smallest useful program that works with ball_world,
-and yours can start as a copy of it. Read it top to bottom. It does three things:
+and yours can start as a copy of it. Read it top to bottom. It does four things:
 
-  1. listens to the world's `state` topic: one row (x, y, vx, vy) per ball, every step;
-  2. every 1 / rate_hz seconds, computes how hard to push the ball with a PD controller:
+  1. listens to the world's `entity_names` topic (latched: the names of the balls, one per
+     line, in the order of the rows of `state`; it changes when balls are spawned or
+     deleted, since a deletion moves the rows after it up);
+  2. listens to the world's `state` topic: one row (x, y, vx, vy) per ball, every step;
+  3. every 1 / rate_hz seconds, finds its ball's row by name and computes how hard to push
+     it with a PD controller:
          acceleration a = kp * (goal - position) - kd * velocity
          impulse      J = mass * a * T          (T = 1 / rate_hz: a force held for T)
      shortened to max_impulse if it is longer (a real actuator is limited too);
-  3. publishes J on the world's `impulse` topic, addressed to the ball by its name.
+  4. publishes J on the world's `impulse` topic, addressed to the ball by its name.
 
 The world applies an impulse before its next step (v += J / m) and lets the ball collide as
-usual, so other balls still bump it: the controller then pushes it back.
+usual, so other balls still bump it: the controller then pushes it back. While its ball is
+not in the world (deleted, or not spawned yet) it says so once and pushes nothing until the
+ball is back; without a world it says what it waits for; every REPORT_SECONDS it reports
+the ball's distance to the goal.
 
-Mass: the impulse a velocity change needs is proportional to the ball's mass, which the world
-does not publish yet; the `mass` parameter gives it (default 0.2 kg, about a ball of the
-default world). A wrong mass scales both gains by assumed / true mass: up to about 9 times too
-heavy still settles (slower, overdamped), too light overshoots.
+Mass: the impulse a velocity change needs is proportional to the ball's mass. The world
+tells it through its ~/get_entity_info service (GetEntityInfo: "ball, radius ... m, mass
+... kg"); this node takes it from the `mass` parameter (default 0.2 kg, about a ball of the
+default world). A wrong mass scales both gains by assumed / true mass: up to about 9 times
+too heavy still settles (slower, overdamped), too light overshoots.
 
 Time: the timer runs on the node's clock. With the world's publish_clock:=true and this node's
 use_sim_time:=true it runs on simulated time, so T is exact even when the world runs slower
@@ -30,19 +38,31 @@ import sys
 from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, String
 
 PROG = 'ball_world_goal'
+#: Largest gain taken (kp in 1/s^2, kd in 1/s). A loop sampled at 20 Hz is unstable long
+#: before it (kp T^2 or kd T of order 1), and far larger ones (1e308) overflow the push.
+MAX_GAIN = 1e6
+#: Seconds between the reports of the distance to the goal, and between the warnings while
+#: no world (no `state`) is heard.
+REPORT_SECONDS = 5.0
+#: How the world publishes `entity_names`: latched (transient local), so a controller started
+#: after the world still gets the names.
+NAMES_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 PARAMETERS = """\
 ROS parameters (after --ros-args; integers are taken for numbers):
   ball         name of the ball to hold (default ball_0)
   goal         [x, y] of the goal point, m (default [5.0, 5.0], the default arena's centre)
-  kp           gain on the distance to the goal, 1/s^2 (default 4.0)
-  kd           gain on the velocity, 1/s (default 4.0: critically damped with kp 4.0)
+  kp           gain on the distance to the goal, 1/s^2 (default 4.0; at most 1e6)
+  kd           gain on the velocity, 1/s (default 4.0: critically damped with kp 4.0;
+               at most 1e6)
   max_impulse  longest push per command, N s (default 0.5)
   rate_hz      commands per second (default 20.0)
   mass         mass of the ball, kg (default 0.2)
@@ -61,8 +81,8 @@ class GoalController(Node):
         # Parameters, checked once at start (see PARAMETERS for their meaning).
         self.ball = self.parameter('ball', 'ball_0', str)
         self.goal = self.parameter('goal', [5.0, 5.0], list)
-        self.kp = self.parameter('kp', 4.0, float, low=0.0)
-        self.kd = self.parameter('kd', 4.0, float, low=0.0)
+        self.kp = self.parameter('kp', 4.0, float, low=0.0, high=MAX_GAIN)
+        self.kd = self.parameter('kd', 4.0, float, low=0.0, high=MAX_GAIN)
         self.max_impulse = self.parameter('max_impulse', 0.5, float, low=0.0, strict=True)
         rate_hz = self.parameter('rate_hz', 20.0, float, low=0.0, strict=True)
         self.mass = self.parameter('mass', 0.2, float, low=0.0, strict=True)
@@ -70,43 +90,92 @@ class GoalController(Node):
 
         # Relative names: with -r __ns:=/sim2 this node talks to the world in /sim2.
         self.state = None
+        self.names = None  # the balls' names in the order of the rows of state
         self.create_subscription(Float64MultiArray, 'state', self.on_state, 1)
+        self.create_subscription(String, 'entity_names', self.on_names, NAMES_QOS)
         # Reliable, like the world's impulse subscription: a push must not be lost.
         self.publisher = self.create_publisher(
             Vector3Stamped, 'impulse',
             QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         self.timer = self.create_timer(self.period, self.on_timer)
+        self.missing = False  # whether "not in the world" was said (said once)
+        # Reports and warnings go by the steady clock: with use_sim_time and no world, the
+        # node's own clock (and so self.timer) stands still.
+        self.create_timer(REPORT_SECONDS, self.on_report,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(
             f'holding {self.ball} at ({self.goal[0]:g}, {self.goal[1]:g}) with kp {self.kp:g}, '
             f'kd {self.kd:g}, mass {self.mass:g} kg, at most {self.max_impulse:g} N s per '
-            f'push, {rate_hz:g} pushes/s')
+            f'push, {rate_hz:g} pushes/s; waiting for {self.resolve_topic_name("state")} '
+            f'and {self.resolve_topic_name("entity_names")} from a ball_world')
 
     def on_state(self, msg):
         # Keep only the latest state; rows are x, y, vx, vy, in the order of the poses.
         self.state = msg.data
 
-    def on_timer(self):
-        if self.state is None:
-            return  # the world has not spoken yet
-        # Which row is our ball? The world names its balls ball_0, ball_1, ... in pose order
-        # (when it publishes its list of entity names, take the names from there instead).
-        names = [f'ball_{i}' for i in range(len(self.state) // 4)]
-        if self.ball not in names:
-            self.get_logger().warning(f'no {self.ball} in a world of {len(names)} balls',
-                                      throttle_duration_sec=5.0)
+    def on_names(self, msg):
+        # The names, one per line, in the order of the rows of state (an empty world: '').
+        # The world publishes them when balls come or go, before its next state: the state
+        # held now has the old rows, so it is dropped until the next one arrives.
+        self.names = msg.data.split('\n') if msg.data else []
+        self.state = None
+
+    def row(self):
+        """Our ball's (x, y, vx, vy) in the latest state, or None (no state or no ball)."""
+        if self.state is None or self.names is None \
+                or len(self.state) != 4 * len(self.names) or self.ball not in self.names:
+            return None
+        row = self.names.index(self.ball)
+        return self.state[4 * row:4 * row + 4]
+
+    def on_report(self):
+        """Every REPORT_SECONDS: the distance to the goal, or what is missing."""
+        if self.state is None and self.names is None:
+            self.get_logger().warning(
+                f'no ball_world heard yet on {self.resolve_topic_name("state")} and '
+                f'{self.resolve_topic_name("entity_names")}; is it running, in this '
+                'namespace and ROS domain?')
             return
-        row = names.index(self.ball)
-        x, y, vx, vy = self.state[4 * row:4 * row + 4]
+        row = self.row()
+        if row is not None:
+            x, y = row[0], row[1]
+            distance = math.hypot(self.goal[0] - x, self.goal[1] - y)
+            self.get_logger().info(f'{self.ball} is {distance:.3g} m from the goal, at '
+                                   f'({x:.3f}, {y:.3f})')
+
+    def on_timer(self):
+        if self.state is None or self.names is None:
+            return  # the world has not spoken yet (or an edit's state is on its way)
+        if len(self.state) != 4 * len(self.names):
+            return  # a state from before an edit whose names came first
+        if self.ball not in self.names:
+            if not self.missing:
+                self.missing = True
+                self.get_logger().warning(f'{self.ball} is not in the world (deleted?): not '
+                                          'pushing until it is back')
+            return
+        if self.missing:
+            self.missing = False
+            self.get_logger().info(f'{self.ball} is back: pushing again')
+        # Which row is our ball? The one its name has in the names published last.
+        x, y, vx, vy = self.row()
 
         # PD control: accelerate towards the goal, brake in proportion to the speed.
         ax = self.kp * (self.goal[0] - x) - self.kd * vx
         ay = self.kp * (self.goal[1] - y) - self.kd * vy
         # That acceleration held for one period is a velocity change of a * T, which an
-        # impulse of mass * a * T makes. Keep its direction, limit its length.
-        jx, jy = self.mass * ax * self.period, self.mass * ay * self.period
-        length = math.hypot(jx, jy)
-        if length > self.max_impulse:
-            jx, jy = jx * self.max_impulse / length, jy * self.max_impulse / length
+        # impulse of mass * a * T makes. Keep its direction, limit its length (taken from
+        # the acceleration's direction, so that an impulse too long for a float is still
+        # shortened to max_impulse rather than turned into inf / inf = NaN).
+        accel = math.hypot(ax, ay)
+        if not math.isfinite(accel):
+            self.get_logger().warning(f'push on {self.ball} not finite (state {x}, {y}, {vx}, '
+                                      f'{vy}); not sent', throttle_duration_sec=5.0)
+            return
+        if accel == 0.0:
+            return
+        length = min(self.mass * accel * self.period, self.max_impulse)
+        jx, jy = ax / accel * length, ay / accel * length
 
         msg = Vector3Stamped()
         msg.header.stamp = self.get_clock().now().to_msg()
@@ -114,7 +183,7 @@ class GoalController(Node):
         msg.vector.x, msg.vector.y = jx, jy  # z stays 0: the world is the z = 0 plane
         self.publisher.publish(msg)
 
-    def parameter(self, name, default, kind, low=None, strict=False):
+    def parameter(self, name, default, kind, low=None, strict=False, high=None):
         """Declare a parameter and return its value as `kind`, or raise ParameterError.
 
         dynamic_typing lets `-p kp:=4` (an integer) stand for 4.0.
@@ -124,13 +193,15 @@ class GoalController(Node):
         if kind is str and isinstance(value, str) and value:
             return value
         if kind is float and _is_number(value) and (
-                low is None or value > low or (value == low and not strict)):
+                low is None or value > low or (value == low and not strict)) and (
+                high is None or value <= high):
             return float(value)
         if kind is list and isinstance(value, (list, tuple)) and len(value) == 2 \
                 and all(_is_number(v) for v in value):
             return [float(v) for v in value]
         if kind is float:
-            wanted = f"a number {'>' if strict else '>='} {low:g}"
+            wanted = f"a number {'>' if strict else '>='} {low:g}" + (
+                f' and <= {high:g}' if high is not None else '')
         else:
             wanted = 'a ball name such as ball_0' if kind is str else 'two numbers [x, y]'
         raise ParameterError(f"parameter '{name}': expected {wanted}, got {value!r}")
