@@ -582,8 +582,7 @@ def markdown(results, args, pymunk, allocator, command):
                   for label, backend, total, inside, runs in results['startup']]
         lines += ['', 'Each run is a fresh process (build_world of the default parameters, one '
                   'step); numba keeps its compiled kernels in NUMBA_CACHE_DIR, empty for the '
-                  'first row. `python -m ball_world.core.numba_backend --warm` fills it at '
-                  'set-up.']
+                  'first row. `python -m ball_world.core.warm` fills it at set-up.']
     if results.get('worst'):
         lines += ['', '## Worst cases inside core.limits (mean ms per step)', '',
                   '| world | balls | walls | backend | first step incl. build, ms | '
