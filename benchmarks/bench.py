@@ -582,8 +582,7 @@ def markdown(results, args, pymunk, allocator, command):
                   for label, backend, total, inside, runs in results['startup']]
         lines += ['', 'Each run is a fresh process (build_world of the default parameters, one '
                   'step); numba keeps its compiled kernels in NUMBA_CACHE_DIR, empty for the '
-                  'first row. `python -m ball_world.core.numba_backend --warm` fills it at '
-                  'set-up.']
+                  'first row. `python -m ball_world.core.warm` fills it at set-up.']
     if results.get('worst'):
         lines += ['', '## Worst cases inside core.limits (mean ms per step)', '',
                   '| world | balls | walls | backend | first step incl. build, ms | '
@@ -717,12 +716,19 @@ def parse_args(argv):
     parser.add_argument('--no-tune-allocator', action='store_true',
                         help="leave glibc malloc's thresholds at their defaults")
     parser.add_argument('--seed', type=int, default=1)
-    parser.add_argument('--plot', type=Path, default=Path('docs/bench.png'))
-    parser.add_argument('--markdown', type=Path, default=Path('docs/bench.md'),
-                        help='write the tables to this file (default docs/bench.md)')
+    parser.add_argument('--docs', action='store_true',
+                        help='write the tables and the plot over the tracked docs/bench.md and '
+                             'docs/bench.png (default: runs/, so a checkout stays clean)')
+    parser.add_argument('--plot', type=Path, default=None,
+                        help='write the plot to this file (default runs/bench.png)')
+    parser.add_argument('--markdown', type=Path, default=None,
+                        help='write the tables to this file (default runs/bench.md)')
     parser.add_argument('--quick', action='store_true',
                         help='a tiny configuration (N = 100, 300; short runs) for tests')
     args = parser.parse_args(argv)
+    output = Path('docs' if args.docs else 'runs')
+    args.plot = output / 'bench.png' if args.plot is None else args.plot
+    args.markdown = output / 'bench.md' if args.markdown is None else args.markdown
     if args.quick:
         args.n, args.repeats, args.seconds, args.warmup_steps = [100, 300], 2, 0.05, 20
         args.energy_n, args.energy_steps, args.cdr_poses, args.budget_n = 300, 500, 1000, [300]
@@ -816,6 +822,7 @@ def main(argv=None):
         args.markdown.parent.mkdir(parents=True, exist_ok=True)
         args.markdown.write_text(table)
     try:
+        args.plot.parent.mkdir(parents=True, exist_ok=True)
         plot(results, args, args.plot)
     except ImportError:
         print('matplotlib not installed: no plot (pip install matplotlib)')

@@ -3,7 +3,8 @@
 #
 # ROS 2 Jazzy comes from a sourced installation when there is one (ROS_DISTRO=jazzy), and
 # otherwise from the ros-jazzy-* wheels on PyPI, which exist only for CPython 3.12. Re-running
-# is fast: dependencies are installed again only when a requirements file changes.
+# is fast: dependencies are installed again only when a requirements file changes, the package
+# and its numba kernels only when its sources change (each says so when it runs).
 #
 # The simulation_interfaces and tf2_msgs types come from the sourced distribution's packages;
 # the wheels set-up builds them from interfaces/ into the venv (scripts/build_interfaces.sh: a
@@ -11,6 +12,21 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=${BALL_WORLD_VENV:-.venv}
+
+# What `pip install .` and the numba warm-ups depend on, as one hash: the dependencies' stamp
+# ($1), and the name, size and modification time of every file the package installs (numba
+# keys its cache on the modification time too, so a checkout that only touches a file still
+# recompiles). `scripts/setup.sh --package-stamp` prints it for the tree (test/test_setup.py).
+package_stamp() {
+  { echo "$1"
+    find ball_world setup.py setup.cfg package.xml resource config launch rviz -type f \
+      ! -path '*/__pycache__/*' -printf '%p %s %T@\n' | LC_ALL=C sort
+  } | sha256sum | cut -d' ' -f1
+}
+if [ "${1:-}" = --package-stamp ]; then
+  package_stamp ''
+  exit 0
+fi
 
 is_python312() {
   "$1" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 12))' >/dev/null 2>&1
@@ -79,8 +95,19 @@ else
     fi
   done
 fi
-"$venv/bin/python" -m pip install --quiet --no-deps --no-build-isolation .
-# Compile the numba kernels now (cached), so no run waits ~15 s for them: once for the
-# installed package the executables run, once for the source tree the tests import.
-(cd "$venv" && bin/python -m ball_world.core.numba_backend --warm) >/dev/null
-"$venv/bin/python" -m ball_world.core.numba_backend --warm >/dev/null
+# The package and its compiled kernels: again only when a file they depend on changed, the
+# dependencies were reinstalled, or the installed copy or the kernel cache has gone.
+package="$venv/.ball_world-package"
+wanted_package=$(package_stamp "$wanted")
+if [ "$(cat "$package" 2>/dev/null)" != "$wanted_package" ] || [ ! -x "$venv/bin/ball_world" ] ||
+   ! compgen -G 'ball_world/core/__pycache__/*.nbi' >/dev/null; then
+  echo "setup: installing ball_world into $venv and compiling its numba kernels" \
+       '(sources changed; 10-30 s, several minutes when numba compiles from scratch)'
+  rm -f "$package"
+  "$venv/bin/python" -m pip install --quiet --no-deps --no-build-isolation .
+  # Compile the numba kernels now (cached), so no run waits ~15 s for them: once for the
+  # installed package the executables run, once for the source tree the tests import.
+  (cd "$venv" && bin/python -m ball_world.core.warm) >/dev/null
+  "$venv/bin/python" -m ball_world.core.warm >/dev/null
+  echo "$wanted_package" > "$package"
+fi

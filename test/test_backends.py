@@ -270,7 +270,7 @@ def test_kernel_cache_fingerprint_follows_the_shared_code(monkeypatch):
 
 
 def test_warm_entry_point_compiles_the_kernels():
-    done = subprocess.run([sys.executable, '-m', 'ball_world.core.numba_backend', '--warm'],
+    done = subprocess.run([sys.executable, '-m', 'ball_world.core.warm'],
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     assert 'numba kernels (seed and exact mode) ready' in done.stdout

@@ -4,7 +4,10 @@ No timing is asserted (machines differ); only that every section is produced, th
 backends have a number at every N, that exact mode is timed beside seed mode on every gas
 scene, that the default backend is named, and that the energy change is rounding noise.
 """
-from benchmarks.bench import bench_worst_case, main, many_walls_world, radius_spread_world
+from pathlib import Path
+
+from benchmarks.bench import (bench_worst_case, main, many_walls_world, parse_args,
+                              radius_spread_world)
 import numpy as np
 
 from ball_world.core import limits
@@ -82,3 +85,13 @@ def test_worst_case_worlds_are_inside_the_limits_and_step_on_both_backends(capsy
         ('radius ratio 100', 'numba'), ('radius ratio 100', 'numpy'),
         (f'{limits.MAX_WALLS:,} walls', 'numba'), (f'{limits.MAX_WALLS:,} walls', 'numpy')]
     assert all(row[5] > 0.0 for row in rows)
+
+
+def test_results_go_to_runs_unless_the_docs_are_asked_for():
+    # `make bench` for one's own numbers must not dirty the tracked docs/bench.md and .png.
+    default = parse_args([])
+    assert (default.markdown, default.plot) == (Path('runs/bench.md'), Path('runs/bench.png'))
+    docs = parse_args(['--docs'])
+    assert (docs.markdown, docs.plot) == (Path('docs/bench.md'), Path('docs/bench.png'))
+    chosen = parse_args(['--docs', '--markdown', 'a.md'])
+    assert (chosen.markdown, chosen.plot) == (Path('a.md'), Path('docs/bench.png'))

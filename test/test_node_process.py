@@ -99,3 +99,24 @@ def test_installed_defaults_file_starts_the_node():
                             '-p', 'max_steps:=3', '-p', 'rate_hz:=0.0', '-p', 'dt:=0.01')
     assert code == 0, err
     assert '20 balls' in err
+
+
+def test_parameters_before_ros_args_are_warned_about_not_silently_dropped():
+    # rclpy reads only what follows --ros-args: `ball_world -p rate_hz:=30` used to run at the
+    # default rate without a word.
+    code, _, err = run_tool('ball_world', '-p', 'dt:=0.5', '--ros-args', '-p', 'max_steps:=1',
+                            '-p', 'rate_hz:=0.0', '-p', 'dt:=0.25')
+    assert code == 0, err
+    assert ("ball_world: warning: ignoring '-p dt:=0.5': ROS arguments go after --ros-args, "
+            'e.g. ball_world --ros-args -p dt:=0.5') in err
+    assert 'dt 0.25 s' in err  # the value after --ros-args is the one that acts
+
+
+def test_first_log_line_is_short_and_the_names_are_at_debug_level():
+    code, _, err = run_node('-p', 'max_steps:=1', '-p', 'rate_hz:=0.0', '-p', 'dt:=0.5',
+                            '--log-level', 'ball_world:=debug')
+    assert code == 0, err
+    lines = [line for line in err.splitlines() if '[ball_world]' in line]
+    assert 'world: 20 balls' in lines[0] and len(lines[0]) < 200, lines[0]
+    names = next(line for line in lines if 'publishing /balls' in line)
+    assert '[DEBUG]' in names and 'spawn_entity' in names and '/ball_world/step' in names

@@ -259,7 +259,9 @@ def test_info_reports_steps_segments_topics_impulses_and_energy(recorded, capsys
     assert info.main([str(path)]) == 0
     out = capsys.readouterr().out
     assert 'summary:     yes' in out
-    assert 'steps:       44 in 2 segments' in out
+    # 30 + 12 steps; each segment also records its initial state, step 0.
+    assert 'steps:       42 after the initial states (44 messages on /balls), in 2 segments' \
+        in out
     assert '  0: from log time 0 s, steps 0-30' in out
     assert '  1: from log time 1.55 s, steps 0-12' in out
     assert '/impulse  geometry_msgs/msg/Vector3Stamped  4' in out

@@ -219,12 +219,14 @@ def test_spawn_entities_judges_each_request_in_order(world):
 
 def test_states_are_read_and_set_in_the_world_frame_at_the_current_time(world):
     pause(world)
+    # The world ran before the pause, for as many steps as the machine's load allowed.
+    paused_at = world.simulation.step_index
     world.call(StepSimulation, 'step_simulation', StepSimulation.Request(steps=3))
     got = world.call(GetEntityState, 'get_entity_state', GetEntityState.Request(
         entity='ball_1'))
     assert got.result.result == OK
     stamp = got.state.header.stamp.sec * 10**9 + got.state.header.stamp.nanosec
-    assert stamp == world.simulation.stamp_ns == 3 * world.simulation.dt_ns
+    assert stamp == world.simulation.stamp_ns == (paused_at + 3) * world.simulation.dt_ns
     assert got.state.header.frame_id == 'world'
     assert got.state.pose.position.x == world.simulation.world.positions[1, 0]
     assert got.state.twist.linear.x == -0.5

@@ -255,7 +255,10 @@ class WorldProbe(Probe):
         self.velocities = np.asarray(msg.data).reshape(-1, 4)[:, 2:]
 
     def pause(self, paused):
-        assert self.call(SetBool, 'ball_world/pause', SetBool.Request(data=paused)).success
+        """Pause or resume; the step the world was at, read from its answer ('... at step N')."""
+        answer = self.call(SetBool, 'ball_world/pause', SetBool.Request(data=paused))
+        assert answer.success, answer.message
+        return int(answer.message.rsplit(' ', 1)[1])
 
 
 @pytest.fixture
@@ -325,16 +328,17 @@ def test_keys_drive_the_world_in_a_terminal(terminal, world, start_world):
 
     # Another client pauses the world: space then means resume, although the teleop last
     # saw it running (its pause changes nothing, so it resumes at once).
-    world.pause(True)
-    world.spin_for(0.2)
-    stopped_at = world.stamps[-1]
+    # The step it stopped at comes from the answer: a loaded machine may deliver the last
+    # steps' messages late, so what arrived so far is no measure.
+    stopped_at = world.pause(True) * DT_NS
+    world.spin_until(lambda: world.stamps[-1] == stopped_at, 'the last step before the pause')
     terminal.keys('Space')
     terminal.wait_for(f'status   resume: running at step {stopped_at // DT_NS}')
     world.spin_until(lambda: world.stamps[-1] > stopped_at, 'stepping after the resume')
     terminal.keys('Space')
-    terminal.wait_for('status   pause: paused at step')
-    world.spin_for(0.2)
-    paused_at = world.stamps[-1]
+    screen = terminal.wait_for('status   pause: paused at step')
+    paused_at = int(screen.split('status   pause: paused at step ')[1].split()[0]) * DT_NS
+    world.spin_until(lambda: world.stamps[-1] == paused_at, 'the last step before the pause')
     world.spin_for(0.5)  # 25 steps would have come at 50 Hz
     assert world.stamps[-1] == paused_at
     terminal.wait_for(f't = {paused_at / 1e9:.3f} s, paused')

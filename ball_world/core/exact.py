@@ -61,14 +61,6 @@ def event_budget(n):
     return max(MIN_EVENT_BUDGET, EVENTS_PER_BALL * n)
 
 
-def warm():
-    """Compile (or load from numba's cache) the exact-mode kernel by stepping a tiny world."""
-    from ball_world.core.world import World
-    world = World([[1.0, 1.0], [2.0, 1.0]], [[1.0, 0.0], [-1.0, 0.0]], [0.4, 0.4], [1.0, 1.0],
-                  walls=[[0.0, 0.0, 4.0, 0.0], [4.0, 0.0, 4.0, 4.0]], mode='exact')
-    step(world, 0.5)
-
-
 def invalidate(world):
     """Forget the predictions kept for `world`: the next step rebuilds them from its arrays."""
     _states.pop(world, None)

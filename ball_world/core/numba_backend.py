@@ -17,16 +17,13 @@ Compiled kernels are cached on disk (numba's cache=True, next to this file or in
 user's cache directory). numba only notices changes to this file, not to the modules its
 kernels inline (`rules`, `stepping`, `broadphase`, `limits`), so `ensure_fresh_cache`
 compares a fingerprint of those with the one the cached kernels were built with, and
-rebuilds them if they differ. `python -m ball_world.core.numba_backend --warm` compiles and
-caches everything once (a set-up step), so no run pays the compilation.
+rebuilds them if they differ. `python -m ball_world.core.warm` compiles and caches everything
+once (a set-up step), so no run pays the compilation.
 
 numba is in requirements/base.txt; without it the numpy backend still works, and
 `available()` says whether this one can.
 """
-import argparse
 import hashlib
-import sys
-import time
 
 import numpy as np
 
@@ -690,43 +687,3 @@ class NumbaStepper:
         (*head, _, _, lists, anchor, best) = self._prepared
         self._prepared = (*head, np.empty((rows[0], 2), dtype=np.int64),
                           np.empty((rows[1], 2), dtype=np.int64), lists, anchor, best)
-
-
-def warm():
-    """Compile (or load) every kernel by stepping a small world; returns seconds taken."""
-    began = time.perf_counter()
-    ensure_fresh_cache()
-    x = np.array([[1.0, 1.0], [1.9, 1.0], [3.0, 3.0]])
-    v = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 5.0]])
-    radii = np.array([0.5, 0.4, 0.05])
-    masses = np.ones(3)
-    members, level_starts, largest = radius_classes(radii)
-    walls = np.array([[0.0, 0.0, 10.0, 0.0, 1.0, 0.0, 10.0], [0.0, 4.0, 4.0, 4.0, 1.0, 0.0, 4.0]])
-    totals = np.zeros(len(stepping.StepStats._fields), dtype=np.int64)
-    seed_step(x, v, radii, masses, 1.0, 0.1, stepping.travel_per_substep(0.05), walls, 10.0,
-              members, level_starts, largest, SKIN_RADII * 0.05, np.empty((12, 2), np.int64),
-              np.empty((3, 2), np.int64), np.zeros(3, dtype=np.int64), np.empty((3, 2)),
-              np.full(3, -1, dtype=np.int64), totals)
-    return time.perf_counter() - began
-
-
-def main(argv=None):
-    parser = argparse.ArgumentParser(
-        prog='python -m ball_world.core.numba_backend',
-        description='Compile and cache the numba kernels, so that no run waits for them.')
-    parser.add_argument('--warm', action='store_true', required=True,
-                        help='compile (or load from the cache) every kernel once')
-    parser.parse_args(argv)
-    if not available():
-        print('numba is not installed: nothing to compile (the numpy backend needs nothing)')
-        return 0
-    from ball_world.core import exact
-    began = time.perf_counter()
-    warm()
-    exact.warm()
-    print(f'numba kernels (seed and exact mode) ready in {time.perf_counter() - began:.1f} s')
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

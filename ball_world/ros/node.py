@@ -209,23 +209,28 @@ class BallWorld(Node):
         self._window = (time.monotonic(), 0)
         self._start_wall = time.monotonic()
         self._publish(self.simulation.last_record)
-        self.get_logger().info(self._startup_line(values))
+        summary, names = self._startup_lines(values)
+        self.get_logger().info(summary)
+        self.get_logger().debug(names)
 
-    def _startup_line(self, values):
-        """One line: the world, the rate, and every name the node speaks on."""
+    def _startup_lines(self, values):
+        """Two lines: the world and the rate (info), and every name the node speaks on
+        (debug: `--ros-args --log-level ball_world:=debug` shows it)."""
         simulation = self.simulation
         published = [self.resolve_topic_name(name) for name in TOPICS_OUT]
         if values['publish_clock']:
             published.append('/clock')
         services = [self.resolve_service_name(name) for name in SERVICES]
         standard = ', '.join(self.interfaces.names)
-        return (f'world: {describe(simulation.world, simulation.dt_ns)}; rate '
-                f"{values['rate_hz']:g} Hz{' (paused at step 0)' if self.paused else ''}; "
-                f"publishing {', '.join(published)}; subscribed to "
-                f"{', '.join(self.resolve_topic_name(name) for name in TOPICS_IN)}; services "
-                f"{', '.join(services)}; simulation_interfaces services "
-                f'{self.get_fully_qualified_name()}/{{{standard}}} and action '
-                f"{self.resolve_service_name('~/' + ACTION)}")
+        summary = (f'world: {describe(simulation.world, simulation.dt_ns)}; rate '
+                   f"{values['rate_hz']:g} Hz{' (paused at step 0)' if self.paused else ''}; "
+                   f'node {self.get_fully_qualified_name()}')
+        names = (f"publishing {', '.join(published)}; subscribed to "
+                 f"{', '.join(self.resolve_topic_name(name) for name in TOPICS_IN)}; services "
+                 f"{', '.join(services)}; simulation_interfaces services "
+                 f'{self.get_fully_qualified_name()}/{{{standard}}} and action '
+                 f"{self.resolve_service_name('~/' + ACTION)}")
+        return summary, names
 
     # Stepping ---------------------------------------------------------------------------
 
@@ -582,6 +587,16 @@ def usage():
     return '\n'.join(lines)
 
 
+def ignored_arguments(own):
+    """The warning for arguments before --ros-args, which rclpy never reads.
+
+    `ball_world -p rate_hz:=30` would otherwise run at the default rate without a word.
+    """
+    hint = ' '.join(own) if any(':=' in arg for arg in own) else '-p NAME:=VALUE'
+    return (f"ball_world: warning: ignoring {' '.join(own)!r}: ROS arguments go after "
+            f'--ros-args, e.g. ball_world --ros-args {hint}')
+
+
 def run(args=None):
     """Start the node and spin until shutdown or max_steps; return the exit code.
 
@@ -593,6 +608,8 @@ def run(args=None):
     if '-h' in own or '--help' in own:
         print(usage())
         return 0
+    if own:
+        print(ignored_arguments(own), file=sys.stderr)
     tune_allocator()
     try:
         rclpy.init(args=args)

@@ -27,6 +27,16 @@ def _seconds(ns):
     return f'{ns / 1e9:.9g} s'
 
 
+def _duration(ns):
+    """A span of log time to the millisecond: dt is kept in whole nanoseconds, so 1,800 steps
+    of 1/60 s last 30.0000006 s, which is 30 s to anyone reading a summary."""
+    return f"{f'{ns / 1e9:.3f}'.rstrip('0').rstrip('.')} s"
+
+
+def _plural(count, word):
+    return f"{count:,} {word}{'' if count == 1 else 's'}"
+
+
 def _energy(message):
     if message is None:
         return None
@@ -38,7 +48,10 @@ def _first(recording, topic):
 
 
 def _segment_lines(recording):
+    """A line per segment, and the steps taken in all of them: a segment starts at step 0,
+    its initial state, which is published and recorded but is not a step."""
     lines = []
+    taken = 0
     segments = recording.segments
     for position, segment in enumerate(segments):
         if position + 1 < len(segments):
@@ -46,10 +59,11 @@ def _segment_lines(recording):
         else:
             last_log = recording.end_ns if recording.end_ns is not None else 0
         last_step = max(0, (last_log - segment.log_offset_ns) // segment.dt_ns)
-        lines.append(f'  {segment.index}: from log time {_seconds(segment.log_offset_ns)}, '
+        taken += last_step
+        lines.append(f'  {segment.index}: from log time {_duration(segment.log_offset_ns)}, '
                      f'steps 0-{last_step}, dt {segment.dt_ns / 1e6:.6g} ms, frame '
                      f"'{segment.frame_id}', written by ball_world {segment.package_version}")
-    return lines
+    return lines, taken
 
 
 def describe(recording):
@@ -68,13 +82,17 @@ def describe(recording):
         or 'none'
     lines.append(f'compression: {compressions} ({recording.chunk_count} chunks)')
     if recording.start_ns is not None:
-        lines.append(f'duration:    {_seconds(recording.end_ns - recording.start_ns)} (log time '
-                     f'{_seconds(recording.start_ns)} to {_seconds(recording.end_ns)})')
+        lines.append(f'duration:    {_duration(recording.end_ns - recording.start_ns)} (log '
+                     f'time {_duration(recording.start_ns)} to {_duration(recording.end_ns)})')
     balls_topic = recording.topic_of('balls')
-    steps = recording.topics[balls_topic].message_count if balls_topic in recording.topics \
+    poses = recording.topics[balls_topic].message_count if balls_topic in recording.topics \
         else 0
-    lines.append(f'steps:       {steps} in {len(recording.segments)} segments')
-    lines.extend(_segment_lines(recording))
+    segment_lines, taken = _segment_lines(recording)
+    count = len(recording.segments)
+    lines.append(f"steps:       {taken:,} after the initial state{'' if count == 1 else 's'} "
+                 f'({_plural(poses, "message")} on {_shown(balls_topic)}), in '
+                 f'{_plural(count, "segment")}')
+    lines.extend(segment_lines)
     first_balls = _first(recording, balls_topic)
     if first_balls is not None:
         count = len(decode_pose_array(first_balls.data)[2])

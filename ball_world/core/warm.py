@@ -1,0 +1,49 @@
+"""Compile numba's kernels ahead of time, so that no run waits ~15 s for its first step.
+
+Why a module of its own: warming is a set-up task (scripts/setup.sh runs
+`python -m ball_world.core.warm`), not physics. It steps two tiny worlds through World, the
+path every run takes, so exactly the specialisations runs use are compiled and cached: one in
+seed mode on the numba backend, one in exact mode. numba keeps them on disk (cache=True, next
+to the modules or in NUMBA_CACHE_DIR), and recompiles them itself when the sources change
+(core.numba_backend.ensure_fresh_cache for the modules its kernels inline).
+"""
+import argparse
+import sys
+import time
+
+from ball_world.core.stepping import numba_installed
+from ball_world.core.world import World
+
+#: Two balls that meet at once and a small one heading for a wall: every stage has work.
+_POSITIONS = [[1.0, 1.0], [1.9, 1.0], [3.0, 3.0]]
+_VELOCITIES = [[1.0, 0.0], [-1.0, 0.0], [0.0, 5.0]]
+_RADII = [0.5, 0.4, 0.05]
+_WALLS = [[0.0, 0.0, 10.0, 0.0], [0.0, 4.0, 4.0, 4.0], [4.0, 0.0, 4.0, 4.0]]
+
+
+def warm():
+    """Compile (or load from numba's cache) the seed-mode and exact-mode kernels; returns
+    the seconds taken."""
+    began = time.perf_counter()
+    for mode in ('seed', 'exact'):
+        world = World(_POSITIONS, _VELOCITIES, _RADII, [1.0, 1.0, 1.0], walls=_WALLS,
+                      backend='numba', mode=mode)
+        for _ in range(3):
+            world.step(0.1)
+    return time.perf_counter() - began
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(
+        prog='python -m ball_world.core.warm',
+        description='Compile and cache the numba kernels, so that no run waits for them.')
+    parser.parse_args(argv)
+    if not numba_installed():
+        print('numba is not installed: nothing to compile (the numpy backend needs nothing)')
+        return 0
+    print(f'numba kernels (seed and exact mode) ready in {warm():.1f} s')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
