@@ -31,6 +31,7 @@ from ball_world.core import parameters as table
 from ball_world.core.alloc import tune_allocator
 from ball_world.core.exact import EventBudgetExceeded
 from ball_world.core.impulses import check_impulse, ImpulseRejected
+from ball_world.core.pacing import MAX_LAG, steps_due
 from ball_world.core.scenario import describe, ScenarioError, step_duration_ns
 from ball_world.core.stepping import SubstepLimitExceeded
 from ball_world.msgs.cdr import decode_vector3_stamped, encode_clock
@@ -237,32 +238,38 @@ class BallWorld(Node):
     def _schedule(self, rate_hz):
         """Step every 1 / rate_hz s of wall time (0: as fast as possible).
 
-        Periods up to MAX_TIMER_PERIOD are the timer's own; longer ones are kept by a due
-        time checked at that period, so a rate of 1e-300 Hz waits rather than crashing.
-        Ticks missed while the machine was busy are skipped, never bunched into a burst.
+        Step k is due at a fixed time (core/pacing.py); each tick of the timer takes the
+        steps due by then, so ticks missed while the process was busy are made up, up to
+        pacing.MAX_LAG s; beyond that the lag is dropped and said so. Periods up to
+        MAX_TIMER_PERIOD are the timer's own; longer ones are checked at that period, so a
+        rate of 1e-300 Hz waits rather than crashing.
         """
         period = 0.0 if rate_hz == 0.0 else 1.0 / rate_hz
         self._step_period = period
         self._next_due = time.monotonic() + period
-        tick_ns = int(min(period, MAX_TIMER_PERIOD) * 1e9)
+        self._tick = min(period, MAX_TIMER_PERIOD)
+        tick_ns = int(self._tick * 1e9)
         if self._timer is None:
+            self._dropped_steps = 0
             self._timer = self.create_timer(tick_ns * 1e-9, self._on_timer, clock=self._steady)
         else:
             self._timer.timer_period_ns = tick_ns
 
-    def _due(self):
-        if self._step_period <= MAX_TIMER_PERIOD:
-            return True
-        now = time.monotonic()
-        if now < self._next_due:
-            return False
-        self._next_due += self._step_period
-        if self._next_due < now:
-            self._next_due = now + self._step_period
-        return True
-
     def _on_timer(self):
-        if not self.paused and not self.finished and self._due():
+        if self.paused or self.finished:
+            return
+        take, self._next_due, dropped = steps_due(
+            time.monotonic(), self._next_due, self._step_period, self._tick)
+        if dropped:
+            self._dropped_steps += dropped
+            self.get_logger().warning(
+                f'more than {MAX_LAG:g} s behind the {1.0 / self._step_period:g} Hz schedule: '
+                f'dropped {dropped} steps of wall time ({self._dropped_steps} so far); '
+                'the world costs more than its rate or the machine is busy',
+                throttle_duration_sec=REPORT_PERIOD, throttle_time_source_type=self._steady)
+        for _ in range(take):
+            if self.paused or self.finished:
+                return
             self._drain_impulses()
             self.step_once()
 
