@@ -49,6 +49,29 @@ class AppliedEdit:
     mass: float = 0.0  # spawn: kg
     impulses_before: int = 0
     text: str = ''  # the JSON document as recorded and published
+    agent: bool = False  # spawn: the ball is an agent (the JSON has 'agent': true)
+    yaw: Optional[float] = None  # set_state of an agent: its heading, rad (JSON 'yaw')
+
+
+@dataclass(frozen=True)
+class AppliedCommand:
+    """A velocity command an agent took (core.agents), in force from the step it is recorded
+    with: body frame, as received on <name>/cmd_vel (cdr: the message's bytes, or b'')."""
+
+    name: str  # the agent's entity name
+    vx: float  # m/s forward
+    vy: float  # m/s left
+    wz: float  # rad/s
+    cdr: bytes = b''
+
+
+@dataclass(frozen=True)
+class AgentFrame:
+    """The agents at the end of a step: names, rows in the arrays, headings (rad)."""
+
+    names: tuple  # entity names, in the order of odom and /tf
+    indices: np.ndarray  # (A,) rows of positions and velocities
+    yaws: np.ndarray  # (A,) headings, rad, in [-pi, pi]
 
 
 @dataclass(frozen=True)
@@ -110,6 +133,9 @@ class StepRecord:
     radii: Optional[np.ndarray] = None
     masses: Optional[np.ndarray] = None
     world_changed: bool = False
+    # Agents (core.agents): None in a world without agents, so its records are as before.
+    agents: Optional[AgentFrame] = None
+    commands: tuple = field(default_factory=tuple)  # AppliedCommand taken before this step
 
 
 class Sink(Protocol):
