@@ -271,3 +271,41 @@ def test_agents_alone_follow_limits_and_report_names():
     assert agents.impulses(velocities, masses, {'a': 0, 'b': 1}, 10**9 // 4, 5) == []
     [(name, jx, jy)] = agents.impulses(velocities, masses, {'a': 0, 'b': 1}, 10**9 // 4, 10)
     assert (name, jx, jy) == ('b', 2.0 * 0.5, 0.0)
+
+
+def test_resource_string_says_agent_true_and_nothing_else_goes():
+    from ball_world.core.edits import parse_resource, parse_spawn
+    assert parse_spawn('{radius: 0.3, agent: true}')[3] is True
+    assert parse_spawn('{radius: 0.3}')[3] is False
+    assert parse_resource('{radius: 0.3, agent: true}')[0] == 0.3
+    with pytest.raises(EditRefused, match='agent must be true or false'):
+        parse_spawn('{agent: 1}')
+
+
+@pytest.mark.parametrize('z, w, yaw', [
+    (0.0, 1.0, 0.0), (math.sin(0.4), math.cos(0.4), 0.8), (1.0, 0.0, math.pi),
+    (-math.sin(1.0), math.cos(1.0), -2.0), (0.0, -1.0, 0.0)])
+def test_a_pose_rotated_about_z_gives_the_heading(z, w, yaw):
+    from geometry_msgs.msg import Pose
+    from ball_world.ros.sim_interfaces import planar_pose
+    pose = Pose()
+    pose.position.x, pose.position.y = 1.0, 2.0
+    pose.orientation.z, pose.orientation.w = z, w
+    x, y, got = planar_pose(pose, '', 'world')
+    assert (x, y) == (1.0, 2.0)
+    assert math.cos(got) == pytest.approx(math.cos(yaw), abs=1e-12)
+    assert math.sin(got) == pytest.approx(math.sin(yaw), abs=1e-12)
+
+
+@pytest.mark.parametrize('q, words', [
+    ((0.1, 0.0, 0.0, 0.995), 'is a rotation'), ((0.0, 0.0, 0.5, 0.5), 'not a unit'),
+    ((0.0, 0.0, math.nan, 1.0), 'not finite')])
+def test_a_pose_rotated_otherwise_is_refused_as_invalid_pose(q, words):
+    from geometry_msgs.msg import Pose
+    from ball_world.core.edits import INVALID_POSE
+    from ball_world.ros.sim_interfaces import planar_pose
+    pose = Pose()
+    (pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w) = q
+    with pytest.raises(EditRefused, match=words) as refused:
+        planar_pose(pose, '', 'world')
+    assert refused.value.kind == INVALID_POSE

@@ -102,6 +102,11 @@ def wrapped(yaw):
     return math.remainder(yaw, _TWO_PI)
 
 
+def frames(prefix, name):
+    """An agent's (odom frame, body frame): <prefix><name>/odom, <prefix><name>/base_link."""
+    return f'{prefix}{name}/odom', f'{prefix}{name}/base_link'
+
+
 def agent_names(parameters, count):
     """The agents of a new world of `count` balls, checked (ParameterError naming `agents`).
 
@@ -219,13 +224,19 @@ class Agents:
             result.append((name, mass * dvx, mass * dvy))
         return result
 
+    def yaw_rate(self, name, end_ns):
+        """The yaw rate (clamped) agent `name` turns at in the step ending end_ns, rad/s."""
+        command = self.in_force(name, end_ns)
+        if command is None:
+            return 0.0
+        limit = self.limits.max_yaw_rate
+        return min(max(command.wz, -limit), limit)
+
     def turn(self, dt_ns, end_ns):
         """Advance every heading over the step ending end_ns by its clamped yaw rate."""
-        limit = self.limits.max_yaw_rate
         dt = dt_ns * 1e-9
         for name in self._yaw:
-            command = self.in_force(name, end_ns)
-            if command is None or command.wz == 0.0:
+            rate = self.yaw_rate(name, end_ns)
+            if rate == 0.0:
                 continue
-            rate = min(max(command.wz, -limit), limit)
             self._yaw[name] = wrapped(self._yaw[name] + rate * dt)
