@@ -13,13 +13,14 @@ import numpy as np
 
 from ball_world import __version__
 from ball_world.core import limits
-from ball_world.core.agents import agent_names, Agents, CommandRejected, Limits
+from ball_world.core.agents import agent_names, Agents, CommandRejected, frames, Limits
 from ball_world.core.edits import (check_placement, check_speeds, EditRefused, Entities,
                                    INVALID_POSE, MAX_SPAWN_BATCH, TOO_MANY)
 from ball_world.core.impulses import ImpulseRejected, lookup_ball, velocity_after
 from ball_world.core.limits import MAX_SIM_TIME_NS
 from ball_world.core.parameters import checked
 from ball_world.core.scenario import build_world, step_duration_ns
+from ball_world.msgs.agent_cdr import encode_odometry, encode_tf_message
 from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
                                  encode_vector3_stamped)
 from ball_world.step_record import (AgentFrame, AppliedCommand, AppliedEdit, AppliedImpulse,
@@ -110,6 +111,7 @@ class Simulation:
         self.agents = Agents(agent_names(parameters, len(world)),
                              Limits.from_parameters(parameters))
         self._drive = None  # the agents' impulses for the next step, once prepared
+        self._agent_frames = None  # (names, odom frames, body frames) last recorded
         self._commands = []  # commands taken since the last step
         self._world_changed = False
         self._applied = []  # impulses applied since the last step
@@ -432,7 +434,8 @@ class Simulation:
             impulses=tuple(self._applied), real_time_factor=real_time_factor,
             edits=tuple(self._edits), names=self._names, radii=world.radii,
             masses=world.masses, world_changed=self._world_changed,
-            agents=self._agent_frame(), commands=tuple(self._commands))
+            agents=self._agent_frame(positions, velocities, stamp_ns),
+            commands=tuple(self._commands))
         self._commands = []
         self._applied = []
         self._edits = []
@@ -442,16 +445,44 @@ class Simulation:
         self._each_sink(lambda sink: sink.write_step(record))
         return record
 
-    def _agent_frame(self):
-        """The agents' rows and headings now, or None in a world without agents."""
+    def _agent_frame(self, positions, velocities, stamp_ns):
+        """The agents now (rows, headings, odom and /tf bytes), or None without agents.
+
+        The odom twist is in the body frame (REP 105): the world velocity turned by -yaw,
+        and the yaw rate of the step that just ended.
+        """
         agents = self.agents
         if not len(agents):
             return None
         names = agents.names
         index_of = self.index_of
-        return AgentFrame(names=names,
-                          indices=np.array([index_of[name] for name in names], dtype=np.int64),
-                          yaws=np.array(agents.yaws(), dtype=np.float64))
+        indices = np.array([index_of[name] for name in names], dtype=np.int64)
+        yaws = np.array(agents.yaws(), dtype=np.float64)
+        cos, sin = np.cos(yaws), np.sin(yaws)
+        moving = velocities[indices]
+        twists = np.empty((len(names), 3))
+        twists[:, 0] = cos * moving[:, 0] + sin * moving[:, 1]
+        twists[:, 1] = cos * moving[:, 1] - sin * moving[:, 0]
+        twists[:, 2] = [agents.yaw_rate(name, stamp_ns) for name in names]
+        static = None
+        if self._agent_frames is None or self._agent_frames[0] != names:
+            prefix = str(self.parameters['frame_prefix'])
+            pairs = [frames(prefix, name) for name in names]
+            self._agent_frames = (names, tuple(p[0] for p in pairs),
+                                  tuple(p[1] for p in pairs))
+            count = len(names)
+            static = encode_tf_message(stamp_ns, (self.frame_id,) * count,
+                                       self._agent_frames[1], np.zeros((count, 2)),
+                                       np.zeros(count))
+        _, odom_frames, base_frames = self._agent_frames
+        located = positions[indices]
+        return AgentFrame(
+            names=names, indices=indices, yaws=yaws, twists=twists, odom_frames=odom_frames,
+            base_frames=base_frames,
+            odom_cdr=tuple(encode_odometry(stamp_ns, odom_frames, base_frames, located, yaws,
+                                           twists)),
+            tf_cdr=encode_tf_message(stamp_ns, odom_frames, base_frames, located, yaws),
+            tf_static_cdr=static)
 
     def _each_sink(self, action):
         """Run action on every sink; a sink that raises is dropped and reported once."""

@@ -72,6 +72,14 @@ class AgentFrame:
     names: tuple  # entity names, in the order of odom and /tf
     indices: np.ndarray  # (A,) rows of positions and velocities
     yaws: np.ndarray  # (A,) headings, rad, in [-pi, pi]
+    twists: np.ndarray  # (A, 3) vx, vy in the body frame (m/s), yaw rate (rad/s)
+    odom_frames: tuple  # <p><name>/odom of each agent
+    base_frames: tuple  # <p><name>/base_link of each agent
+    odom_cdr: tuple  # nav_msgs/Odometry of each agent, CDR, as published on <name>/odom
+    tf_cdr: bytes  # tf2_msgs/TFMessage: every odom -> base_link, as published on /tf
+    # /tf_static (frame_id -> each odom frame, identity) when the set of agents changed with
+    # this record (a segment's first record included), else None.
+    tf_static_cdr: Optional[bytes] = None
 
 
 @dataclass(frozen=True)

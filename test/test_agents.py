@@ -309,3 +309,28 @@ def test_a_pose_rotated_otherwise_is_refused_as_invalid_pose(q, words):
     with pytest.raises(EditRefused, match=words) as refused:
         planar_pose(pose, '', 'world')
     assert refused.value.kind == INVALID_POSE
+
+
+def test_odom_and_tf_bytes_carry_the_step_bit_for_bit_and_the_body_twist():
+    from ball_world.msgs.agent_cdr import decode_odometry, decode_tf_message
+    simulation = one_agent(**{'agent.cmd_timeout': 0.0, 'frame_prefix': 'w1/'})
+    first = simulation.last_record.agents
+    static = decode_tf_message(first.tf_static_cdr)
+    assert static.frame_ids == ['world'] and static.child_frame_ids == ['w1/ball_0/odom']
+    assert static.transforms.tolist() == [[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]]
+    simulation.command('ball_0', 1.0, 0.0, 0.5)
+    for _ in range(100):
+        record, _ = simulation.step()
+        assert record.agents.tf_static_cdr is None
+    odom = decode_odometry(record.agents.odom_cdr[0])
+    assert (odom.frame_id, odom.child_frame_id) == ('w1/ball_0/odom', 'w1/ball_0/base_link')
+    assert odom.stamp_ns == record.stamp_ns
+    assert odom.pose[:2].tobytes() == record.positions[0].tobytes()
+    yaw = float(record.agents.yaws[0])
+    half = [math.sin(yaw / 2), math.cos(yaw / 2)]
+    assert odom.pose[5:7].tolist() == pytest.approx(half, abs=1e-15)
+    # Turning at 0.5 rad/s at 1 m/s: in the body frame the agent goes straight ahead.
+    assert odom.twist.tolist() == pytest.approx([1.0, 0.0, 0.0, 0.0, 0.0, 0.5], abs=1e-12)
+    tf = decode_tf_message(record.agents.tf_cdr)
+    assert tf.child_frame_ids == ['w1/ball_0/base_link']
+    assert tf.transforms[0, :2].tobytes() == record.positions[0].tobytes()

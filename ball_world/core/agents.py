@@ -8,8 +8,9 @@ and can be pushed); what it adds is a heading and a drive:
 - The heading (yaw, rad) is kinematic: collisions do not turn it. Each step it turns by the
   commanded yaw rate (clamped to max_yaw_rate) times dt, kept in [-pi, pi].
 - Before each step the drive moves the agent's velocity toward the commanded one: the body
-  command (forward, left) is clamped to max_speed, rotated into the world by the heading at
-  the start of the step, and the change dv is limited to max_accel * dt. It reaches the world
+  command (forward, left) is clamped to max_speed, rotated into the world by the heading the
+  step ends with (so odometry, taken at the end, sees the commanded body velocity), and the
+  change dv is limited to max_accel * dt. It reaches the world
   as an impulse J = m dv through the Simulation's impulse queue, with the same checks as any
   impulse and recorded as one.
 - A command is in force for cmd_timeout seconds of simulated time from the step it took
@@ -198,10 +199,11 @@ class Agents:
         limits = self.limits
         reach = limits.max_accel * (dt_ns * 1e-9)
         result = []
-        for name, yaw in self._yaw.items():
+        for name in self._yaw:
             index = index_of.get(name)
             if index is None:
                 continue
+            yaw = self.heading_after(name, dt_ns, end_ns)
             command = self.in_force(name, end_ns)
             if command is None:
                 target_x = target_y = 0.0
@@ -232,11 +234,13 @@ class Agents:
         limit = self.limits.max_yaw_rate
         return min(max(command.wz, -limit), limit)
 
+    def heading_after(self, name, dt_ns, end_ns):
+        """The heading of `name` at the end of the step ending end_ns (its yaw rate applied)."""
+        rate = self.yaw_rate(name, end_ns)
+        yaw = self._yaw[name]
+        return yaw if rate == 0.0 else wrapped(yaw + rate * (dt_ns * 1e-9))
+
     def turn(self, dt_ns, end_ns):
         """Advance every heading over the step ending end_ns by its clamped yaw rate."""
-        dt = dt_ns * 1e-9
         for name in self._yaw:
-            rate = self.yaw_rate(name, end_ns)
-            if rate == 0.0:
-                continue
-            self._yaw[name] = wrapped(self._yaw[name] + rate * dt)
+            self._yaw[name] = self.heading_after(name, dt_ns, end_ns)
