@@ -67,6 +67,8 @@ class DirectoryClaim:
         self.path = path
         self.created = created
         self._fd = fd
+        status = os.fstat(fd)
+        self.identity = (status.st_dev, status.st_ino)
 
     def release(self):
         if self._fd is not None:

@@ -40,6 +40,18 @@ def split_chunk_bytes(max_bytes):
     return min(CHUNK_BYTES, max(MIN_CHUNK_BYTES, max_bytes // 8))
 
 
+def splits(values):
+    """Whether parameters ask for a split recording (record.max_bytes or max_seconds)."""
+    return bool(values['record.max_bytes'] or values['record.max_seconds'])
+
+
+def open_split_sink(values, report=None):
+    """The SplitMcapSink the record.* parameters describe (raises OSError naming the path)."""
+    return SplitMcapSink(values['record.mcap'], values['record.max_bytes'],
+                         values['record.max_seconds'], values['record.max_files'],
+                         values['record.overwrite'], report)
+
+
 class SplitMcapSink:
     """A Sink writing `<dir>/<name>_0.mcap`, `_1.mcap`, ... and `<dir>/metadata.yaml`.
 
@@ -73,6 +85,15 @@ class SplitMcapSink:
         except OSError:
             self._claim.discard()
             raise
+
+    @property
+    def identity(self):
+        """(device, inode) of the directory: another output of the run may not be it."""
+        return self._claim.identity
+
+    def discard(self):
+        """Give up a recording that never began: as close(), which then removes it all."""
+        self.close()
 
     @property
     def files(self):

@@ -20,8 +20,8 @@ PROG = 'ball_world_to_rrd'
 
 def parse_args(argv):
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
-    parser.add_argument('input', type=Path, help='ball_world MCAP recording (IN.mcap), or a bag directory '
-                             'of split files')
+    parser.add_argument('input', type=Path, help='ball_world MCAP recording (IN.mcap), or a '
+                        'bag directory of split files')
     parser.add_argument('-o', '--output', type=Path,
                         help='Rerun file to write (default: IN with the suffix .rrd)')
     parser.add_argument('--force', action='store_true',
