@@ -10,6 +10,7 @@ import errno
 import os
 from pathlib import Path
 import signal
+import struct
 import sys
 import textwrap
 
@@ -187,17 +188,26 @@ def test_info_sums_the_files(by_time, capsys):
     assert 'run_1.mcap:' in out
 
 
+def data_bytes(path):
+    """Where a finished MCAP's summary starts (its footer says): the bytes of its data."""
+    data = Path(path).read_bytes()
+    opcode, length, summary_start = struct.unpack_from('<BQQ', data, len(data) - 8 - 29)
+    assert (opcode, length) == (0x02, 20)
+    return summary_start
+
+
 def test_split_by_size_keeps_files_near_max_bytes_and_resims(tmp_path, capsys):
     directory = tmp_path / 'sized'
     limit = 50_000
     truth, _ = record(directory, steps=150, reset_steps=0, max_bytes=limit)
     names = metadata(directory)['relative_file_paths']
-    assert len(names) >= 3
-    sizes = [(directory / name).stat().st_size for name in names]
-    # a file rolls once the bytes handed to it pass the limit: one chunk (at most 64 KiB
-    # before compression) plus a step and the summary past it at most
-    assert all(limit <= size <= limit + (96 << 10) for size in sizes[:-1]), sizes
-    assert sizes[-1] <= limit + (96 << 10)
+    assert len(names) >= 4
+    sizes = [data_bytes(directory / name) for name in names]
+    # A file rolls at the first step at which its bytes, the open chunk counted
+    # uncompressed, reach the limit: so its data ends at most one step (about 6 kB here,
+    # markers included) past it, and at most one chunk (16 KiB) short of it.
+    assert all(limit - (16 << 10) <= size <= limit + (8 << 10) for size in sizes[:-1]), sizes
+    assert sizes[-1] <= limit + (8 << 10)
     assert resim.main([str(directory)]) == 0
     assert f'all {len(truth.records)} recorded steps' in capsys.readouterr().out
 
@@ -207,8 +217,7 @@ def test_max_files_keeps_the_newest_and_says_so(tmp_path, capsys):
     truth, said = record(directory, steps=100, reset_steps=0, max_seconds=1.0, max_files=2)
     names = metadata(directory)['relative_file_paths']
     assert names == ['kept_4.mcap', 'kept_5.mcap']
-    assert sorted(p.name for p in directory.iterdir()) == ['kept_4.mcap', 'kept_5.mcap',
-                                                            'metadata.yaml']
+    assert sorted(p.name for p in directory.iterdir()) == names + ['metadata.yaml']
     assert [line.rsplit('/', 1)[1] for line in said] == [f'kept_{i}.mcap' for i in range(4)]
     assert all(line.startswith('record.max_files 2: removed') for line in said)
     # what is left re-simulates from the state its first file resumes from

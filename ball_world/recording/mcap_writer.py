@@ -319,8 +319,9 @@ class McapSink:
 
     @property
     def bytes_written(self):
-        """Bytes handed to the file so far; the open chunk (at most chunk_bytes) is not."""
-        return self._file.tell()
+        """Bytes handed to the file so far plus the open chunk's (uncompressed): about the
+        size of the file were it finished now, less its summary."""
+        return self._file.tell() + self._pending
 
     # Sink protocol ----------------------------------------------------------------------
 

@@ -27,13 +27,15 @@ from ball_world.recording.mcap_writer import CHUNK_BYTES, McapRecordingError, Mc
 from ball_world.recording.resume import resume_metadata
 
 #: Smallest chunk a split file is cut into: small files still compress well.
-MIN_CHUNK_BYTES = 64 << 10
+MIN_CHUNK_BYTES = 16 << 10
 
 
 def split_chunk_bytes(max_bytes):
-    """Chunks of at most an eighth of a file, so a file ends within about 1/8 of max_bytes.
+    """Chunks of at most an eighth of a file: a small file still has a few chunks to index.
 
-    The size checked is what was handed to the file; the open chunk is not in it yet.
+    The size checked counts the open chunk uncompressed, so compression (zstd halves a
+    chunk, lz4 barely shrinks poses) can only make a file end below max_bytes, by at most
+    what the open chunk shrinks.
     """
     if not max_bytes:
         return CHUNK_BYTES
