@@ -204,6 +204,14 @@ def write_metadata(directory, recordings):
     os.replace(temporary, target)
 
 
+def missing_metadata(directory):
+    """What a directory without metadata.yaml is, for the one line that refuses it."""
+    if numbered_files(directory):
+        return (f'has no {METADATA_FILE}: its recorder was killed before it finished a '
+                f'file; ball_world_repair {directory} writes it')
+    return f'is a directory without {METADATA_FILE}, not a bag of split files'
+
+
 def listed_files(directory, load):
     """The file names metadata.yaml lists, in order (ValueError says what is wrong).
 
@@ -215,9 +223,7 @@ def listed_files(directory, load):
         with open(path, 'rb') as stream:
             data = stream.read(MAX_METADATA_BYTES + 1)
     except FileNotFoundError:
-        raise ValueError(f'no {METADATA_FILE}: not a bag directory, or its recorder was '
-                         'killed before it finished a file (ball_world_repair writes it)'
-                         ) from None
+        raise ValueError(missing_metadata(directory)) from None
     document = load(data.decode('utf-8', 'replace'), METADATA_FILE, MAX_METADATA_BYTES)
     information = document.get('rosbag2_bagfile_information') \
         if isinstance(document, dict) else None

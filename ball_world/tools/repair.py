@@ -203,12 +203,11 @@ def main(argv=None):
 
 def _main_bag(args):
     """A bag directory of split files: repaired in place (tools.repair_bag)."""
-    from ball_world.tools.repair_bag import repair_bag
-    if args.output:
-        print(f'{PROG}: {args.input}: a bag directory is repaired in place; -o is for one '
-              'file', file=sys.stderr)
-        return 2
+    from ball_world.tools.repair_bag import check_bag, repair_bag
     try:
+        if args.output:
+            check_bag(args.input)
+            raise RecordingError('a bag directory is repaired in place; -o is for one file')
         lines = repair_bag(args.input)
     except RecordingError as error:
         print(f'{PROG}: {args.input}: {error}', file=sys.stderr)

@@ -14,8 +14,8 @@ import os
 
 from mcap.records import Message
 
-from ball_world.recording.bag import (listed_files, METADATA_FILE, numbered_files, summarize,
-                                      write_metadata)
+from ball_world.recording.bag import (listed_files, METADATA_FILE, missing_metadata,
+                                      numbered_files, summarize, write_metadata)
 from ball_world.recording.files import FileRefused, open_regular
 from ball_world.recording.mcap_reader import load_untrusted, Recording, RecordingError, Scan
 from ball_world.tools import repair as repair_file
@@ -49,12 +49,20 @@ def _previously_listed(directory):
         return []
 
 
+def check_bag(directory):
+    """Refuse (RecordingError) a directory that is no bag of split files."""
+    if not numbered_files(directory):
+        raise RecordingError(missing_metadata(directory) if not os.path.exists(
+            os.path.join(directory, METADATA_FILE)) else 'holds no split file to repair')
+
+
 def repair_bag(directory, stream=None):
     """Repair every split file of `directory` that needs it and rewrite metadata.yaml.
 
     Returns the report as lines. Raises RecordingError when no file is left to list, or
     OSError (FileRefused: the directory is being recorded).
     """
+    check_bag(directory)
     fd = _lock(directory)
     try:
         lines = []
