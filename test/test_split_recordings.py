@@ -13,8 +13,10 @@ import signal
 import struct
 import sys
 import textwrap
+import time
 
-from ball_world_testing.harness import ROSBAGS_TYPES, Truth
+from ball_world_testing.harness import finish, ROSBAGS_TYPES, start_node, Truth
+from geometry_msgs.msg import PoseArray
 from mcap.reader import make_reader
 import numpy as np
 import pytest
@@ -28,7 +30,7 @@ from ball_world.recording.files import FileRefused
 from ball_world.recording.recording_set import open_recording, RecordingSet
 from ball_world.recording.split_writer import SplitMcapSink
 from ball_world.simulation import Simulation, SpawnRequest
-from ball_world.tools import info, repair, resim
+from ball_world.tools import info, repair, resim, to_rrd
 
 ROOT = Path(__file__).resolve().parents[1]
 RATE = 20.0
@@ -188,6 +190,14 @@ def test_info_sums_the_files(by_time, capsys):
     assert 'run_1.mcap:' in out
 
 
+def test_to_rrd_converts_the_set(by_time, tmp_path, capsys):
+    directory, truth = by_time
+    output = tmp_path / 'set.rrd'
+    assert to_rrd.main([str(directory), '-o', str(output)]) == 0
+    assert f'wrote {output}: {len(truth.records)} steps, 2 segment' in capsys.readouterr().err
+    assert output.stat().st_size > 0
+
+
 def data_bytes(path):
     """Where a finished MCAP's summary starts (its footer says): the bytes of its data."""
     data = Path(path).read_bytes()
@@ -325,3 +335,50 @@ def test_sigkill_mid_split_then_repair_then_resim(tmp_path, capsys, processes):
     assert resim.main([str(directory)]) == 0
     assert 'bit-identically' in capsys.readouterr().out
     assert resim.main([str(directory / last)]) == 0  # the repaired file alone
+
+
+# The node and the player ---------------------------------------------------------------------
+
+NODE_TIMEOUT = 120.0  # generous: two noisy cores; a test fails only on a hang
+
+
+def test_node_records_a_split_run_and_refuses_an_existing_bag(tmp_path, capsys):
+    directory = tmp_path / 'node'
+    run_node = ('max_steps:=45', 'rate_hz:=0.0', 'dt:=0.05', f'record.mcap:={directory}',
+                'record.max_seconds:=1.0', 'record.max_files:=2')
+    code, out, err = finish(start_node(*run_node), NODE_TIMEOUT)
+    assert code == 0, err
+    # steps 0-45 in files of 20 steps: three files, the oldest removed and said so
+    assert metadata(directory)['relative_file_paths'] == ['node_1.mcap', 'node_2.mcap']
+    assert f'record.max_files 2: removed the oldest split file {directory}/node_0.mcap' \
+        in out + err
+    assert [s.step for s in open_recording(directory).steps()] == list(range(20, 46))
+    assert resim.main([str(directory)]) == 0
+    assert 'all 26 recorded steps re-simulate bit-identically' in capsys.readouterr().out
+
+    code, out, err = finish(start_node(*run_node), NODE_TIMEOUT)
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert code == 2 and lines == [
+        f"ball_world: parameter 'record.mcap': cannot record to {directory}: already exists; "
+        'set record.overwrite:=true to replace it'], err
+    assert metadata(directory)['relative_file_paths'] == ['node_1.mcap', 'node_2.mcap']
+
+
+def test_replay_plays_the_files_in_order_with_their_timing(by_time, probe, processes):
+    directory, truth = by_time
+    received = probe.listen(PoseArray, '/balls', keep=lambda data: (time.monotonic(), data),
+                            raw=True)
+    env = dict(os.environ,
+               PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get('PYTHONPATH', ''))
+    child = processes.start([sys.executable, '-m', 'ball_world.tools.replay', str(directory),
+                             '--topics', '/balls', '--wait-for-subscribers', '--delay', '0.3'],
+                            cwd=ROOT, env=env)
+    assert probe.wait_for(lambda: len(received) >= len(truth.records), timeout=60), \
+        len(received)
+    code, _, err = finish(child, timeout=15)
+    assert code == 0, err
+    assert [data for _, data in received] == [rec.balls_cdr for rec in truth.records]
+    # steps 50 ms of log time apart, across the files and the reset (its log time goes on
+    # at the next step): the median spacing within 0.5x-2x, as for a single file
+    spacing = np.median(np.diff([t for t, _ in received]))
+    assert 0.5 * DT_NS / 1e9 <= spacing <= 2 * DT_NS / 1e9, spacing
