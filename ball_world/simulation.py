@@ -20,6 +20,7 @@ from ball_world.core.impulses import ImpulseRejected, lookup_ball, velocity_afte
 from ball_world.core.limits import MAX_SIM_TIME_NS
 from ball_world.core.parameters import checked
 from ball_world.core.scenario import build_world, step_duration_ns
+from ball_world.core.world import World
 from ball_world.msgs.agent_cdr import encode_odometry, encode_tf_message
 from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
                                  encode_vector3_stamped)
@@ -133,6 +134,27 @@ class Simulation:
             names=self._names)
         self._each_sink(lambda sink: sink.start_segment(snapshot, info))
         return self.record(stats=None)
+
+    def resume(self, parameters, state, segment, log_offset_ns):
+        """Continue a recorded segment where a split file starts (re-simulation only).
+
+        state: recording.resume.ResumeState, the world at the end of step state.step. Walls,
+        backend and mode come from the parameters, the balls and their names from the state,
+        so that seed-mode steps from here are bit for bit the recorded run's. (Exact mode
+        carries predictions from step to step that a state cannot hold: see
+        docs/reliability.md.) Meant for a Simulation without sinks.
+        """
+        built = build(parameters)
+        base = built.world
+        world = World(state.positions.copy(), state.velocities.copy(), state.radii.copy(),
+                      state.masses.copy(), walls=base.walls.segments, backend=base.backend,
+                      mode=base.mode)
+        self.reset(parameters, BuiltWorld(built.parameters, world, built.dt_ns))
+        self.entities = Entities.restored(state.names, state.retired, len(base))
+        self._names = tuple(self.entities.names)
+        self.step_index = state.step
+        self.segment = segment
+        self.log_offset_ns = log_offset_ns
 
     @property
     def names(self):

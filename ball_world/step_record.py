@@ -113,6 +113,9 @@ class RunInfo:
     log_offset_ns: int
     package_version: str
     backend: str = ''  # the backend physics.backend resolved to (auto: numba or numpy)
+    # A split file that continues the segment: the metadata values saying from where
+    # (recording.resume.resume_metadata); None where the segment starts.
+    resume: Optional[dict] = None
 
 
 @dataclass(frozen=True)

@@ -149,6 +149,19 @@ class Entities:
         self._retired = set()
         self._next_number = count
 
+    @classmethod
+    def restored(cls, names, retired, first_count):
+        """The names part-way through a segment: live `names`, deleted `retired`.
+
+        first_count: the balls the segment started with. Generated names count up from
+        there past every name used, so the next one is the name the original run gave.
+        """
+        entities = cls(0)
+        entities.append(names)
+        entities._retired = set(retired)
+        entities._next_number = first_count
+        return entities
+
     def __len__(self):
         return len(self.names)
 

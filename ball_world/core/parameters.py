@@ -326,6 +326,14 @@ PARAMETERS = (
               '(otherwise it is refused at start).', AT_START),
     Parameter('record.mcap', STRING, '', 'MCAP file to record to; empty records nothing.',
               AT_START, max_length=MAX_PATH_LENGTH),
+    Parameter('record.max_bytes', INTEGER, 0, 'Start a new MCAP file past this size, in '
+              'bytes: record.mcap is then a rosbag2 bag directory; 0: one file.', AT_START, 0,
+              _INT64_MAX),
+    Parameter('record.max_seconds', DOUBLE, 0.0, 'Start a new MCAP file past this much '
+              'simulated time, s: record.mcap is then a rosbag2 bag directory; 0: one file.',
+              AT_START, 0.0, 1e9),
+    Parameter('record.max_files', INTEGER, 0, 'Keep at most this many split MCAP files (the '
+              'oldest removed, logged); 0: all.', AT_START, 0, 1_000_000),
     Parameter('record.rerun', STRING, '', 'Rerun .rrd file to log to; empty logs nothing.',
               AT_START, max_length=MAX_PATH_LENGTH),
     Parameter('record.rerun_every', INTEGER, 1, 'Log every k-th step to the .rrd (steps with '

@@ -54,6 +54,7 @@ from ball_world.msgs.cdr import (decode_pose_array, decode_state, decode_state_l
 from ball_world.recording.files import open_regular
 from ball_world.recording.mcap_writer import (EVENT_ROLES, flatten_parameters, METADATA_NAME,
                                               NODE_NAME, STEP_TOPICS)
+from ball_world.recording.resume import parse_resume, ResumeState
 from ball_world.step_record import (AppliedEdit, AppliedImpulse, RunInfo, STATS_FIELDS,
                                     StepRecord, WorldSnapshot)
 
@@ -461,6 +462,8 @@ class Segment:
     package_version: str
     parameters: dict  # flat names ('balls.x'), checked and merged over the defaults
     topics: dict  # logical name -> recorded topic
+    # Where a split file continues the segment (its first step is resume.step + 1).
+    resume: Optional[ResumeState] = None
 
     @classmethod
     def from_metadata(cls, values):
@@ -502,15 +505,27 @@ class Segment:
             if not isinstance(text, str) or len(text) > limits.MAX_NAME_LENGTH \
                     or not text.isprintable():
                 raise RecordingError(f"'{key}' is not a name: {_text(text)}")
+        try:
+            resume = parse_resume(values, lambda text, what: load_untrusted(
+                text, what, MAX_PARAMETERS_TEXT))
+        except ValueError as error:
+            raise RecordingError(f'the state it resumes from: {error}') from None
         return cls(index=index, log_offset_ns=log_offset_ns, dt_ns=dt_ns, frame_id=frame_id,
-                   package_version=version, parameters=parameters, topics=_topics(values))
+                   package_version=version, parameters=parameters, topics=_topics(values),
+                   resume=resume)
 
     def expected_balls(self):
         """How many balls the parameters make (explicit and random), without building."""
         return len(self.parameters['balls.x']) + self.parameters['random.count']
 
     def check_ball_count(self, recorded):
-        """Refuse a step whose ball count the parameters cannot give, before any building."""
+        """Refuse a step whose ball count the parameters cannot give, before any building.
+
+        A segment continued in a split file has its balls in its resume state, and its
+        first step's edits may change their number: nothing to check against.
+        """
+        if self.resume is not None:
+            return
         expected = self.expected_balls()
         if recorded != expected:
             raise RecordingError(f'segment {self.index}: its parameters make {expected:,} '
@@ -910,14 +925,19 @@ def snapshot_and_info(segment, first_step=None):
     world = segment_world(segment)
     positions = world.positions.copy()
     velocities = world.velocities.copy()
-    if first_step is not None and first_step.step == 0 and first_step.complete:
+    radii, masses = world.radii.copy(), world.masses.copy()
+    names = tuple(f'ball_{i}' for i in range(len(world)))
+    if segment.resume is not None:  # a split file: the balls at the step it continues
+        resume = segment.resume
+        positions, velocities = resume.positions.copy(), resume.velocities.copy()
+        radii, masses, names = resume.radii.copy(), resume.masses.copy(), resume.names
+    elif first_step is not None and first_step.step == 0 and first_step.complete:
         positions = first_step.positions.copy()
         velocities = first_step.state[:, 2:4].copy()
-    snapshot = WorldSnapshot(radii=world.radii.copy(), masses=world.masses.copy(),
+    snapshot = WorldSnapshot(radii=radii, masses=masses,
                              walls=world.walls.segments.copy(), positions=positions,
                              velocities=velocities, dt_ns=segment.dt_ns,
-                             frame_id=segment.frame_id,
-                             names=tuple(f'ball_{i}' for i in range(len(world))))
+                             frame_id=segment.frame_id, names=names)
     info = RunInfo(parameters=dict(segment.parameters), topics=dict(segment.topics),
                    segment=segment.index, log_offset_ns=segment.log_offset_ns,
                    package_version=segment.package_version)
@@ -1054,7 +1074,7 @@ def feed_sinks(path, sinks, close=True):
     step goes to write_step in order (a step cut off by a crash is skipped, but its edits
     still count). The sinks are flushed at the end, and closed unless close=False.
     """
-    recording = path if isinstance(path, Recording) else Recording(path)
+    recording = Recording(path) if isinstance(path, (str, os.PathLike)) else path
     current = started = None  # segment positions: followed, and begun in the sinks
     roster = snapshot = info = None
     fed = 0

@@ -42,6 +42,7 @@ from ball_world import __version__
 from ball_world.msgs.cdr import encode_clock, encode_string
 from ball_world.msgs.definitions import message_definition, type_hash
 from ball_world.recording.files import claim_output, OutputClaim
+from ball_world.recording.resume import RESUME_STEP
 from ball_world.step_record import PACKAGE_NAME
 
 #: Compression of the MCAP chunks. lz4 is the default because writing competes with stepping
@@ -228,7 +229,16 @@ def segment_metadata(world, info, topics):
         'parameters': yaml.dump(document, Dumper=_ParamsDumper, sort_keys=False),
         'parameters_json': json.dumps(document),
         'topics': json.dumps(topics),
+        **(info.resume or {}),
     }
+
+
+def segment_start_ns(world, info):
+    """Log time of what a segment start writes: its step 0, or in a split file that
+    continues the segment (recording.resume), the file's first step."""
+    if info.resume:
+        return info.log_offset_ns + (int(info.resume[RESUME_STEP]) + 1) * world.dt_ns
+    return info.log_offset_ns
 
 
 class _Markers:
@@ -307,6 +317,12 @@ class McapSink:
         self._writer.start(profile='ros2', library=LIBRARY)
         self._file.flush()  # a full disk or read-only file fails here, at start
 
+    @property
+    def bytes_written(self):
+        """Bytes handed to the file so far plus the open chunk's (uncompressed): about the
+        size of the file were it finished now, less its summary."""
+        return self._file.tell() + self._pending
+
     # Sink protocol ----------------------------------------------------------------------
 
     def start_segment(self, world, info):
@@ -352,7 +368,7 @@ class McapSink:
         self._writer.flush()
         self._pending = 0
         self._writer.add_metadata(METADATA_NAME, segment_metadata(world, info, topics))
-        self._restart_markers(world, info.log_offset_ns)
+        self._restart_markers(world, segment_start_ns(world, info))
 
     def _restart_markers(self, world, log_time_ns):
         """Clear the old world in viewers and record the new one's markers at its next step.

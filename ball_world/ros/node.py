@@ -96,18 +96,24 @@ def open_sinks(values):
     other recording's file is refused.
     """
     from ball_world.recording.files import claim_output, ClaimedSink
+    from ball_world.recording.split_writer import open_split_sink, splits
+    logger = rclpy.logging.get_logger('ball_world')
     claims = []
     sinks = []
     name = None
     try:
         for name in ('record.mcap', 'record.rerun'):
-            if values[name]:
+            if name == 'record.mcap' and values[name] and splits(values):
+                # a bag directory of split files: the sink claims it (and is the claim)
+                claims.append((name, open_split_sink(values, logger.info)))
+            elif values[name]:
                 claims.append((name, claim_output(values[name], values['record.overwrite'],
                                                   'set record.overwrite:=true', claims)))
         claimed = dict(claims)
         if 'record.mcap' in claimed:
             from ball_world.recording.mcap_writer import McapSink
-            sinks.append(BackgroundSink(McapSink(claimed['record.mcap'])))
+            mcap = claimed['record.mcap']
+            sinks.append(BackgroundSink(mcap if splits(values) else McapSink(mcap)))
         if 'record.rerun' in claimed or values['view.rerun']:
             from ball_world.recording.rerun_log import RerunSink
             rerun_file = claimed.get('record.rerun')
@@ -165,7 +171,8 @@ class BallWorld(Node):
             # A recording that fails on its first segment is a bad path, not a run-time fault.
             self.simulation.close()
             sink = getattr(failures[0].sink, 'sink', failures[0].sink)
-            name = 'record.mcap' if type(sink).__name__ == 'McapSink' else 'record.rerun'
+            name = 'record.mcap' if type(sink).__name__ in ('McapSink', 'SplitMcapSink') \
+                else 'record.rerun'
             raise StartupError(f"parameter '{name}': cannot record to {values[name]}: "
                                f'{failures[0].error}')
         self.simulation.on_sink_failure = self._on_sink_failure

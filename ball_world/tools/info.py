@@ -5,10 +5,12 @@ topic are decoded), and a file without summary front to back. Any file that is n
 readable ball_world recording gets one line on stderr and exit status 2.
 """
 import argparse
+import os
 import sys
 
 from ball_world.msgs.cdr import decode_pose_array, decode_vector3_stamped
-from ball_world.recording.mcap_reader import decode_stats, EDIT_KINDS, Recording, RecordingError
+from ball_world.recording.mcap_reader import decode_stats, EDIT_KINDS, RecordingError
+from ball_world.recording.recording_set import open_recording
 from ball_world.step_record import STATS_FIELDS
 from ball_world.tools import print_report
 
@@ -59,11 +61,32 @@ def _segment_lines(recording):
         else:
             last_log = recording.end_ns if recording.end_ns is not None else 0
         last_step = max(0, (last_log - segment.log_offset_ns) // segment.dt_ns)
-        taken += last_step
+        resumed_from = 0 if segment.resume is None else segment.resume.step
+        taken += last_step - resumed_from
+        first_step = 0 if segment.resume is None else resumed_from + 1
         lines.append(f'  {segment.index}: from log time {_duration(segment.log_offset_ns)}, '
-                     f'steps 0-{last_step}, dt {segment.dt_ns / 1e6:.6g} ms, frame '
+                     f'steps {first_step}-{last_step}, dt {segment.dt_ns / 1e6:.6g} ms, frame '
                      f"'{segment.frame_id}', written by ball_world {segment.package_version}")
     return lines, taken
+
+
+def _file_lines(recording):
+    """A bag directory's files (recording_set.RecordingSet): each with its steps and time."""
+    files = getattr(recording, 'files', None)
+    if not files:
+        return []
+    lines = [f'split into:  {len(files)} files (metadata.yaml)']
+    for member in files:
+        topic = member.topic_of('balls')
+        steps = member.topics[topic].message_count if topic in member.topics else 0
+        span = (f', log time {_seconds(member.start_ns)} to {_seconds(member.end_ns)}'
+                if member.start_ns is not None else '')
+        lines.append(f'  {os.path.basename(member.path)}: {member.size} bytes, {steps} steps'
+                     f'{span}')
+    if recording.problem and recording.has_summary:
+        lines.append(f'  NOTE: {recording.problem}; ball_world_repair {recording.path} '
+                     'adds it')
+    return lines
 
 
 def describe(recording):
@@ -71,7 +94,11 @@ def describe(recording):
     header = recording.header
     lines = [f'file:        {recording.path} ({recording.size} bytes)',
              f'written by:  {_shown(header.library)} (profile {header.profile!r})']
-    if recording.has_summary:
+    lines.extend(_file_lines(recording))
+    if getattr(recording, 'files', None) and not recording.has_summary:
+        lines.append(f'summary:     NOT ALL ({recording.problem})')
+        lines.append(f'             Repair it: ball_world_repair {recording.path}')
+    elif recording.has_summary:
         lines.append('summary:     yes (the writer finished the file)')
     else:
         lines.append(f'summary:     NO ({recording.problem}); '
@@ -177,10 +204,10 @@ def _edit_lines(recording, shown=10):
 def main(argv=None):
     parser = argparse.ArgumentParser(
         prog='ball_world_info', description='Summarise a ball_world MCAP recording.')
-    parser.add_argument('file', help='the .mcap recording')
+    parser.add_argument('file', help='the .mcap recording, or a bag directory of split files')
     args = parser.parse_args(argv)
     try:
-        recording = Recording(args.file)
+        recording = open_recording(args.file)
         lines = describe(recording)
     except RecordingError as error:
         print(f'ball_world_info: {args.file}: {error}', file=sys.stderr)

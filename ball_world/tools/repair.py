@@ -179,12 +179,15 @@ def main(argv=None):
         prog=PROG,
         description='Recover a truncated MCAP recording (writer killed: no summary, torn '
                     'last record) into a complete file holding every complete record.')
-    parser.add_argument('input', help='the damaged .mcap')
+    parser.add_argument('input', help='the damaged .mcap, or a bag directory of split files '
+                                      '(repaired in place, metadata.yaml rewritten)')
     parser.add_argument('-o', '--output', help='where to write (default: '
                                                'INPUT.repaired.mcap; may be INPUT itself)')
     parser.add_argument('--force', action='store_true',
                         help='replace the output file if it exists')
     args = parser.parse_args(argv)
+    if os.path.isdir(args.input):
+        return _main_bag(args)
     target = args.output or default_target(args.input)
     try:
         report = repair(args.input, target, args.force)
@@ -195,6 +198,24 @@ def main(argv=None):
         print(f'{PROG}: {error}', file=sys.stderr)
         return 2
     print_report(describe(report, args.input, target))
+    return 0
+
+
+def _main_bag(args):
+    """A bag directory of split files: repaired in place (tools.repair_bag)."""
+    from ball_world.tools.repair_bag import check_bag, repair_bag
+    try:
+        if args.output:
+            check_bag(args.input)
+            raise RecordingError('a bag directory is repaired in place; -o is for one file')
+        lines = repair_bag(args.input)
+    except RecordingError as error:
+        print(f'{PROG}: {args.input}: {error}', file=sys.stderr)
+        return 2
+    except OSError as error:
+        print(f'{PROG}: {error}', file=sys.stderr)
+        return 2
+    print_report('\n'.join(lines))
     return 0
 
 

@@ -29,9 +29,9 @@ from rclpy.utilities import remove_ros_args
 
 from ball_world.msgs.cdr import encode_clock
 from ball_world.msgs.definitions import message_definition
-from ball_world.recording.mcap_reader import (load_untrusted, MAX_SMALL_TEXT, Recording,
-                                              RecordingError)
+from ball_world.recording.mcap_reader import load_untrusted, MAX_SMALL_TEXT, RecordingError
 from ball_world.recording.mcap_writer import CLOCK_TOPIC
+from ball_world.recording.recording_set import open_recording
 
 DEFAULT_DEPTH = 10
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
@@ -164,7 +164,7 @@ def argument_parser():
         prog='ball_world_replay',
         description='Publish a ball_world MCAP recording with its recorded timing and QoS, '
                     'like ros2 bag play. ROS arguments go after --ros-args.')
-    parser.add_argument('file', help='the .mcap recording')
+    parser.add_argument('file', help='the .mcap recording, or a bag directory of split files')
     parser.add_argument('--rate', type=float, default=1.0,
                         help='playback speed factor (default 1: recorded timing)')
     parser.add_argument('--loop', action='store_true', help='start over at the end')
@@ -216,7 +216,7 @@ def main(argv=None):
     argv = list(sys.argv[1:] if argv is None else argv)
     args = argument_parser().parse_args(remove_ros_args(['ball_world_replay', *argv])[1:])
     try:
-        recording = Recording(args.file)
+        recording = open_recording(args.file)
     except RecordingError as error:
         print(f'ball_world_replay: {args.file}: {error}', file=sys.stderr)
         return 2

@@ -26,7 +26,8 @@ import numpy as np
 from ball_world.core.edits import Ball, EditRefused
 from ball_world.core.scenario import ScenarioError
 from ball_world.msgs.cdr import decode_state_layout, decode_vector3_stamped
-from ball_world.recording.mcap_reader import Recording, RecordingError
+from ball_world.recording.mcap_reader import RecordingError
+from ball_world.recording.recording_set import open_recording
 from ball_world.simulation import Simulation, SpawnRequest
 from ball_world.step_record import STATS_FIELDS
 from ball_world.tools import print_report
@@ -124,6 +125,18 @@ def _rebuild(segment, first_step):
     if first_step.ball_count is not None:
         segment.check_ball_count(first_step.ball_count)
     return Simulation(segment.parameters, sinks=())
+
+
+def _resume(segment):
+    """The segment's Simulation at the step a split file continues from (its resume state)."""
+    simulation = Simulation(segment.parameters, sinks=())
+    try:
+        simulation.resume(segment.parameters, segment.resume, segment.index,
+                          segment.log_offset_ns)
+    except ValueError as error:  # balls the World refuses (core.limits)
+        raise RecordingError(f'segment {segment.index}: the state it resumes from: '
+                             f'{error}') from None
+    return simulation
 
 
 def _advance(simulation, step, comparison, segment_index):
@@ -231,10 +244,13 @@ def resimulate(recording, progress=None):
             progress.advance()
         segment = recording.segments[step.segment]
         if result is None or result.position != step.segment:
-            if step.step != 0:
+            if step.step == 0:
+                simulation = _rebuild(segment, step)
+            elif segment.resume is not None and step.step == segment.resume.step + 1:
+                simulation = _resume(segment)
+            else:
                 raise RecordingError(f'segment {segment.index} begins at '
                                      f'step {step.step}: its first steps are not recorded')
-            simulation = _rebuild(segment, step)
             result = SegmentResult(segment.index, step.segment)
             comparison.segments.append(result)
         elif step.step <= result.last_step:
@@ -281,11 +297,11 @@ def main(argv=None):
         description='Re-simulate a recording from its parameters, impulses and world edits '
                     'and check that every recorded pose and state row is bit-identical. Exit '
                     '0 if so, 1 if not, 2 if the recording cannot be read or rebuilt.')
-    parser.add_argument('file', help='the .mcap recording')
+    parser.add_argument('file', help='the .mcap recording, or a bag directory of split files')
     args = parser.parse_args(argv)
     progress = None
     try:
-        recording = Recording(args.file)
+        recording = open_recording(args.file)
         balls = recording.topics.get(recording.topic_of('balls'))
         progress = Progress(balls.message_count if balls else 0, 'steps', PROG)
         comparison = resimulate(recording, progress)

@@ -20,7 +20,8 @@ PROG = 'ball_world_to_rrd'
 
 def parse_args(argv):
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
-    parser.add_argument('input', type=Path, help='ball_world MCAP recording (IN.mcap)')
+    parser.add_argument('input', type=Path, help='ball_world MCAP recording (IN.mcap), or a '
+                        'bag directory of split files')
     parser.add_argument('-o', '--output', type=Path,
                         help='Rerun file to write (default: IN with the suffix .rrd)')
     parser.add_argument('--force', action='store_true',
@@ -47,11 +48,12 @@ def convert(args):
     """
     # Imported here: rerun takes a while to import, and --help should not wait for it.
     from ball_world.recording.files import ClaimedSink, PartialOutput
-    from ball_world.recording.mcap_reader import feed_sinks, Recording, RecordingError
+    from ball_world.recording.mcap_reader import feed_sinks, RecordingError
+    from ball_world.recording.recording_set import open_recording
     from ball_world.recording.rerun_log import RerunSink
     from ball_world.tools.progress import StepProgress
 
-    recording = Recording(args.input)
+    recording = open_recording(args.input)
     balls = recording.topics.get(recording.topic_of('balls'))
     if balls is None or balls.message_count == 0:
         raise RecordingError('holds no step to convert')

@@ -1,0 +1,218 @@
+"""Record a long run as a rosbag2 bag directory of MCAP files, split by size or by time.
+
+Why: one file that grows without bound is hard to move, open or repair, and the MCAP
+writer keeps an index entry per chunk for the summary, so its memory grows with the file
+too. SplitMcapSink wraps one McapSink per file: past record.max_bytes (bytes handed to the
+file) or record.max_seconds (log time since the file's first step), the file is finished
+(summary, footer) and the next one begun, always between two steps. Each writer is new, so
+the writer's memory is bounded by one file.
+
+Every file stands alone: a file begun inside a segment starts with that segment's
+'ball_world' metadata record (parameters, topics) plus the state it continues from
+(recording.resume: the step before its first, with every ball's name, position, velocity,
+radius and mass), then the markers of that world (and whatever else McapSink writes at a
+segment start). A reset starts the next segment in whichever file is open (a due split is
+made first, so the new file begins with the segment).
+
+After each finished file metadata.yaml is rewritten (recording.bag), after record.max_files
+is applied: the oldest files beyond it are removed, each said through `report`. Errors are
+OSErrors whose text names the file (McapRecordingError): a full disk while the next file
+starts leaves every finished file and the last metadata.yaml as they were.
+"""
+import dataclasses
+import os
+
+from ball_world.recording.bag import (claim_directory, file_name, summarize, write_metadata)
+from ball_world.recording.mcap_writer import CHUNK_BYTES, McapRecordingError, McapSink
+from ball_world.recording.resume import resume_metadata
+
+#: Smallest chunk a split file is cut into: small files still compress well.
+MIN_CHUNK_BYTES = 16 << 10
+
+
+def split_chunk_bytes(max_bytes):
+    """Chunks of at most an eighth of a file: a small file still has a few chunks to index.
+
+    The size checked counts the open chunk uncompressed, so compression (zstd halves a
+    chunk, lz4 barely shrinks poses) can only make a file end below max_bytes, by at most
+    what the open chunk shrinks.
+    """
+    if not max_bytes:
+        return CHUNK_BYTES
+    return min(CHUNK_BYTES, max(MIN_CHUNK_BYTES, max_bytes // 8))
+
+
+def splits(values):
+    """Whether parameters ask for a split recording (record.max_bytes or max_seconds)."""
+    return bool(values['record.max_bytes'] or values['record.max_seconds'])
+
+
+def open_split_sink(values, report=None):
+    """The SplitMcapSink the record.* parameters describe (raises OSError naming the path)."""
+    return SplitMcapSink(values['record.mcap'], values['record.max_bytes'],
+                         values['record.max_seconds'], values['record.max_files'],
+                         values['record.overwrite'], report)
+
+
+class SplitMcapSink:
+    """A Sink writing `<dir>/<name>_0.mcap`, `_1.mcap`, ... and `<dir>/metadata.yaml`.
+
+    max_bytes, max_seconds: when to start the next file (0: never by that measure).
+    max_files: how many files to keep (0: all). report(line): where removals are said.
+    The directory is claimed at once (recording.bag.claim_directory: an existing one is
+    refused unless overwrite). Other keyword arguments go to each McapSink.
+    """
+
+    def __init__(self, directory, max_bytes=0, max_seconds=0.0, max_files=0, overwrite=False,
+                 report=None, **options):
+        self.path = os.fspath(directory)
+        self.max_bytes = int(max_bytes)
+        self.max_ns = round(float(max_seconds) * 1e9)
+        self.max_files = int(max_files)
+        self.report = report
+        options.setdefault('chunk_bytes', split_chunk_bytes(self.max_bytes))
+        self._options = options
+        self._claim = claim_directory(self.path, overwrite, 'set record.overwrite:=true')
+        self._finished = []  # bag.FileSummary of each complete file kept, in order
+        self._number = 0
+        self._sink = None
+        self._closed = False
+        self._world = self._info = None  # the current segment's start
+        self._last = None  # the segment's last StepRecord
+        self._retired = set()  # names deleted in the segment so far
+        self._file_steps = 0
+        self._file_start_ns = None
+        try:
+            self._open()
+        except OSError:
+            self._claim.discard()
+            raise
+
+    @property
+    def identity(self):
+        """(device, inode) of the directory: another output of the run may not be it."""
+        return self._claim.identity
+
+    def discard(self):
+        """Give up a recording that never began: as close(), which then removes it all."""
+        self.close()
+
+    @property
+    def files(self):
+        """Paths of the complete files kept so far, in order."""
+        return [summary.path for summary in self._finished]
+
+    # Sink protocol ----------------------------------------------------------------------
+
+    def start_segment(self, world, info):
+        self._check_open()
+        if self._due(None):
+            self._run(self._roll, None)
+        self._world, self._info = world, info
+        self._last = None
+        self._retired = set()
+        self._run(self._sink.start_segment, world, info)
+
+    def write_step(self, record):
+        self._check_open()
+        if self._due(record.log_time_ns) and self._last is not None:
+            self._run(self._roll, self._last)
+        self._run(self._sink.write_step, record)
+        if self._file_start_ns is None:
+            self._file_start_ns = record.log_time_ns
+        self._file_steps += 1
+        self._last = record
+        self._retired.update(edit.name for edit in record.edits if edit.kind == 'delete')
+
+    def flush(self):
+        self._check_open()
+        self._run(self._sink.flush)
+
+    def close(self):
+        """Finish the open file and metadata.yaml; a second call does nothing.
+
+        A recording closed before anything was recorded leaves no directory it created.
+        """
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self._sink is not None:
+                self._finish(self.max_files or None)
+        finally:
+            if self._finished:
+                self._claim.release()
+            else:
+                self._claim.discard()
+
+    # Implementation ---------------------------------------------------------------------
+
+    def _check_open(self):
+        if self._closed:
+            raise ValueError(f'{self.path}: the recording is closed')
+
+    def _run(self, action, *args):
+        """Run action; any error finishes this sink (the files already complete stay)."""
+        try:
+            action(*args)
+        except Exception:
+            self._closed = True
+            self._sink = None
+            self._claim.release()
+            raise
+
+    def _due(self, log_time_ns):
+        if not self._file_steps:
+            return False
+        if self.max_bytes and self._sink.bytes_written >= self.max_bytes:
+            return True
+        return bool(self.max_ns and log_time_ns is not None
+                    and log_time_ns - self._file_start_ns >= self.max_ns)
+
+    def _open(self):
+        path = os.path.join(self.path, file_name(self.path, self._number))
+        self._sink = McapSink(path, **self._options)
+        self._number += 1
+        self._file_steps = 0
+        self._file_start_ns = None
+
+    def _finish(self, keep):
+        """Close the open file, keep its summary and at most `keep` files (None: all), and
+        rewrite metadata.yaml."""
+        from ball_world.recording.mcap_reader import Recording, RecordingError
+        sink, self._sink = self._sink, None
+        sink.close()
+        if not os.path.exists(sink.path):
+            return  # it held no segment: McapSink removed it
+        try:
+            self._finished.append(summarize(Recording(sink.path)))
+        except RecordingError as error:
+            raise McapRecordingError(0, f'cannot be read back: {error}', sink.path) from None
+        while keep is not None and len(self._finished) > keep:
+            oldest = self._finished.pop(0)
+            os.unlink(oldest.path)
+            if self.report is not None:
+                self.report(f'record.max_files {self.max_files}: removed the oldest split '
+                            f'file {oldest.path}')
+        metadata = os.path.join(self.path, 'metadata.yaml')
+        try:
+            write_metadata(self.path, self._finished)
+        except OSError as error:
+            raise McapRecordingError(error.errno, error.strerror or str(error),
+                                     metadata) from None
+
+    def _roll(self, resume_from):
+        """Finish the open file and begin the next; resume_from: the StepRecord it follows.
+
+        The limit on kept files counts the file being begun, so at most max_files exist.
+        """
+        self._finish(self.max_files - 1 if self.max_files else None)
+        self._open()
+        if resume_from is not None:
+            record = resume_from
+            world = dataclasses.replace(
+                self._world, radii=record.radii, masses=record.masses,
+                positions=record.positions, velocities=record.velocities, names=record.names)
+            info = dataclasses.replace(self._info,
+                                       resume=resume_metadata(record, self._retired))
+            self._sink.start_segment(world, info)
