@@ -185,7 +185,7 @@ def test_info_sums_the_files(by_time, capsys):
     out = capsys.readouterr().out
     count = len(metadata(directory)['files'])
     assert f'split into:  {count} files' in out
-    assert 'steps:       97 in 2 segments' in out
+    assert 'steps:       95 after the initial states (97 messages on /balls), in 2 segments' in out
     assert 'edits:       2 (1 spawn, 1 delete)' in out
     assert 'run_1.mcap:' in out
 
@@ -291,6 +291,7 @@ def test_full_disk_while_finishing_a_file_loses_nothing_already_written(tmp_path
 
 KILLED = textwrap.dedent("""
     import sys
+    import time
     from ball_world.recording.split_writer import SplitMcapSink
     from ball_world.simulation import Simulation
     params = {'rate_hz': 20.0, 'random.count': 40, 'random.seed': 5}
@@ -302,6 +303,8 @@ KILLED = textwrap.dedent("""
         if sim.step_index % 5 == 2:
             sim.flush()
             print(sim.step_index, flush=True)
+            if sim.step_index == 37:
+                time.sleep(3600)  # killed here, in the middle of a file, never between files
 """)
 
 
