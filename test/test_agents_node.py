@@ -100,10 +100,12 @@ def test_odom_is_the_state_row_and_tf_composes_world_to_base_link(probe, process
         assert (t.transform.translation.x, t.transform.translation.y,
                 t.transform.rotation.z, t.transform.rotation.w) == (0.0, 0.0, 0.0, 1.0)
     poses = {stamp_ns(m): m.poses[1].position for m in balls}
+    # state carries no stamp: its rows are found by position. A ball held against a wall can
+    # end two steps at one position with different velocities, so keep every row seen there.
     rows = {}
     for message in state:
         x, y, vx, vy = message.data[4:8]
-        rows[(x, y)] = (vx, vy)
+        rows.setdefault((x, y), []).append((vx, vy))
     compared = 0
     for message in odom:
         pose = message.pose.pose
@@ -111,13 +113,17 @@ def test_odom_is_the_state_row_and_tf_composes_world_to_base_link(probe, process
         assert message.child_frame_id == 'w/ball_1/base_link'
         position = poses.get(stamp_ns(message))
         if position is None:
-            continue
+            continue  # that step's balls message has not arrived
         assert (pose.position.x, pose.position.y) == (position.x, position.y)  # bit for bit
-        vx, vy = rows[(pose.position.x, pose.position.y)]
+        seen = rows.get((position.x, position.y))
+        if seen is None:
+            continue  # nor its state message
         yaw = 2.0 * math.atan2(pose.orientation.z, pose.orientation.w)
         body = message.twist.twist.linear
-        assert body.x == pytest.approx(math.cos(yaw) * vx + math.sin(yaw) * vy, abs=1e-12)
-        assert body.y == pytest.approx(math.cos(yaw) * vy - math.sin(yaw) * vx, abs=1e-12)
+        cos, sin = math.cos(yaw), math.sin(yaw)
+        in_body = [(cos * vx + sin * vy, cos * vy - sin * vx) for vx, vy in seen]
+        assert any((body.x, body.y) == pytest.approx(row, abs=1e-12) for row in in_body), \
+            (body.x, body.y, in_body)
         compared += 1
     assert compared > 20
     composed = 0
