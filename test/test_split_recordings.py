@@ -179,6 +179,23 @@ def test_resim_across_the_splits_and_of_each_file_alone(by_time, capsys):
         assert 'bit-identically' in capsys.readouterr().out
 
 
+def test_exact_mode_resims_across_the_splits_and_refuses_a_lone_later_file(tmp_path, capsys):
+    directory = tmp_path / 'exact'
+    sink = SplitMcapSink(directory, max_seconds=1.0)
+    simulation = Simulation({**PARAMS, 'physics.mode': 'exact'}, sinks=[sink])
+    run(simulation, 45)
+    simulation.close()
+    assert resim.main([str(directory)]) == 0
+    assert 'all 46 recorded steps re-simulate bit-identically' in capsys.readouterr().out
+    assert resim.main([str(directory / 'exact_0.mcap')]) == 0
+    capsys.readouterr()
+    # the predictions exact mode carries between steps are in no file: refused, not compared
+    assert resim.main([str(directory / 'exact_1.mcap')]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'segment 0 is picked up at step 20 (a split file) in exact ' \
+        'mode' in err[0]
+
+
 def test_info_sums_the_files(by_time, capsys):
     directory, _ = by_time
     assert info.main([str(directory)]) == 0
