@@ -541,12 +541,15 @@ def run_steps(args, workdir):
 # memory ---------------------------------------------------------------------------------------
 
 def run_memory(args, workdir):
-    from ball_world.recording.mcap_reader import Recording
+    from ball_world.recording.recording_set import open_recording
     ns = namespace()
     mcap_path, rrd_path = Path(workdir) / 'memory.mcap', Path(workdir) / 'memory.rrd'
     recordings = {}
     if args.record in ('mcap', 'both'):
         recordings['record.mcap'] = mcap_path
+        if args.split_seconds:  # a bag directory of split files (issue 23)
+            recordings.update({'record.max_seconds': args.split_seconds,
+                               'record.max_files': args.max_files})
     if args.record in ('rrd', 'both'):
         recordings['record.rerun'] = rrd_path
     node = NodeProcess(workdir, ns, 'memory', {**world_parameters(args), 'rate_hz': 100.0,
@@ -583,9 +586,12 @@ def run_memory(args, workdir):
     checks = [f'SIGINT exit {code}']
     fine = code == 0
     if 'record.mcap' in recordings:
-        finished = Recording(mcap_path).has_summary
+        recording = open_recording(mcap_path)
+        finished = recording.has_summary
         fine = fine and finished
-        checks.append(f'MCAP {_size_mb(mcap_path):,.0f} MB, summary {finished}')
+        split = (f' in {len(recording.files)} files kept of {args.split_seconds:g} s each '
+                 f'(record.max_files {args.max_files})' if args.split_seconds else '')
+        checks.append(f'MCAP {_size_mb(mcap_path):,.0f} MB{split}, summary {finished}')
     if 'record.rerun' in recordings:
         verify = rerun_cli('rrd', 'verify', rrd_path)
         fine = fine and verify[0] == 0
@@ -593,20 +599,26 @@ def run_memory(args, workdir):
                       + ('passes' if verify[0] == 0 else f'FAILS: {verify[1][-200:]}'))
     if not args.keep:
         for path in (mcap_path, rrd_path):
-            if path.exists():
+            if path.is_dir():
+                shutil.rmtree(path)
+            elif path.exists():
                 path.unlink()
     rtf = node.real_time_factors()
     recorded = {'both': 'MCAP and .rrd', 'mcap': 'MCAP', 'rrd': '.rrd', 'none': 'nothing'}
     what = (f'{args.balls} balls at 100 Hz recording {recorded[args.record]} for '
             f'{args.minutes:g} min ({steps:,} steps); real-time factor '
             + (f'{min(rtf):.2f}-{max(rtf):.2f}' if rtf else 'n/a') + '; ' + ', '.join(checks))
-    row(f'memory --minutes {args.minutes:g} --record {args.record}', what,
+    split = f' --split-seconds {args.split_seconds:g}' if args.split_seconds else ''
+    row(f'memory --minutes {args.minutes:g} --record {args.record}{split}', what,
         f'RSS {rss[0]:.0f} MB at {times[0]:.0f} s -> {rss[-1]:.0f} MB at {times[-1]:.0f} s: '
         f'{growth:+.1f}% ({slope:+.2f} MB/min fitted from {warm:.0f} s on)')
     return 0 if fine else 1
 
 
 def _size_mb(path):
+    """A file's size, or the sum of a bag directory's, MB."""
+    if path.is_dir():
+        return sum(part.stat().st_size for part in path.iterdir()) / 2**20
     return path.stat().st_size / 2**20 if path.exists() else 0.0
 
 
@@ -1020,6 +1032,11 @@ def main(argv=None):
     memory.add_argument('--balls', type=int, default=1000)
     memory.add_argument('--record', choices=('both', 'mcap', 'rrd', 'none'), default='both',
                         help='what the node records (default both), to tell whose memory grows')
+    memory.add_argument('--split-seconds', type=float, default=0.0, metavar='S',
+                        help='record the MCAP as a bag directory split every S simulated '
+                             'seconds (record.max_seconds; default 0: one file)')
+    memory.add_argument('--max-files', type=int, default=0, metavar='K',
+                        help='with --split-seconds: keep the newest K files (record.max_files)')
     rtf = cases.add_parser('rtf', help='real-time factor of a 10,000-ball node at 100 Hz, '
                                        'publishing and recording MCAP')
     rtf.add_argument('--balls', type=int, default=10_000)

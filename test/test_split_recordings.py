@@ -6,7 +6,9 @@ alone (complete, indexed, re-simulable from its first step), metadata.yaml must 
 files hold (checked against mcap's own reader), and the `rosbags` library must take the
 directory as one rosbag2 recording.
 """
+import base64
 import errno
+import json
 import os
 from pathlib import Path
 import signal
@@ -15,7 +17,8 @@ import sys
 import textwrap
 import time
 
-from ball_world_testing.harness import finish, ROSBAGS_TYPES, start_node, Truth
+from ball_world_testing.harness import (finish, rewrite_recording, ROSBAGS_TYPES, start_node,
+                                        Truth)
 from geometry_msgs.msg import PoseArray
 from mcap.reader import make_reader
 import numpy as np
@@ -264,6 +267,57 @@ def test_a_missing_file_is_refused_naming_it(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert err == [f'{prog}: {directory}: gap_1.mcap, listed in metadata.yaml, is '
                        'missing: the set is incomplete']
+
+
+def crafted_resume(state):
+    """A change to a resume state: (field, new value) given the decoded JSON object."""
+    def change(values):
+        if 'resume_state' in values:
+            document = json.loads(values['resume_state'])
+            key, value = state(document)
+            document[key] = value
+            values['resume_state'] = json.dumps(document)
+        return values
+    return change
+
+
+def nan_positions(document):
+    count = len(document['names'])
+    data = np.full((count, 2), np.nan).astype('<f8').tobytes()
+    return 'positions', base64.b64encode(data).decode()
+
+
+@pytest.mark.parametrize('state, words', [
+    (nan_positions, 'positions holds a value that is not finite'),
+    (lambda d: ('radii', 'no*base64!'), 'radii is not base64 text'),
+    # 24 masses: 192 bytes, 256 base64 characters; 244 of them decode to 183 bytes
+    (lambda d: ('masses', d['masses'][:-12]), 'masses holds 183 bytes, not 1 float64'),
+    (lambda d: ('names', d['names'][:-1]), 'positions holds'),
+    (lambda d: ('names', d['names'][:-1] + ['9lives']), "holds '9lives', which is no entity"),
+    (lambda d: ('names', [d['names'][0]] * len(d['names'])), 'or one twice'),
+])
+def test_a_crafted_resume_state_is_refused_in_one_line(by_time, tmp_path, capsys,
+                                                       state, words):
+    directory, _ = by_time
+    crafted = rewrite_recording(directory / 'run_1.mcap', tmp_path / 'crafted.mcap',
+                                metadata=crafted_resume(state))
+    for tool, prog in ((resim, 'ball_world_resim'), (info, 'ball_world_info')):
+        assert tool.main([str(crafted)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(
+            f"{prog}: {crafted}: segment 0: 'ball_world' metadata: the state it resumes "
+            'from: ') and words in err[0], err
+
+
+def test_metadata_yaml_naming_a_path_outside_is_refused(tmp_path, capsys):
+    directory = tmp_path / 'bag'
+    record(directory, steps=30, reset_steps=0, max_seconds=1.0)
+    text = (directory / 'metadata.yaml').read_text()
+    (directory / 'metadata.yaml').write_text(text.replace('- bag_0.mcap', '- ../bag_0.mcap'))
+    assert resim.main([str(directory)]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"ball_world_resim: {directory}: metadata.yaml lists '../bag_0.mcap', which is not a "
+        'file name in the directory')
 
 
 def test_an_existing_directory_is_refused_unless_overwrite(tmp_path):
