@@ -453,3 +453,21 @@ def test_replay_plays_the_files_in_order_with_their_timing(by_time, probe, proce
     # at the next step): the median spacing within 0.5x-2x, as for a single file
     spacing = np.median(np.diff([t for t, _ in received]))
     assert 0.5 * DT_NS / 1e9 <= spacing <= 2 * DT_NS / 1e9, spacing
+
+
+def test_repair_removes_a_file_killed_as_it_began_and_keeps_the_rest(tmp_path, capsys):
+    directory = tmp_path / 'began'
+    truth, _ = record(directory, steps=45, reset_steps=0, max_seconds=1.0)
+    names = metadata(directory)['relative_file_paths']
+    # killed during a roll: the next file holds its magic and header record, or nothing
+    data = (directory / names[0]).read_bytes()
+    header_end = 8 + 9 + struct.unpack_from('<Q', data, 9)[0]
+    (directory / f'began_{len(names)}.mcap').write_bytes(data[:header_end])
+    (directory / f'began_{len(names) + 1}.mcap').write_bytes(b'')
+    assert repair.main([str(directory)]) == 0
+    out = capsys.readouterr().out
+    assert f'began_{len(names)}.mcap: removed, it held no complete message' in out
+    assert f'began_{len(names) + 1}.mcap: removed, it held no complete message' in out
+    assert metadata(directory)['relative_file_paths'] == names
+    assert sorted(p.name for p in directory.iterdir()) == sorted(names + ['metadata.yaml'])
+    assert [s.step for s in open_recording(directory).steps()] == [r.step for r in truth.records]
