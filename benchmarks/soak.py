@@ -541,12 +541,15 @@ def run_steps(args, workdir):
 # memory ---------------------------------------------------------------------------------------
 
 def run_memory(args, workdir):
-    from ball_world.recording.mcap_reader import Recording
+    from ball_world.recording.recording_set import open_recording
     ns = namespace()
     mcap_path, rrd_path = Path(workdir) / 'memory.mcap', Path(workdir) / 'memory.rrd'
     recordings = {}
     if args.record in ('mcap', 'both'):
         recordings['record.mcap'] = mcap_path
+        if args.split_seconds:  # a bag directory of split files (issue 23)
+            recordings.update({'record.max_seconds': args.split_seconds,
+                               'record.max_files': args.max_files})
     if args.record in ('rrd', 'both'):
         recordings['record.rerun'] = rrd_path
     node = NodeProcess(workdir, ns, 'memory', {**world_parameters(args), 'rate_hz': 100.0,
@@ -583,9 +586,12 @@ def run_memory(args, workdir):
     checks = [f'SIGINT exit {code}']
     fine = code == 0
     if 'record.mcap' in recordings:
-        finished = Recording(mcap_path).has_summary
+        recording = open_recording(mcap_path)
+        finished = recording.has_summary
         fine = fine and finished
-        checks.append(f'MCAP {_size_mb(mcap_path):,.0f} MB, summary {finished}')
+        split = (f' in {len(recording.files)} files kept of {args.split_seconds:g} s each '
+                 f'(record.max_files {args.max_files})' if args.split_seconds else '')
+        checks.append(f'MCAP {_size_mb(mcap_path):,.0f} MB{split}, summary {finished}')
     if 'record.rerun' in recordings:
         verify = rerun_cli('rrd', 'verify', rrd_path)
         fine = fine and verify[0] == 0
@@ -593,20 +599,84 @@ def run_memory(args, workdir):
                       + ('passes' if verify[0] == 0 else f'FAILS: {verify[1][-200:]}'))
     if not args.keep:
         for path in (mcap_path, rrd_path):
-            if path.exists():
+            if path.is_dir():
+                shutil.rmtree(path)
+            elif path.exists():
                 path.unlink()
     rtf = node.real_time_factors()
     recorded = {'both': 'MCAP and .rrd', 'mcap': 'MCAP', 'rrd': '.rrd', 'none': 'nothing'}
     what = (f'{args.balls} balls at 100 Hz recording {recorded[args.record]} for '
             f'{args.minutes:g} min ({steps:,} steps); real-time factor '
             + (f'{min(rtf):.2f}-{max(rtf):.2f}' if rtf else 'n/a') + '; ' + ', '.join(checks))
-    row(f'memory --minutes {args.minutes:g} --record {args.record}', what,
+    split = f' --split-seconds {args.split_seconds:g}' if args.split_seconds else ''
+    row(f'memory --minutes {args.minutes:g} --record {args.record}{split}', what,
         f'RSS {rss[0]:.0f} MB at {times[0]:.0f} s -> {rss[-1]:.0f} MB at {times[-1]:.0f} s: '
         f'{growth:+.1f}% ({slope:+.2f} MB/min fitted from {warm:.0f} s on)')
     return 0 if fine else 1
 
 
+def _sink_for_memory(args, path):
+    """The sink the sinkmemory case records through, as the node wraps it."""
+    from ball_world.recording.writer_thread import BackgroundSink
+    if args.sinks == 'rrd':
+        from ball_world.recording.rerun_log import RerunSink
+        return RerunSink(path.with_suffix('.rrd'))
+    if args.sinks == 'split':
+        from ball_world.recording.split_writer import SplitMcapSink
+        return BackgroundSink(SplitMcapSink(path, max_seconds=args.split_seconds,
+                                            max_files=args.max_files))
+    from ball_world.recording.mcap_writer import McapSink
+    return BackgroundSink(McapSink(path.with_suffix('.mcap')))
+
+
+def run_sink_memory(args, workdir):
+    """RSS per simulated minute of a Simulation writing through one kind of sink (no ROS).
+
+    Where recording memory goes, without the node: a simulated minute (6,000 steps at
+    100 Hz) takes seconds, so tens of minutes are measured in a few, flushed every 100 steps
+    as the node flushes every second.
+    """
+    from ball_world.simulation import Simulation
+    side = arena_side(args.balls)
+    path = Path(workdir) / 'sinkmemory'
+    simulation = Simulation({'random.count': args.balls, 'random.seed': 1, 'rate_hz': 100.0,
+                             'arena': [0.0, 0.0, side, side],
+                             'physics.backend': args.backend, 'physics.mode': args.mode},
+                            sinks=[_sink_for_memory(args, path)])
+    began = time.monotonic()
+    samples = []
+    for k in range(1, round(args.minutes * 6000) + 1):
+        simulation.step()
+        if k % 100 == 0:
+            simulation.flush()
+        if k % 6000 == 0:
+            samples.append(rss_mb())
+            progress(f'sinkmemory: {k // 6000} simulated min, RSS {samples[-1]:.1f} MB')
+    simulation.close()
+    elapsed = time.monotonic() - began
+    for leftover in [] if args.keep else Path(workdir).glob('sinkmemory*'):
+        if leftover.is_dir():
+            shutil.rmtree(leftover)
+        else:
+            leftover.unlink()
+    if len(samples) < 4:
+        raise SoakError('fewer than four samples: give --minutes 4 or more')
+    minutes = np.arange(1, len(samples) + 1)
+    slope = np.polyfit(minutes[2:], np.array(samples[2:]), 1)[0]
+    split = (f' --split-seconds {args.split_seconds:g} --max-files {args.max_files}'
+             if args.sinks == 'split' else '')
+    row(f'sinkmemory --sinks {args.sinks}{split} --minutes {args.minutes:g}',
+        f'Simulation of {args.balls} balls ({args.mode} mode), {len(samples) * 6000:,} steps '
+        f'at 100 Hz in {elapsed:.0f} s; RSS per simulated minute '
+        + ' '.join(f'{value:.1f}' for value in samples) + ' MB',
+        f'{slope:+.2f} MB per simulated minute, fitted from minute 3 on')
+    return 0
+
+
 def _size_mb(path):
+    """A file's size, or the sum of a bag directory's, MB."""
+    if path.is_dir():
+        return sum(part.stat().st_size for part in path.iterdir()) / 2**20
     return path.stat().st_size / 2**20 if path.exists() else 0.0
 
 
@@ -1020,6 +1090,19 @@ def main(argv=None):
     memory.add_argument('--balls', type=int, default=1000)
     memory.add_argument('--record', choices=('both', 'mcap', 'rrd', 'none'), default='both',
                         help='what the node records (default both), to tell whose memory grows')
+    memory.add_argument('--split-seconds', type=float, default=0.0, metavar='S',
+                        help='record the MCAP as a bag directory split every S simulated '
+                             'seconds (record.max_seconds; default 0: one file)')
+    memory.add_argument('--max-files', type=int, default=0, metavar='K',
+                        help='with --split-seconds: keep the newest K files (record.max_files)')
+    sinkmemory = cases.add_parser('sinkmemory', help='RSS of a Simulation writing through '
+                                                     'one kind of sink, without ROS')
+    sinkmemory.add_argument('--minutes', type=float, default=10.0,
+                            help='simulated minutes at 100 Hz (default 10)')
+    sinkmemory.add_argument('--balls', type=int, default=1000)
+    sinkmemory.add_argument('--sinks', choices=('mcap', 'split', 'rrd'), default='split')
+    sinkmemory.add_argument('--split-seconds', type=float, default=10.0, metavar='S')
+    sinkmemory.add_argument('--max-files', type=int, default=2, metavar='K')
     rtf = cases.add_parser('rtf', help='real-time factor of a 10,000-ball node at 100 Hz, '
                                        'publishing and recording MCAP')
     rtf.add_argument('--balls', type=int, default=10_000)
@@ -1048,7 +1131,7 @@ def main(argv=None):
                              'of the node)')
     viewer.add_argument('--target', type=float, default=0.99,
                         help='least real-time factor of every phase that passes (default 0.99)')
-    for case in (kill, flood, steps, memory, rtf, fulldisk, viewer):
+    for case in (kill, flood, steps, memory, sinkmemory, rtf, fulldisk, viewer):
         case.add_argument('--backend', choices=('auto', 'numpy', 'numba'), default='auto',
                           help='physics.backend of the world (default auto, as the node)')
         case.add_argument('--mode', choices=('seed', 'exact'), default='seed',
@@ -1062,7 +1145,8 @@ def main(argv=None):
         if getattr(args, name, 1) < 1:
             parser.error(f'--{name} must be at least 1')
     runs = {'kill': run_kill, 'flood': run_flood, 'steps': run_steps, 'memory': run_memory,
-            'rtf': run_rtf, 'startup': run_startup, 'fulldisk': run_fulldisk,
+            'sinkmemory': run_sink_memory, 'rtf': run_rtf, 'startup': run_startup,
+            'fulldisk': run_fulldisk,
             'viewer': run_viewer}
     workdir = args.dir or tempfile.mkdtemp(prefix='ball_world_soak_')
     os.makedirs(workdir, exist_ok=True)

@@ -6,7 +6,9 @@ alone (complete, indexed, re-simulable from its first step), metadata.yaml must 
 files hold (checked against mcap's own reader), and the `rosbags` library must take the
 directory as one rosbag2 recording.
 """
+import base64
 import errno
+import json
 import os
 from pathlib import Path
 import signal
@@ -15,7 +17,8 @@ import sys
 import textwrap
 import time
 
-from ball_world_testing.harness import finish, ROSBAGS_TYPES, start_node, Truth
+from ball_world_testing.harness import (finish, rewrite_recording, ROSBAGS_TYPES, start_node,
+                                        Truth)
 from geometry_msgs.msg import PoseArray
 from mcap.reader import make_reader
 import numpy as np
@@ -179,6 +182,23 @@ def test_resim_across_the_splits_and_of_each_file_alone(by_time, capsys):
         assert 'bit-identically' in capsys.readouterr().out
 
 
+def test_exact_mode_resims_across_the_splits_and_refuses_a_lone_later_file(tmp_path, capsys):
+    directory = tmp_path / 'exact'
+    sink = SplitMcapSink(directory, max_seconds=1.0)
+    simulation = Simulation({**PARAMS, 'physics.mode': 'exact'}, sinks=[sink])
+    run(simulation, 45)
+    simulation.close()
+    assert resim.main([str(directory)]) == 0
+    assert 'all 46 recorded steps re-simulate bit-identically' in capsys.readouterr().out
+    assert resim.main([str(directory / 'exact_0.mcap')]) == 0
+    capsys.readouterr()
+    # the predictions exact mode carries between steps are in no file: refused, not compared
+    assert resim.main([str(directory / 'exact_1.mcap')]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'segment 0 is picked up at step 20 (a split file) in exact ' \
+        'mode' in err[0]
+
+
 def test_info_sums_the_files(by_time, capsys):
     directory, _ = by_time
     assert info.main([str(directory)]) == 0
@@ -247,6 +267,57 @@ def test_a_missing_file_is_refused_naming_it(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert err == [f'{prog}: {directory}: gap_1.mcap, listed in metadata.yaml, is '
                        'missing: the set is incomplete']
+
+
+def crafted_resume(state):
+    """A change to a resume state: (field, new value) given the decoded JSON object."""
+    def change(values):
+        if 'resume_state' in values:
+            document = json.loads(values['resume_state'])
+            key, value = state(document)
+            document[key] = value
+            values['resume_state'] = json.dumps(document)
+        return values
+    return change
+
+
+def nan_positions(document):
+    count = len(document['names'])
+    data = np.full((count, 2), np.nan).astype('<f8').tobytes()
+    return 'positions', base64.b64encode(data).decode()
+
+
+@pytest.mark.parametrize('state, words', [
+    (nan_positions, 'positions holds a value that is not finite'),
+    (lambda d: ('radii', 'no*base64!'), 'radii is not base64 text'),
+    # 24 masses: 192 bytes, 256 base64 characters; 244 of them decode to 183 bytes
+    (lambda d: ('masses', d['masses'][:-12]), 'masses holds 183 bytes, not 1 float64'),
+    (lambda d: ('names', d['names'][:-1]), 'positions holds'),
+    (lambda d: ('names', d['names'][:-1] + ['9lives']), "holds '9lives', which is no entity"),
+    (lambda d: ('names', [d['names'][0]] * len(d['names'])), 'or one twice'),
+])
+def test_a_crafted_resume_state_is_refused_in_one_line(by_time, tmp_path, capsys,
+                                                       state, words):
+    directory, _ = by_time
+    crafted = rewrite_recording(directory / 'run_1.mcap', tmp_path / 'crafted.mcap',
+                                metadata=crafted_resume(state))
+    for tool, prog in ((resim, 'ball_world_resim'), (info, 'ball_world_info')):
+        assert tool.main([str(crafted)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(
+            f"{prog}: {crafted}: segment 0: 'ball_world' metadata: the state it resumes "
+            'from: ') and words in err[0], err
+
+
+def test_metadata_yaml_naming_a_path_outside_is_refused(tmp_path, capsys):
+    directory = tmp_path / 'bag'
+    record(directory, steps=30, reset_steps=0, max_seconds=1.0)
+    text = (directory / 'metadata.yaml').read_text()
+    (directory / 'metadata.yaml').write_text(text.replace('- bag_0.mcap', '- ../bag_0.mcap'))
+    assert resim.main([str(directory)]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"ball_world_resim: {directory}: metadata.yaml lists '../bag_0.mcap', which is not a "
+        'file name in the directory')
 
 
 def test_an_existing_directory_is_refused_unless_overwrite(tmp_path):
@@ -385,3 +456,21 @@ def test_replay_plays_the_files_in_order_with_their_timing(by_time, probe, proce
     # at the next step): the median spacing within 0.5x-2x, as for a single file
     spacing = np.median(np.diff([t for t, _ in received]))
     assert 0.5 * DT_NS / 1e9 <= spacing <= 2 * DT_NS / 1e9, spacing
+
+
+def test_repair_removes_a_file_killed_as_it_began_and_keeps_the_rest(tmp_path, capsys):
+    directory = tmp_path / 'began'
+    truth, _ = record(directory, steps=45, reset_steps=0, max_seconds=1.0)
+    names = metadata(directory)['relative_file_paths']
+    # killed during a roll: the next file holds its magic and header record, or nothing
+    data = (directory / names[0]).read_bytes()
+    header_end = 8 + 9 + struct.unpack_from('<Q', data, 9)[0]
+    (directory / f'began_{len(names)}.mcap').write_bytes(data[:header_end])
+    (directory / f'began_{len(names) + 1}.mcap').write_bytes(b'')
+    assert repair.main([str(directory)]) == 0
+    out = capsys.readouterr().out
+    assert f'began_{len(names)}.mcap: removed, it held no complete message' in out
+    assert f'began_{len(names) + 1}.mcap: removed, it held no complete message' in out
+    assert metadata(directory)['relative_file_paths'] == names
+    assert sorted(p.name for p in directory.iterdir()) == sorted(names + ['metadata.yaml'])
+    assert [s.step for s in open_recording(directory).steps()] == [r.step for r in truth.records]

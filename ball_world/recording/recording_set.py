@@ -13,6 +13,7 @@ Files continue each other: a segment that goes on in the next file appears there
 the first file's copy kept: when max_files removed the files before it, that copy is the
 one with the resume state, so re-simulation starts there.
 """
+import dataclasses
 import os
 
 from ball_world.recording.bag import listed_files, numbered_files
@@ -87,11 +88,8 @@ class RecordingSet:
         for f in files:
             for topic, info in f.topics.items():
                 previous = self.topics.get(topic)
-                count = info.message_count + (previous.message_count if previous else 0)
-                self.topics[topic] = previous.__class__(
-                    topic=topic, type=info.type, message_count=count,
-                    offered_qos_profiles=info.offered_qos_profiles,
-                    type_hash=info.type_hash) if previous else info
+                self.topics[topic] = info if previous is None else dataclasses.replace(
+                    previous, message_count=previous.message_count + info.message_count)
         merged = {}
         for f in files:
             for segment in f.segments:

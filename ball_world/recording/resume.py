@@ -31,9 +31,12 @@ _BOUNDS = {'positions': (-limits.COORDINATE_LIMIT, limits.COORDINATE_LIMIT),
            'masses': (limits.MIN_MASS, limits.MAX_MASS)}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ResumeState:
-    """The world at the end of step `step` of a segment, as a split file starts from it."""
+    """The world at the end of step `step` of a segment, as a split file starts from it.
+
+    Compared by identity: its arrays have no single truth value.
+    """
 
     step: int
     names: tuple

@@ -128,7 +128,17 @@ def _rebuild(segment, first_step):
 
 
 def _resume(segment):
-    """The segment's Simulation at the step a split file continues from (its resume state)."""
+    """The segment's Simulation at the step a split file continues from (its resume state).
+
+    Exact mode keeps its collision predictions from step to step (core.exact), and a state
+    cannot hold them: from a resume state its steps differ in the last bits. Refused.
+    """
+    if segment.parameters['physics.mode'] == 'exact':
+        raise RecordingError(f'segment {segment.index} is picked up at step '
+                             f'{segment.resume.step + 1} (a split file) in exact mode, whose '
+                             'collision predictions carry over from step to step: it '
+                             're-simulates bit for bit only from its first step (give the bag '
+                             'directory with the file where it starts)')
     simulation = Simulation(segment.parameters, sinks=())
     try:
         simulation.resume(segment.parameters, segment.resume, segment.index,
