@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 from simulation_interfaces.msg import Result
 from simulation_interfaces.srv import DeleteEntity
+from std_msgs.msg import Float64MultiArray
 
 from ball_world.tools.goal import REPORT_SECONDS
 
@@ -137,6 +138,9 @@ def test_help_prints_usage_and_parameters():
     (('--ros-args', '-p', 'kp:=1e308'),
      "parameter 'kp': expected a number >= 0 and <= 1e+06, got 1e+308"),
     (('--ros-args', '-p', 'kd:=inf'), "parameter 'kd': expected a number >= 0 and <= 1e+06"),
+    (('--ros-args', '-p', 'rate_hz:=1e-300'),
+     "parameter 'rate_hz': expected a number >= 0.001 and <= 1000, got 1e-300"),
+    (('--ros-args', '-p', 'rate_hz:=1e300'), "parameter 'rate_hz': expected a number >= 0.001"),
     (('--ros-args', '-p', 'goal:=[1.0]'), "parameter 'goal': expected two numbers [x, y]"),
     (('--ros-args', '-p', 'mass:=0'), "parameter 'mass': expected a number > 0, got 0"),
     (('--ros-args', '-p', 'rate_hz:=fast'), "parameter 'rate_hz'"),
@@ -219,3 +223,45 @@ def test_without_a_world_it_says_what_it_waits_for(processes):
     assert code == 0, err
     assert err.count('waiting for /nobody_here/state and /nobody_here/entity_names') == 1, err
     assert 'no ball_world heard yet on /nobody_here/state' in err, err
+
+
+# Pushes are always finite ----------------------------------------------------------------------
+
+@pytest.mark.parametrize('overrides, state, pushed', [
+    # A mass whose push overflows a float is still shortened to max_impulse.
+    ({'mass': 1e308}, (2.0, 2.0, 0.0, 0.0), 0.5),
+    # The largest gains and speeds the world can have: finite, shortened.
+    ({'kp': 1e6, 'kd': 1e6}, (0.0, 10.0, -1e5, 1e5), 0.5),
+    # A state no world publishes (1.7e308 m away): not sent at all.
+    ({'kp': 1e6}, (1.7e308, 2.0, 0.0, 0.0), None),
+    # At the goal, at rest: nothing to push.
+    ({}, (GOAL[0], GOAL[1], 0.0, 0.0), None),
+])
+def test_every_push_is_finite_and_at_most_max_impulse(overrides, state, pushed):
+    """The controller's arithmetic on the edge of what floats hold, in a context of its own."""
+    import rclpy
+    from rclpy.parameter import Parameter
+    from std_msgs.msg import String
+    from ball_world.tools.goal import GoalController
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        values = {'ball': 'ball_1', 'goal': list(GOAL), **overrides}
+        controller = GoalController(context=context, parameter_overrides=[
+            Parameter(name, value=value) for name, value in values.items()])
+        sent = []
+        controller.publisher = type('Publisher', (), {'publish': lambda self, m: sent.append(
+            (m.vector.x, m.vector.y, m.vector.z))})()
+        controller.on_names(String(data='ball_0\nball_1'))
+        controller.on_state(Float64MultiArray(data=[1.0, 1.0, 0.0, 0.0, *state]))
+        controller.on_timer()
+        if pushed is None:
+            assert sent == []
+        else:
+            ((jx, jy, jz),) = sent
+            assert all(math.isfinite(v) for v in (jx, jy)) and jz == 0.0
+            assert math.hypot(jx, jy) == pytest.approx(pushed, rel=1e-12)
+        controller.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
