@@ -22,7 +22,6 @@ from simulation_interfaces.msg import Result
 from simulation_interfaces.srv import DeleteEntity
 from std_msgs.msg import Float64MultiArray
 
-from ball_world.tools.goal import REPORT_SECONDS
 
 GOAL = (6.0, 7.0)
 MASS, KICKER_MASS, KICK_SPEED = 0.5, 0.1, 3.0
@@ -214,15 +213,23 @@ def test_goal_follows_its_ball_by_name_when_rows_move_and_holds_while_it_is_gone
     assert finish(world)[0] == 0
 
 
-def test_without_a_world_it_says_what_it_waits_for(processes):
+def test_without_a_world_it_says_what_it_waits_for(processes, tmp_path):
+    """Once at start what it waits for, then a warning every REPORT_SECONDS (waited for
+    with a liveness deadline, never timed)."""
+    log = tmp_path / 'goal.log'
     controller = processes.start([executable('ball_world_goal'), '--ros-args',
-                                  '-r', '__ns:=/nobody_here'])
-    time.sleep(REPORT_SECONDS + 2.0)  # a warning is due after REPORT_SECONDS
+                                  '-r', '__ns:=/nobody_here'], log=log)
+    deadline = time.monotonic() + DEADLINE
+    while 'no ball_world heard yet' not in log.read_text():
+        assert controller.poll() is None, log.read_text()
+        assert time.monotonic() < deadline, log.read_text()
+        time.sleep(0.2)
     controller.send_signal(signal.SIGINT)
-    code, _, err = finish(controller)
-    assert code == 0, err
-    assert err.count('waiting for /nobody_here/state and /nobody_here/entity_names') == 1, err
-    assert 'no ball_world heard yet on /nobody_here/state' in err, err
+    code, _, _ = finish(controller)
+    text = log.read_text()
+    assert code == 0, text
+    assert text.count('waiting for /nobody_here/state and /nobody_here/entity_names') == 1, text
+    assert 'no ball_world heard yet on /nobody_here/state' in text, text
 
 
 # Pushes are always finite ----------------------------------------------------------------------
