@@ -8,8 +8,10 @@ checks them, feed_sinks passes it on, and a changed closing edit is a difference
 """
 import signal
 
-from ball_world_testing.harness import finish, RECEIVE_QOS, run_tool, Truth
+from ball_world_testing.harness import (finish, RECEIVE_QOS, rewrite_recording, run_tool,
+                                        Truth)
 from geometry_msgs.msg import Vector3Stamped
+from mcap.records import Channel, Message
 from rclpy.duration import Duration
 from simulation_interfaces.msg import Result, SimulationState
 from simulation_interfaces.srv import DeleteEntity, SetSimulationState, SpawnEntity
@@ -19,7 +21,7 @@ from test_edit_recordings import call, FIRST, pose_at, rewrite_edits, SECOND, sp
 from ball_world.recording.mcap_reader import feed_sinks, Recording
 from ball_world.recording.mcap_writer import McapSink
 from ball_world.simulation import Simulation
-from ball_world.tools import info, resim
+from ball_world.tools import info, repair, resim, to_rrd
 
 
 def edit_after_the_last_step(simulation):
@@ -61,6 +63,12 @@ def test_edits_after_the_last_step_are_recorded_at_close(tmp_path):
     assert feed_sinks(path, [McapSink(copy)]) == 4
     assert call(info, copy)[1].count('edits:       2 (1 spawn, 1 delete)') == 1
     assert call(resim, copy)[0] == 0
+    repaired = tmp_path / 'repaired.mcap'
+    assert call(repair, path, '-o', repaired)[0] == 0
+    assert call(info, repaired)[1].count('edits:       2 (1 spawn, 1 delete)') == 1
+    rrd = tmp_path / 'closed.rrd'
+    code, out, err = call(to_rrd, path, '-o', rrd)
+    assert code == 0 and '4 steps' in err + out, err
 
 
 def test_edits_after_the_last_step_of_a_segment_are_recorded_before_a_reset(tmp_path):
@@ -146,3 +154,30 @@ def test_the_node_records_edits_made_after_its_last_step(probe, processes, tmp_p
         code, out, err = run_tool('ball_world_resim', str(path))
         assert code == 0, out + err
         assert 'after the last step 1 impulses and 2 edits: identical' in out, (how, out)
+
+
+def test_a_closing_record_in_the_middle_of_a_segment_is_refused(tmp_path):
+    """A crafted file: step 4's poses, state and stats taken out, so its edits look like a
+    closing record, and step 5 follows. resim says so in one line and exits 2."""
+    path = tmp_path / 'edited.mcap'
+    simulation = Simulation(FIRST, sinks=[McapSink(path)])
+    edit_after_the_last_step(simulation)
+    simulation.step()
+    simulation.step()
+    simulation.close()
+    channels = {}
+    step_4 = 4 * 50_000_000
+
+    def drop_step_4(item):
+        if isinstance(item, Channel):
+            channels[item.id] = item.topic
+        if isinstance(item, Message) and item.log_time == step_4 and \
+                channels[item.channel_id] in ('/balls', '/state', '/stats'):
+            return None
+        return item
+
+    crafted = rewrite_recording(path, tmp_path / 'crafted.mcap', edit=drop_step_4)
+    code, out, err = call(resim, crafted)
+    assert code == 2, out + err
+    assert err.strip().endswith('segment 0 has step 5 after the closing record of its last '
+                                'step'), err
