@@ -21,6 +21,7 @@ import pytest
 from simulation_interfaces.msg import Result
 from simulation_interfaces.srv import DeleteEntity
 from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
 
 
 GOAL = (6.0, 7.0)
@@ -167,7 +168,8 @@ def test_goal_follows_its_ball_by_name_when_rows_move_and_holds_while_it_is_gone
     """ball_1 is held; deleting ball_0 moves ball_1 to row 0 and ball_2 (at rest far away)
     to row 1. A controller taking row 1 as ball_1 would push ball_1 by ball_2's state and
     throw it off its goal; one that reads entity_names keeps it there. Deleting ball_1 then
-    stops its pushes (one warning) instead of pushing a ball that is gone."""
+    stops its pushes (one warning) instead of pushing a ball that is gone, until a reset
+    brings it back."""
     controller = processes.start([executable('ball_world_goal'), '--ros-args', *CONTROLLER,
                                   '-p', 'ball:=ball_1'])
     world = processes.start([executable('ball_world'), '--ros-args', *THREE])
@@ -204,11 +206,19 @@ def test_goal_follows_its_ball_by_name_when_rows_move_and_holds_while_it_is_gone
     late = [t - gone for t, name in pushes if t > gone + 1.0]
     assert late == [], f'{len(late)} pushes at a ball that is gone'
 
+    # A reset brings ball_1 back (a deleted name cannot be spawned again in its segment):
+    # the controller pushes it again.
+    assert watch.call(Trigger, '/ball_world/reset', Trigger.Request()).success
+    back = time.monotonic()
+    watch.spin_until(lambda: any(t > back for t, _ in pushes), 'pushes after the reset',
+                     process=world)
+
     for process in (controller, world):
         process.send_signal(signal.SIGINT)
     code, _, err = finish(controller)
     assert code == 0 and 'Traceback' not in err, err
     assert err.count('ball_1 is not in the world') == 1, err
+    assert err.count('ball_1 is back: pushing again') == 1, err
     assert 'm from the goal, at (' in err  # the periodic report
     assert finish(world)[0] == 0
 
