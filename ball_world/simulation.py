@@ -25,7 +25,8 @@ from ball_world.msgs.agent_cdr import encode_odometry, encode_tf_message
 from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
                                  encode_vector3_stamped)
 from ball_world.step_record import (AgentFrame, AppliedCommand, AppliedEdit, AppliedImpulse,
-                                    RunInfo, STATS_FIELDS, StepRecord, WorldSnapshot)
+                                    PendingEvents, RunInfo, STATS_FIELDS, StepRecord,
+                                    WorldSnapshot)
 
 DEFAULT_TOPICS = {'balls': '/balls', 'state': '/state', 'stats': '/stats',
                   'impulse': '/impulse', 'edits': '/edits'}
@@ -56,6 +57,10 @@ def build(parameters):
     world = build_world(parameters)
     agent_names(parameters, len(world))
     return BuiltWorld(parameters=parameters, world=world, dt_ns=step_duration_ns(parameters))
+
+
+def _ignore(events):
+    """write_pending of a sink that does not record edits (a viewer, a test's collector)."""
 
 
 @dataclass(frozen=True)
@@ -102,6 +107,7 @@ class Simulation:
         """
         if built is None:
             built = build(parameters)
+        self._hand_over_pending()
         parameters, world, dt_ns = built.parameters, built.world, built.dt_ns
         self.parameters = parameters
         self.world = world
@@ -182,9 +188,33 @@ class Simulation:
         return (self.step_index + 1) * self.dt_ns > MAX_SIM_TIME_NS
 
     def close(self):
-        """Finish every sink's file."""
+        """Finish every sink's file, with the edits made since the last step."""
+        self._hand_over_pending()
         self._each_sink(lambda sink: sink.close())
         self.sinks = []
+
+    def pending_events(self):
+        """The impulses and edits applied since the last step, as PendingEvents."""
+        step = self.step_index + 1
+        stamp_ns = step * self.dt_ns
+        return PendingEvents(step=step, stamp_ns=stamp_ns,
+                             log_time_ns=self.log_offset_ns + stamp_ns,
+                             impulses=tuple(self._applied), edits=tuple(self._edits))
+
+    def _hand_over_pending(self):
+        """At the end of a segment (close, reset): record what changed after its last step.
+
+        Edits, and the impulses they applied, are recorded with the next step; when no
+        step comes they go to the sinks as PendingEvents (write_pending), at the log time
+        that step would have had, which the next segment's log times then follow.
+        """
+        if self.segment < 0 or not (self._applied or self._edits):
+            return
+        events = self.pending_events()
+        self._applied = []
+        self._edits = []
+        self.last_log_ns = events.log_time_ns
+        self._each_sink(lambda sink: getattr(sink, 'write_pending', _ignore)(events))
 
     def flush(self):
         """Make what the sinks hold durable."""

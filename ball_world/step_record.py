@@ -149,6 +149,25 @@ class StepRecord:
     commands: tuple = field(default_factory=tuple)  # AppliedCommand taken before this step
 
 
+@dataclass(frozen=True)
+class PendingEvents:
+    """Impulses and edits applied after a segment's last step, handed over when it ends.
+
+    A world edited (or pushed by an impulse that an edit applied) after its last step has
+    no step record to carry the change: pause, step, spawn, then quit or reset. So that a
+    recording still holds every change the world made, Simulation.close() and reset() hand
+    these to the sinks that take them (write_pending), stamped like the step they would
+    have preceded. In an MCAP they are that step's impulse and edit messages without its
+    balls, state and stats (a closing record); the tools read them as such.
+    """
+
+    step: int  # the step they would have preceded
+    stamp_ns: int  # its simulation time
+    log_time_ns: int  # its log time (simulation time plus the segment's offset)
+    impulses: tuple = field(default_factory=tuple)  # AppliedImpulse, in the order applied
+    edits: tuple = field(default_factory=tuple)  # AppliedEdit, in order (impulses_before)
+
+
 class Sink(Protocol):
     """A destination for a run: the MCAP recorder and the Rerun logger implement this."""
 
@@ -160,6 +179,9 @@ class Sink(Protocol):
 
     def flush(self) -> None:
         """Make everything written so far durable (called about once a second)."""
+
+    # Optional: def write_pending(self, events: PendingEvents) -> None, for sinks that record
+    # edits made after a segment's last step (the MCAP recorder); the others never see them.
 
     def close(self) -> None:
         """Finish the file so every reader opens it (summary, index, footer)."""

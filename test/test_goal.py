@@ -20,8 +20,9 @@ import numpy as np
 import pytest
 from simulation_interfaces.msg import Result
 from simulation_interfaces.srv import DeleteEntity
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
 
-from ball_world.tools.goal import REPORT_SECONDS
 
 GOAL = (6.0, 7.0)
 MASS, KICKER_MASS, KICK_SPEED = 0.5, 0.1, 3.0
@@ -137,6 +138,9 @@ def test_help_prints_usage_and_parameters():
     (('--ros-args', '-p', 'kp:=1e308'),
      "parameter 'kp': expected a number >= 0 and <= 1e+06, got 1e+308"),
     (('--ros-args', '-p', 'kd:=inf'), "parameter 'kd': expected a number >= 0 and <= 1e+06"),
+    (('--ros-args', '-p', 'rate_hz:=1e-300'),
+     "parameter 'rate_hz': expected a number >= 0.001 and <= 1000, got 1e-300"),
+    (('--ros-args', '-p', 'rate_hz:=1e300'), "parameter 'rate_hz': expected a number >= 0.001"),
     (('--ros-args', '-p', 'goal:=[1.0]'), "parameter 'goal': expected two numbers [x, y]"),
     (('--ros-args', '-p', 'mass:=0'), "parameter 'mass': expected a number > 0, got 0"),
     (('--ros-args', '-p', 'rate_hz:=fast'), "parameter 'rate_hz'"),
@@ -164,7 +168,8 @@ def test_goal_follows_its_ball_by_name_when_rows_move_and_holds_while_it_is_gone
     """ball_1 is held; deleting ball_0 moves ball_1 to row 0 and ball_2 (at rest far away)
     to row 1. A controller taking row 1 as ball_1 would push ball_1 by ball_2's state and
     throw it off its goal; one that reads entity_names keeps it there. Deleting ball_1 then
-    stops its pushes (one warning) instead of pushing a ball that is gone."""
+    stops its pushes (one warning) instead of pushing a ball that is gone, until a reset
+    brings it back."""
     controller = processes.start([executable('ball_world_goal'), '--ros-args', *CONTROLLER,
                                   '-p', 'ball:=ball_1'])
     world = processes.start([executable('ball_world'), '--ros-args', *THREE])
@@ -201,21 +206,79 @@ def test_goal_follows_its_ball_by_name_when_rows_move_and_holds_while_it_is_gone
     late = [t - gone for t, name in pushes if t > gone + 1.0]
     assert late == [], f'{len(late)} pushes at a ball that is gone'
 
+    # A reset brings ball_1 back (a deleted name cannot be spawned again in its segment):
+    # the controller pushes it again.
+    assert watch.call(Trigger, '/ball_world/reset', Trigger.Request()).success
+    back = time.monotonic()
+    watch.spin_until(lambda: any(t > back for t, _ in pushes), 'pushes after the reset',
+                     process=world)
+
     for process in (controller, world):
         process.send_signal(signal.SIGINT)
     code, _, err = finish(controller)
     assert code == 0 and 'Traceback' not in err, err
     assert err.count('ball_1 is not in the world') == 1, err
+    assert err.count('ball_1 is back: pushing again') == 1, err
     assert 'm from the goal, at (' in err  # the periodic report
     assert finish(world)[0] == 0
 
 
-def test_without_a_world_it_says_what_it_waits_for(processes):
+def test_without_a_world_it_says_what_it_waits_for(processes, tmp_path):
+    """Once at start what it waits for, then a warning every REPORT_SECONDS (waited for
+    with a liveness deadline, never timed)."""
+    log = tmp_path / 'goal.log'
     controller = processes.start([executable('ball_world_goal'), '--ros-args',
-                                  '-r', '__ns:=/nobody_here'])
-    time.sleep(REPORT_SECONDS + 2.0)  # a warning is due after REPORT_SECONDS
+                                  '-r', '__ns:=/nobody_here'], log=log)
+    deadline = time.monotonic() + DEADLINE
+    while 'no ball_world heard yet' not in log.read_text():
+        assert controller.poll() is None, log.read_text()
+        assert time.monotonic() < deadline, log.read_text()
+        time.sleep(0.2)
     controller.send_signal(signal.SIGINT)
-    code, _, err = finish(controller)
-    assert code == 0, err
-    assert err.count('waiting for /nobody_here/state and /nobody_here/entity_names') == 1, err
-    assert 'no ball_world heard yet on /nobody_here/state' in err, err
+    code, _, _ = finish(controller)
+    text = log.read_text()
+    assert code == 0, text
+    assert text.count('waiting for /nobody_here/state and /nobody_here/entity_names') == 1, text
+    assert 'no ball_world heard yet on /nobody_here/state' in text, text
+
+
+# Pushes are always finite ----------------------------------------------------------------------
+
+@pytest.mark.parametrize('overrides, state, pushed', [
+    # A mass whose push overflows a float is still shortened to max_impulse.
+    ({'mass': 1e308}, (2.0, 2.0, 0.0, 0.0), 0.5),
+    # The largest gains and speeds the world can have: finite, shortened.
+    ({'kp': 1e6, 'kd': 1e6}, (0.0, 10.0, -1e5, 1e5), 0.5),
+    # A state no world publishes (1.7e308 m away): not sent at all.
+    ({'kp': 1e6}, (1.7e308, 2.0, 0.0, 0.0), None),
+    # At the goal, at rest: nothing to push.
+    ({}, (GOAL[0], GOAL[1], 0.0, 0.0), None),
+])
+def test_every_push_is_finite_and_at_most_max_impulse(overrides, state, pushed):
+    """The controller's arithmetic on the edge of what floats hold, in a context of its own."""
+    import rclpy
+    from rclpy.parameter import Parameter
+    from std_msgs.msg import String
+    from ball_world.tools.goal import GoalController
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        values = {'ball': 'ball_1', 'goal': list(GOAL), **overrides}
+        controller = GoalController(context=context, parameter_overrides=[
+            Parameter(name, value=value) for name, value in values.items()])
+        sent = []
+        controller.publisher = type('Publisher', (), {'publish': lambda self, m: sent.append(
+            (m.vector.x, m.vector.y, m.vector.z))})()
+        controller.on_names(String(data='ball_0\nball_1'))
+        controller.on_state(Float64MultiArray(data=[1.0, 1.0, 0.0, 0.0, *state]))
+        controller.on_timer()
+        if pushed is None:
+            assert sent == []
+        else:
+            ((jx, jy, jz),) = sent
+            assert all(math.isfinite(v) for v in (jx, jy)) and jz == 0.0
+            assert math.hypot(jx, jy) == pytest.approx(pushed, rel=1e-12)
+        controller.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)

@@ -2,15 +2,17 @@
 
 Each rejection once called rclpy's throttled warning (0.7 ms even when it suppressed the
 line) and the node drained the subscription until it was empty, so 2,000 bad impulses a
-second stopped stepping for the flood and long after it. Here a separate process floods the
-node's `impulse` topic with impulses it must reject (unknown balls, non-finite vectors, a z
-component), and a probe counts the node's steps from outside: during the flood and after it
-the node keeps stepping at a healthy fraction of its rate, it warns a few times rather than
+second stopped stepping (and every service) for the flood and long after it. Here a separate
+process floods the node's `impulse` topic with impulses it must reject (unknown balls,
+non-finite vectors, a z component), and a probe counts the node's steps from outside: during
+the flood and after it the node keeps stepping at a healthy fraction of its rate, a service
+call made during the flood is answered during it, it warns a few times rather than
 once per impulse, and a valid impulse sent after the flood is applied (so the whole flood
 was taken and judged, in order).
 """
 import json
 import math
+import select
 import signal
 import sys
 import time
@@ -18,6 +20,7 @@ import time
 from ball_world_testing.harness import finish, RECEIVE_QOS
 from geometry_msgs.msg import Vector3Stamped
 from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool
 
 RATE_HZ = 100.0
 FLOOD_RATE = 2000  # bad impulses per second
@@ -51,6 +54,7 @@ bad = [encode_vector3_stamped(0, 'no_such_ball', 0.1, 0.0, 0.0),
        encode_vector3_stamped(0, 'ball_0', math.inf, -math.inf, 0.0),
        encode_vector3_stamped(0, 'ball_0', 0.1, 0.0, 1.0)]
 began = time.monotonic()
+print('flooding', flush=True)
 sent = 0
 while time.monotonic() < began + seconds:
     due = int((time.monotonic() - began) * rate)
@@ -79,10 +83,19 @@ def test_a_flood_of_rejected_impulses_leaves_the_world_stepping(processes, probe
 
     flooder = processes.start([sys.executable, '-c', FLOODER, str(FLOOD_RATE),
                                str(FLOOD_SECONDS)])
+    # Spinning all along, so that every state is counted when it arrives.
+    probe.spin_until(lambda: select.select([flooder.stdout], [], [], 0)[0] or
+                     flooder.poll() is not None, 'the flood to start', process=node)
+    assert flooder.stdout.readline() == 'flooding\n', finish(flooder)
+    # The node's services answer during the flood.
+    answer = probe.call(SetBool, '/ball_world/pause', SetBool.Request(data=False))
+    assert answer.success and answer.message.startswith('already running')
+    answered = time.monotonic()
     probe.spin_until(lambda: flooder.poll() is not None, 'the flood to end', process=node)
     code, out, err = finish(flooder)
     assert code == 0, err
     flood = json.loads(out)
+    assert answered < flood['ended'], 'the service answered only after the flood'
     assert flood['acked'] and flood['sent'] >= 0.9 * FLOOD_RATE * FLOOD_SECONDS
 
     pusher = probe.node.create_publisher(Vector3Stamped, 'impulse', RECEIVE_QOS)
@@ -91,11 +104,13 @@ def test_a_flood_of_rejected_impulses_leaves_the_world_stepping(processes, probe
     push.vector.x = PUSH
     pusher.publish(push)
     after = time.monotonic()
+    seen = len(arrivals)
     probe.spin_until(lambda: time.monotonic() > after + AFTER_SECONDS, 'the time after',
                      process=node)
     # The push waits behind every impulse of the flood: once it moved the ball, the node had
     # taken and rejected all of them.
-    probe.spin_until(lambda: math.isclose(arrivals[-1][1], PUSH / MASS, rel_tol=1e-12),
+    probe.spin_until(lambda: any(math.isclose(vx, PUSH / MASS, rel_tol=1e-12)
+                                 for _, vx in arrivals[seen:]),
                      'the push sent after the flood', process=node)
 
     def steps(start, end):

@@ -386,7 +386,9 @@ def test_real_time_factor_window_unit():
 
 @pytest.mark.parametrize('value', [
     'rerun+http://127.0.0.1:9876', 'http://127.0.0.1:9876/proxy', 'rerun+http://:9876/proxy',
-    'rerun+http://127.0.0.1:99999/proxy', 'Spawn', 'rerun+http://h:1/proxy?x=1', ' '])
+    'rerun+http://127.0.0.1:99999/proxy', 'Spawn', 'rerun+http://h:1/proxy?x=1', ' ',
+    'rerun+http://host:0/proxy', 'rerun+http://host/proxy', 'rerun+https://example.org/proxy',
+    'rerun+http://host:/proxy', 'rerun+http://host:-1/proxy'])
 def test_bad_view_values_are_refused(value):
     with pytest.raises(ValueError, match='expected .spawn. or a URL like rerun'):
         parse_view(value)
@@ -397,7 +399,8 @@ def test_bad_view_values_are_refused(value):
 def test_good_view_values():
     assert parse_view('spawn') == ('127.0.0.1', 9876)
     assert parse_view('rerun+http://localhost:9090/proxy') == ('localhost', 9090)
-    assert parse_view('rerun+https://example.org/proxy') == ('example.org', 443)
+    assert parse_view('rerun+https://example.org:443/proxy') == ('example.org', 443)
+    assert parse_view('rerun://[::1]:9876/proxy') == ('::1', 9876)
 
 
 def test_sink_rejects_bad_arguments(tmp_path):
@@ -656,13 +659,14 @@ def test_node_without_a_viewer_says_so_once_and_runs(tmp_path):
     assert 'max_steps 150 reached' in result.stderr
 
 
-@pytest.mark.parametrize('value', ['viewer', 'rerun+http://127.0.0.1:9876', 'http://h:1/proxy'])
+@pytest.mark.parametrize('value', ['viewer', 'rerun+http://127.0.0.1:9876', 'http://h:1/proxy',
+                                   'rerun+http://host:0/proxy'])
 def test_node_refuses_a_bad_view_with_one_line(value):
     result = run_node(f'view.rerun:={value}')
     assert result.returncode == 2
     assert result.stderr.strip().splitlines() == [
         f"ball_world: parameter 'view.rerun': expected 'spawn' or a URL like "
-        f"rerun+http://127.0.0.1:9876/proxy, got '{value}'"]
+        f"rerun+http://127.0.0.1:9876/proxy, with a port from 1 to 65535, got '{value}'"]
 
 
 # The native viewer (view.rerun:=spawn) ------------------------------------------------------

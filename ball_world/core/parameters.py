@@ -126,6 +126,13 @@ class Parameter:
             return self._check_range(float(value))
         if self.kind == INTEGER:
             if isinstance(value, bool) or not isinstance(value, int):
+                if isinstance(value, float) and abs(value) >= 2.0 ** 63:
+                    # ROS reads an integer that does not fit in 64 bits as a double: the
+                    # digits given are lost, so they are not echoed as if they were read.
+                    raise ParameterError(self.name, f'does not fit in a 64-bit integer (got '
+                                                    f'about {value:.3g})' + (
+                                                        f'; the range is {self.range_text()}'
+                                                        if self.low is not None else ''))
                 if isinstance(value, float) and value.is_integer():
                     value = int(value)
                 else:

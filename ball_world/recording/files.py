@@ -343,6 +343,10 @@ class ClaimedSink:
     def write_step(self, record):
         self.sink.write_step(record)
 
+    def write_pending(self, events):
+        if hasattr(self.sink, 'write_pending'):
+            self.sink.write_pending(events)
+
     def flush(self):
         self.sink.flush()
 

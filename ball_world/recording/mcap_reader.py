@@ -55,8 +55,8 @@ from ball_world.recording.files import open_regular
 from ball_world.recording.mcap_writer import (EVENT_ROLES, flatten_parameters, METADATA_NAME,
                                               NODE_NAME, STEP_TOPICS)
 from ball_world.recording.resume import parse_resume, ResumeState
-from ball_world.step_record import (AppliedEdit, AppliedImpulse, RunInfo, STATS_FIELDS,
-                                    StepRecord, WorldSnapshot)
+from ball_world.step_record import (AppliedEdit, AppliedImpulse, PendingEvents, RunInfo,
+                                    STATS_FIELDS, StepRecord, WorldSnapshot)
 
 MAGIC = b'\x89MCAP0\r\n'
 _RECORD_HEAD = struct.Struct('<BQ')
@@ -592,6 +592,15 @@ class RecordedStep:
                 and self.stats is not None)
 
     @property
+    def closing(self):
+        """Whether this is a closing record: impulses and edits applied after the segment's
+        last step (the run ended or was reset before another step), with no balls, state or
+        stats of their own (step_record.PendingEvents). A crash never leaves one: a step's
+        messages are written in one chunk."""
+        return (self.positions is None and self.state is None and self.stats is None
+                and bool(self.impulses or self.edits))
+
+    @property
     def ball_count(self):
         """Balls in this step's messages (None when it has neither balls nor state)."""
         for rows in (self.positions, self.state):
@@ -1067,12 +1076,17 @@ def step_record(step, impulses, roster):
         world_changed=roster.take_changed())
 
 
+def _ignore(events):
+    """write_pending of a sink that does not record edits."""
+
+
 def feed_sinks(path, sinks, close=True):
     """Replay a recording into Sinks as the node would have: returns the steps fed.
 
     Each segment starts with start_segment(WorldSnapshot, RunInfo), then every complete
     step goes to write_step in order (a step cut off by a crash is skipped, but its edits
-    still count). The sinks are flushed at the end, and closed unless close=False.
+    still count), and a closing record to write_pending, for the sinks that take it. The
+    sinks are flushed at the end, and closed unless close=False.
     """
     recording = Recording(path) if isinstance(path, (str, os.PathLike)) else path
     current = started = None  # segment positions: followed, and begun in the sinks
@@ -1085,6 +1099,12 @@ def feed_sinks(path, sinks, close=True):
             roster = BallRoster(snapshot, segment.index)
             current = step.segment
         impulses = roster.follow(step)
+        if step.closing and started == current:
+            events = PendingEvents(step=step.step, stamp_ns=step.stamp_ns,
+                                   log_time_ns=step.log_time_ns, impulses=impulses,
+                                   edits=step.edits)
+            for sink in sinks:
+                getattr(sink, 'write_pending', _ignore)(events)
         if not step.complete:
             continue
         if started != current:

@@ -337,6 +337,20 @@ class McapSink:
                              f'{record.log_time_ns} ns')
         self._guard(self._write_step, record)
 
+    def write_pending(self, events):
+        """Record edits (and the impulses they applied) made after the segment's last step.
+
+        They go at the log time of the step they would have preceded, as that step's impulse
+        and edit messages would, with no balls, state or stats: a closing record, which the
+        reader and the tools take for what it is (mcap_reader.RecordedStep.closing).
+        """
+        self._check_open()
+        if self._last_log_ns is not None and events.log_time_ns <= self._last_log_ns:
+            raise ValueError(f'log time went back from {self._last_log_ns} to '
+                             f'{events.log_time_ns} ns')
+        self._guard(self._write_events, events.log_time_ns, events.impulses, events.edits)
+        self._last_log_ns = events.log_time_ns
+
     def flush(self):
         self._check_open()
         self._guard(self._flush)
@@ -406,19 +420,22 @@ class McapSink:
                                  publish_time=log_time_ns, sequence=sequence)
         self._pending += len(data) + 31  # message record overhead
 
-    def _write_step(self, record):
-        log_time_ns = record.log_time_ns
-        # Impulses and edits come first, in the order they were applied: all of them were
-        # applied before the step whose stamp they carry.
-        impulses = record.impulses
+    def _write_events(self, log_time_ns, impulses, edits):
+        """Impulses and edits in the order they were applied (each edit's impulses_before)."""
         done = 0
-        for edit in record.edits:
+        for edit in edits:
             for impulse in impulses[done:edit.impulses_before]:
                 self._add('impulse', log_time_ns, impulse.cdr)
             done = max(done, edit.impulses_before)
             self._add('edits', log_time_ns, encode_string(edit.text))
         for impulse in impulses[done:]:
             self._add('impulse', log_time_ns, impulse.cdr)
+
+    def _write_step(self, record):
+        log_time_ns = record.log_time_ns
+        # Impulses and edits come first, in the order they were applied: all of them were
+        # applied before the step whose stamp they carry.
+        self._write_events(log_time_ns, record.impulses, record.edits)
         if record.world_changed:
             self._restart_markers(dataclasses.replace(self._world, radii=record.radii),
                                   log_time_ns)

@@ -50,7 +50,9 @@ PROBE_TIMEOUT = 1.0
 SPAWN = 'spawn'
 #: Port of the native viewer that `spawn` starts (the SDK's default).
 SPAWN_PORT = 9876
-VIEW_SCHEMES = {'rerun': 443, 'rerun+http': 80, 'rerun+https': 443}
+#: URL schemes of a viewer. The port must be written out: without one, urllib (and a
+#: reader) would take the scheme's 80 or 443, where no viewer listens.
+VIEW_SCHEMES = ('rerun', 'rerun+http', 'rerun+https')
 
 
 class OutletFailed(RuntimeError):
@@ -71,10 +73,10 @@ def parse_view(value):
     except ValueError:
         parts, port = None, None
     if (parts is None or parts.scheme not in VIEW_SCHEMES or not parts.hostname
-            or parts.path != '/proxy' or parts.query or parts.fragment):
+            or parts.path != '/proxy' or parts.query or parts.fragment or not port):
         raise ValueError(f"expected 'spawn' or a URL like rerun+http://127.0.0.1:9876/proxy, "
-                         f'got {value!r}')
-    return parts.hostname, port or VIEW_SCHEMES[parts.scheme]
+                         f'with a port from 1 to 65535, got {value!r}')
+    return parts.hostname, port
 
 
 def spawn_call(stream, blueprint, viewer=None):

@@ -53,6 +53,10 @@ class BackgroundSink:
     def write_step(self, record):
         self._submit(self.sink.write_step, record)
 
+    def write_pending(self, events):
+        if hasattr(self.sink, 'write_pending'):
+            self._submit(self.sink.write_pending, events)
+
     def flush(self):
         self._submit(self.sink.flush)
 

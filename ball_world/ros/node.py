@@ -39,6 +39,7 @@ from ball_world.msgs.markers import MarkerBuilder
 from ball_world.recording.writer_thread import BackgroundSink
 from ball_world.ros.agents import AgentTopics
 from ball_world.ros.parameters import converted, current_values, declare_all, ParameterError
+from ball_world.ros.rcl_init import init_quietly
 from ball_world.ros.sim_interfaces import ACTION, SimulationInterfaces
 from ball_world.simulation import build, Simulation
 
@@ -631,10 +632,9 @@ def run(args=None):
     if own:
         print(ignored_arguments(own), file=sys.stderr)
     tune_allocator()
-    try:
-        rclpy.init(args=args)
-    except Exception as error:  # noqa: B902 - rcl reports bad arguments as generic errors
-        print(f'ball_world: cannot start: {error}', file=sys.stderr)
+    refused = init_quietly(args)  # rcl's own [ERROR] lines held back: one line of ours
+    if refused is not None:
+        print(f'ball_world: cannot start: {refused}', file=sys.stderr)
         return 2
     node = None
     code = 0

@@ -49,6 +49,9 @@ PROG = 'ball_world_goal'
 #: Largest gain taken (kp in 1/s^2, kd in 1/s). A loop sampled at 20 Hz is unstable long
 #: before it (kp T^2 or kd T of order 1), and far larger ones (1e308) overflow the push.
 MAX_GAIN = 1e6
+#: Pushes per second taken: a timer's period must fit rclpy's nanoseconds (1e-300 Hz does
+#: not) and must not be 0 ns (1e300 Hz would spin a core for nothing).
+MIN_RATE_HZ, MAX_RATE_HZ = 1e-3, 1e3
 #: Seconds between the reports of the distance to the goal, and between the warnings while
 #: no world (no `state`) is heard.
 REPORT_SECONDS = 5.0
@@ -64,7 +67,7 @@ ROS parameters (after --ros-args; integers are taken for numbers):
   kd           gain on the velocity, 1/s (default 4.0: critically damped with kp 4.0;
                at most 1e6)
   max_impulse  longest push per command, N s (default 0.5)
-  rate_hz      commands per second (default 20.0)
+  rate_hz      commands per second (default 20.0; 0.001 to 1000)
   mass         mass of the ball, kg (default 0.2)
   use_sim_time true: run on the world's /clock (start the world with publish_clock:=true)"""
 
@@ -76,15 +79,15 @@ class ParameterError(ValueError):
 class GoalController(Node):
     """Reads the world's state, pushes one ball towards its goal at a fixed rate."""
 
-    def __init__(self):
-        super().__init__('ball_world_goal')
+    def __init__(self, **kwargs):
+        super().__init__('ball_world_goal', **kwargs)
         # Parameters, checked once at start (see PARAMETERS for their meaning).
         self.ball = self.parameter('ball', 'ball_0', str)
         self.goal = self.parameter('goal', [5.0, 5.0], list)
         self.kp = self.parameter('kp', 4.0, float, low=0.0, high=MAX_GAIN)
         self.kd = self.parameter('kd', 4.0, float, low=0.0, high=MAX_GAIN)
         self.max_impulse = self.parameter('max_impulse', 0.5, float, low=0.0, strict=True)
-        rate_hz = self.parameter('rate_hz', 20.0, float, low=0.0, strict=True)
+        rate_hz = self.parameter('rate_hz', 20.0, float, low=MIN_RATE_HZ, high=MAX_RATE_HZ)
         self.mass = self.parameter('mass', 0.2, float, low=0.0, strict=True)
         self.period = 1.0 / rate_hz
 

@@ -6,7 +6,9 @@ edits (spawn, delete, set_state) are applied in the order the node applied them 
 impulses_before says how many of the step's impulses came before it), through the same
 Simulation calls the node makes; and every recorded pose, state row and stats entry (except
 the real-time factor, which depends on the wall clock), every impulse and every edit
-message must be bit-identical to the re-simulated one. An edit the re-simulation refuses,
+message must be bit-identical to the re-simulated one. A segment's closing record (edits,
+and the impulses they applied, made after its last step: mcap_reader.RecordedStep.closing)
+is made the same way, without a step, and checked the same way. An edit the re-simulation refuses,
 or a spawn that gets another name, is a difference too. Exit status: 0 all identical, 1 a
 difference, 2 an unreadable recording or parameters that no longer build a world (one line
 on stderr).
@@ -70,6 +72,7 @@ class SegmentResult:
     edits: int = 0
     last_step: int = 0
     differing_steps: int = 0
+    closing: Optional[tuple] = None  # (impulses, edits) made after the last step, if any
 
 
 class Comparison:
@@ -158,6 +161,15 @@ def _advance(simulation, step, comparison, segment_index):
     if step.step == 0:
         _compare_events(simulation.last_record, step, comparison, segment_index)
         return simulation.last_record
+    _make_edits(simulation, step, comparison, segment_index)
+    result, rejected = simulation.step()
+    _report_rejected(rejected, step.step, comparison, segment_index)
+    _compare_events(result, step, comparison, segment_index)
+    return result
+
+
+def _make_edits(simulation, step, comparison, segment_index):
+    """Queue the step's impulses and make its edits, in the order the node applied them."""
     impulses = step.impulses
     queued = 0
     for edit in step.edits:
@@ -167,10 +179,18 @@ def _advance(simulation, step, comparison, segment_index):
         _edit(simulation, edit, step.step, comparison, segment_index)
     for impulse in impulses[queued:]:
         simulation.queue_impulse(impulse.frame_id, impulse.x, impulse.y)
-    result, rejected = simulation.step()
-    _report_rejected(rejected, step.step, comparison, segment_index)
-    _compare_events(result, step, comparison, segment_index)
-    return result
+
+
+def _close(simulation, step, comparison, segment_index):
+    """A closing record: the edits and impulses applied after the segment's last step.
+
+    They are made as the node made them, and applied without a step; each must be accepted
+    as recorded, and the impulse and edit messages the re-simulation makes must be the
+    recorded ones (stamped with the step they would have preceded).
+    """
+    _make_edits(simulation, step, comparison, segment_index)
+    _report_rejected(simulation.apply_queued(), step.step, comparison, segment_index)
+    _compare_events(simulation.pending_events(), step, comparison, segment_index)
 
 
 def _edit(simulation, edit, k, comparison, segment_index):
@@ -250,7 +270,7 @@ def resimulate(recording, progress=None):
     comparison = Comparison()
     simulation = result = None
     for step in recording.steps():
-        if progress is not None:
+        if progress is not None and not step.closing:
             progress.advance()
         segment = recording.segments[step.segment]
         if result is None or result.position != step.segment:
@@ -263,6 +283,9 @@ def resimulate(recording, progress=None):
                                      f'step {step.step}: its first steps are not recorded')
             result = SegmentResult(segment.index, step.segment)
             comparison.segments.append(result)
+        elif result.closing is not None:
+            raise RecordingError(f'segment {segment.index} has step {step.step} after the '
+                                 'closing record of its last step')
         elif step.step <= result.last_step:
             comparison.add(Difference(segment.index, step.step, 'step order', None,
                                       result.last_step, step.step, math.inf))
@@ -272,6 +295,13 @@ def resimulate(recording, progress=None):
             raise RecordingError(f'segment {segment.index} jumps from step '
                                  f'{result.last_step} to step {step.step}: the steps between '
                                  'are not recorded')
+        if step.closing:
+            before = comparison.count
+            _close(simulation, step, comparison, segment.index)
+            result.closing = (len(step.impulses), len(step.edits))
+            if comparison.count != before:
+                result.differing_steps += 1
+            continue
         record = _advance(simulation, step, comparison, segment.index)
         result.steps += 1
         result.impulses += len(step.impulses)
@@ -288,6 +318,9 @@ def describe(comparison):
         verdict = ('identical' if not result.differing_steps
                    else f'{result.differing_steps} steps differ')
         edits = f', {result.edits} edits' if result.edits else ''
+        if result.closing is not None:
+            edits += (f'; after the last step {result.closing[0]} impulses and '
+                      f'{result.closing[1]} edits')
         lines.append(f'segment {result.index}: {result.steps} steps compared (last step '
                      f'{result.last_step}), {result.impulses} impulses{edits}: {verdict}')
     total = sum(result.steps for result in comparison.segments)
