@@ -3,7 +3,7 @@ labels in metres, room for them in the view."""
 import numpy as np
 import pytest
 
-from ball_world.recording.rerun_scale import padded, PAD_FRACTION, ruler, tick_step
+from ball_world.recording.rerun_scale import PAD_FRACTION, padded, ruler, tick_step
 
 
 @pytest.mark.parametrize('span, step', [(10.6, 2.0), (10.0, 2.0), (1.0, 0.2), (47.0, 5.0),
