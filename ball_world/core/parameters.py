@@ -261,9 +261,10 @@ PARAMETERS = (
     Parameter('physics.backend', STRING, 'auto', "How the world steps: 'numpy' (the "
               "reference), 'numba' (compiled, bit-identical) or 'auto' (numba when "
               'installed).', choices=('auto', 'numpy', 'numba')),
-    Parameter('physics.mode', STRING, 'seed', "How collisions are found: 'seed' (the seed's "
-              "rule: after the balls moved, touching and approaching) or 'exact' (every "
-              'collision at its true time of impact; needs numba).', choices=('seed', 'exact')),
+    Parameter('physics.mode', STRING, 'seed', "How collisions are found: 'seed' (the rule of "
+              'the note the project started from, not random.seed: after the balls moved, '
+              "touching and approaching) or 'exact' (every collision at its true time of "
+              'impact; needs numba).', choices=('seed', 'exact')),
     Parameter('publish_clock', BOOL, False, 'Publish /clock after each step.', AT_ONCE),
     Parameter('markers.rate_hz', DOUBLE, 10.0, 'Wall-clock rate of the RViz markers; 0 turns '
               'them off. The node lowers it when markers would take over 5% of its time.',
