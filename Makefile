@@ -19,7 +19,7 @@ run: setup
 	$(VENV)/bin/ball_world_info runs/ball_world.mcap
 	@echo 'Look at the run: $(VENV)/bin/rerun runs/ball_world.rrd  (Rerun viewer)'
 	@echo '  or open runs/ball_world.mcap in Foxglove with foxglove/ball_world.json (layout),'
-	@echo '  or play it: ros2 bag play runs/ball_world.mcap  (ROS 2 Jazzy with rosbag2)'
+	@echo '  or play it: $(VENV)/bin/ball_world_replay runs/ball_world.mcap  (ros2 bag play with ROS 2 Jazzy)'
 
 # The default world live in a browser: prints the address; Ctrl-C stops the node and the server.
 view: setup

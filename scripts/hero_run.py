@@ -26,7 +26,7 @@ def main(output):
         time.sleep(max(0.0, start + (step - 1) * period - time.monotonic()))
         if step == PUSH_AT:
             ball, jx, jy = PUSH
-            simulation.queue_impulse(ball, jx, jy, f'ball_{ball}')
+            simulation.queue_impulse(f'ball_{ball}', jx, jy)
         simulation.step()
     simulation.close()
 

@@ -99,8 +99,9 @@ fi
 # dependencies were reinstalled, or the installed copy or the kernel cache has gone.
 package="$venv/.ball_world-package"
 wanted_package=$(package_stamp "$wanted")
+# (With NUMBA_CACHE_DIR set, numba keeps its cache there: only the stamp tells.)
 if [ "$(cat "$package" 2>/dev/null)" != "$wanted_package" ] || [ ! -x "$venv/bin/ball_world" ] ||
-   ! compgen -G 'ball_world/core/__pycache__/*.nbi' >/dev/null; then
+   { [ -z "${NUMBA_CACHE_DIR:-}" ] && ! compgen -G 'ball_world/core/__pycache__/*.nbi' >/dev/null; }; then
   echo "setup: installing ball_world into $venv and compiling its numba kernels" \
        '(sources changed; 10-30 s, several minutes when numba compiles from scratch)'
   rm -f "$package"

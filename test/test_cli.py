@@ -112,3 +112,16 @@ def test_bad_usage_is_one_line_and_exit_2(args, problem):
     code, out, err = run_tool('ball_world_cli', '--timeout', '1', *args)
     assert code == 2 and problem in err, err
     assert len(err.strip().splitlines()) == 1 and 'Traceback' not in err
+
+
+def test_parameters_are_set_and_read_as_ros2_param_would(world):
+    assert ok('get-param', 'rate_hz') == ['50.0']
+    assert ok('set-param', 'rate_hz', '30') == ['set rate_hz to 30']  # an integer, as typed
+    assert ok('get-param', 'rate_hz') == ['30.0']  # the world keeps doubles double
+    assert ok('set-param', 'arena', '[0, 0, 12, 12]') == ['set arena to [0, 0, 12, 12]']
+    assert ok('get-param', 'arena') == ['[0.0, 0.0, 12.0, 12.0]']
+    line = refused('set-param', 'rate_hz', '-5.0')
+    assert line.startswith('ball_world_cli: set-param rate_hz: refused: ') and 'rate_hz' in line
+    assert ok('get-param', 'rate_hz') == ['30.0']
+    assert refused('get-param', 'rate') == (
+        "ball_world_cli: get-param: the world has no parameter 'rate'")

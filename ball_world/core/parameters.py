@@ -291,9 +291,10 @@ PARAMETERS = (
     Parameter('physics.backend', STRING, 'auto', "How the world steps: 'numpy' (the "
               "reference), 'numba' (compiled, bit-identical) or 'auto' (numba when "
               'installed).', choices=('auto', 'numpy', 'numba')),
-    Parameter('physics.mode', STRING, 'seed', "How collisions are found: 'seed' (the seed's "
-              "rule: after the balls moved, touching and approaching) or 'exact' (every "
-              'collision at its true time of impact; needs numba).', choices=('seed', 'exact')),
+    Parameter('physics.mode', STRING, 'seed', "How collisions are found: 'seed' (the rule of "
+              'the note the project started from, not random.seed: after the balls moved, '
+              "touching and approaching) or 'exact' (every collision at its true time of "
+              'impact; needs numba).', choices=('seed', 'exact')),
     Parameter('agents', STRING_ARRAY, [], 'Entity names of the balls that are agents (robots '
               'driven by <name>/cmd_vel), e.g. [ball_0].', max_size=MAX_AGENTS),
     Parameter('frame_prefix', STRING, '', "Prefix of the agents' frames (<p><name>/odom, "

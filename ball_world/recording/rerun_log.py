@@ -62,7 +62,9 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from ball_world.core.parameters import BY_NAME
 from ball_world.recording.rerun_outlet import new_stream, Outlet, OutletFailed, parse_view
+from ball_world.recording.rerun_scale import padded, ruler
 from ball_world.step_record import PACKAGE_NAME
 
 APPLICATION_ID = PACKAGE_NAME
@@ -73,6 +75,8 @@ WALLS = 'arena/walls'
 IMPULSES = 'arena/impulses'
 VELOCITIES = 'arena/velocities'
 TRAILS = 'arena/trails'
+SCALE = 'arena/scale'
+SCALE_LABELS = 'arena/scale/labels'
 ENERGY = 'plots/energy_change'
 COLLISIONS = 'plots/collisions'
 MOMENTUM = 'plots/momentum'
@@ -163,24 +167,46 @@ def scene_bounds(world):
     return (xmin - margin, ymin - margin, xmax + margin, ymax + margin)
 
 
-def blueprint(world):
+def expected_real_time_factor(parameters):
+    """The real-time factor the run's rate aims at (rate_hz x dt), or None when it runs as
+    fast as it can (rate_hz 0): then no scale fits in advance."""
+    rate_hz = float(parameters.get('rate_hz', BY_NAME['rate_hz'].default))
+    dt = float(parameters.get('dt', BY_NAME['dt'].default))
+    if rate_hz <= 0.0:
+        return None
+    return rate_hz * dt if dt > 0.0 else 1.0
+
+
+def real_time_factor_axis(parameters):
+    """The real-time factor's y axis from 0 to a quarter above its aim: an automatic range
+    would blow jitter of 0.99-1.01 up to the full height (it once started at 1.04)."""
+    expected = expected_real_time_factor(parameters)
+    return None if expected is None else rrb.ScalarAxis(range=(0.0, 1.25 * expected))
+
+
+def blueprint(world, parameters=None):
     """The arena large on the left (+y up, bounds fitted), the plots stacked on the right.
 
     The 2D view's origin is the root, above the `arena` flip, so its visual bounds are in the
-    flipped frame: world y in [ymin, ymax] is view y in [-ymax, -ymin].
+    flipped frame: world y in [ymin, ymax] is view y in [-ymax, -ymin]. The legends of the
+    rising plots sit top left, where their curves (starting at 0) do not go.
     """
-    xmin, ymin, xmax, ymax = (float(v) for v in scene_bounds(world))
+    # With room at the bottom and the left for the ruler's labels (rerun_scale).
+    xmin, ymin, xmax, ymax = (float(v) for v in padded(scene_bounds(world)))
     arena = rrb.Spatial2DView(
         origin='/', contents=f'/{ARENA}/**', name='arena (+y up)',
         visual_bounds=rrb.VisualBounds2D(x_range=[xmin, xmax], y_range=[-ymax, -ymin]))
     plots = rrb.Vertical(
-        rrb.TimeSeriesView(origin=f'/{ENERGY}', name='kinetic energy change since step 0 [%]'),
+        rrb.TimeSeriesView(origin=f'/{ENERGY}', name='kinetic energy change since step 0 [%]',
+                           plot_legend=rrb.PlotLegend(corner='LeftTop')),
         # Momentum is logged (it is part of the recording) but, in a walled box, mostly
         # the walls' doing: it sits in a tab behind the collisions.
-        rrb.Tabs(rrb.TimeSeriesView(origin=f'/{COLLISIONS}', name='collisions since step 0'),
+        rrb.Tabs(rrb.TimeSeriesView(origin=f'/{COLLISIONS}', name='collisions since step 0',
+                                    plot_legend=rrb.PlotLegend(corner='LeftTop')),
                  rrb.TimeSeriesView(origin=f'/{MOMENTUM}', name='momentum [kg m/s]')),
         rrb.TimeSeriesView(origin=f'/{REAL_TIME_FACTOR}',
-                           name=f'real-time factor (last {RTF_WINDOW:g} s)'))
+                           name=f'real-time factor (last {RTF_WINDOW:g} s)',
+                           axis_y=real_time_factor_axis(parameters or {})))
     return rrb.Blueprint(
         rrb.Horizontal(arena, plots, column_shares=[2, 1]),
         rrb.TimePanel(timeline=SIM_TIME, state='collapsed', play_state='following'),
@@ -349,6 +375,16 @@ class RerunSink:
         self._emit('log', WALLS, rr.LineStrips2D(
             strips, radii=rr.Radius.ui_points(1.5), colors=WALL_COLOR, draw_order=20.0))
         self._emit('log', IMPULSES, rr.Arrows2D.cleared())
+        self._log_ruler(world)
+
+    def _log_ruler(self, world):
+        """Ticks and labels in metres along the bottom and left of the scene (rerun_scale),
+        per segment like the walls: a reset may change the scene."""
+        ticks, places, texts = ruler(scene_bounds(world))
+        self._emit('log', SCALE, rr.LineStrips2D(
+            ticks, radii=rr.Radius.ui_points(1.0), colors=WALL_COLOR, draw_order=20.0))
+        self._emit('log', SCALE_LABELS, rr.Points2D(
+            places, radii=0.0, labels=texts, show_labels=True, colors=WALL_COLOR))
 
     def write_step(self, record):
         """Buffer the step if it is one to log; send the buffer when it is full."""
@@ -402,7 +438,7 @@ class RerunSink:
     def _open(self, world, parameters):
         """Create the destinations, with the blueprint fitted to the first world."""
         self._opened = True
-        plan = None if world is None else blueprint(world)
+        plan = None if world is None else blueprint(world, parameters)
         rid = recording_id(parameters)
         if self.path is not None:
             self.outlets.append(Outlet.file(self.path, new_stream(APPLICATION_ID, rid), plan))

@@ -144,6 +144,25 @@ class BallWorld(Node):
     """Steps the world at rate_hz and speaks ROS for it."""
 
     def __init__(self, **kwargs):
+        self._sinks = []
+        try:
+            self._start(**kwargs)
+        except BaseException:
+            self._abandon()
+            raise
+
+    def _abandon(self):
+        """A start cut short (a signal, an error) leaves no stub behind: a recording that has
+        its first segment is closed complete, one that has nothing yet is removed (as a bad
+        path's is), so the next run is not refused for a file this one never wrote."""
+        simulation = getattr(self, 'simulation', None)
+        if simulation is not None:
+            simulation.close()
+        else:
+            for sink in self._sinks:
+                sink.close()
+
+    def _start(self, **kwargs):
         super().__init__('ball_world', **kwargs)
         try:
             # rclpy keeps the command line's and files' values here; they are converted and
@@ -165,7 +184,7 @@ class BallWorld(Node):
             built = build(values)
         except ScenarioError as error:
             raise StartupError(str(error)) from None
-        sinks = open_sinks(values)
+        sinks = self._sinks = open_sinks(values)
         self.simulation = Simulation(values, sinks, topics=topics,
                                      on_sink_failure=failures.append, built=built)
         if failures:

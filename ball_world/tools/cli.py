@@ -8,6 +8,7 @@ lines of the README do, one subcommand each, like `gz service` / `gz topic` do f
     ball_world_cli spawn red 5 5 --radius 0.3 --vx 1
     ball_world_cli state [NAME]               # poses and velocities, at the current time
     ball_world_cli pause | step 60 | resume | reset
+    ball_world_cli set-param rate_hz 30       # what ros2 param set does
 
 It speaks only through the world's public names: the `impulse` topic, the latched
 `entity_names`, and the standard simulation_interfaces services under the world node's name,
@@ -22,11 +23,14 @@ import sys
 import time
 
 from geometry_msgs.msg import Vector3Stamped
+from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType
 import rclpy
 from rclpy.action import ActionClient
 from rclpy.duration import Duration
 from rclpy.exceptions import NameValidationException
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import get_parameter_value, Parameter, parameter_value_to_python
+from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
@@ -65,6 +69,7 @@ EXAMPLES = f"""examples:
   {PROG} set-state red 2 2 0 1             move red to (2, 2) with velocity (0, 1) m/s
   {PROG} state                             every ball: x, y, vx, vy at the current time
   {PROG} pause; {PROG} step 60; {PROG} resume
+  {PROG} set-param rate_hz 30              what ros2 param set /ball_world rate_hz 30 does
   {PROG} --ns /sim2 reset                  the world started with -r __ns:=/sim2"""
 
 
@@ -129,6 +134,13 @@ def _parser():
     state.add_argument('name', nargs='?')
     info = commands.add_parser('info', help="a ball's radius and mass")
     info.add_argument('name')
+
+    set_param = commands.add_parser('set-param', help='set a parameter of the world (what '
+                                    'ros2 param set does); VALUE in YAML: 30, true, [0, 0, 8, 8]')
+    set_param.add_argument('name')
+    set_param.add_argument('value')
+    get_param = commands.add_parser('get-param', help='a parameter of the world')
+    get_param.add_argument('name')
 
     commands.add_parser('status', help='playing, paused, stopped or quitting')
     commands.add_parser('pause', help='pause stepping')
@@ -314,6 +326,36 @@ def state(client, args):
         _state_line(name, entity) for name, entity in zip(response.entities, response.states)]
 
 
+def _parameter_client(client):
+    """The world node's parameter services, once they are offered."""
+    parameters = AsyncParameterClient(client.node, client.world)
+    name = client.node.resolve_service_name(f'{client.world}/set_parameters')
+    client.wait(parameters.services_are_ready, client._no_world(name))
+    return parameters
+
+
+def set_param(client, args):
+    value = get_parameter_value(args.value)
+    parameters = _parameter_client(client)
+    future = parameters.set_parameters([Parameter.from_parameter_msg(
+        ParameterMsg(name=args.name, value=value))])
+    client.wait(future.done, f'the world did not answer set-param within {client.timeout:g} s')
+    [result] = future.result().results
+    if not result.successful:
+        raise Failure(f'set-param {args.name}: refused: {result.reason}')
+    return [f'set {args.name} to {parameter_value_to_python(value)!r}']
+
+
+def get_param(client, args):
+    parameters = _parameter_client(client)
+    future = parameters.get_parameters([args.name])
+    client.wait(future.done, f'the world did not answer get-param within {client.timeout:g} s')
+    values = future.result().values
+    if not values or values[0].type == ParameterType.PARAMETER_NOT_SET:
+        raise Failure(f"get-param: the world has no parameter '{args.name}'")
+    return [repr(parameter_value_to_python(values[0]))]
+
+
 def info(client, args):
     response = _checked(client.call(GetEntityInfo, 'get_entity_info',
                                     GetEntityInfo.Request(entity=args.name)), 'info')
@@ -404,7 +446,7 @@ def simulate(client, args):
 COMMANDS = {'push': push, 'spawn': spawn, 'delete': delete, 'set-state': set_state,
             'state': state, 'info': info, 'status': status, 'pause': pause, 'resume': resume,
             'play': resume, 'stop': stop, 'quit': quit_world, 'reset': reset, 'step': step,
-            'simulate': simulate}
+            'simulate': simulate, 'set-param': set_param, 'get-param': get_param}
 
 
 def run(argv):

@@ -1,5 +1,7 @@
 """ball_world_repair: make a recording whose writer was killed readable by every tool again.
 
+An .rrd is repaired by tools.repair_rrd (through Rerun's own reader); what follows is MCAP.
+
 A SIGKILLed or crashed recorder leaves an MCAP without summary and footer, possibly ending in
 a torn record. Most readers (rosbags, ros2 bag, Foxglove's indexed view) then refuse the
 file. This copies every complete record (header, schemas, channels, messages, metadata,
@@ -26,6 +28,7 @@ from ball_world.recording.files import open_regular, PartialOutput, same_path
 from ball_world.recording.mcap_reader import METADATA_NAME, RecordingError, Scan, Segment
 from ball_world.tools import print_report
 from ball_world.tools.progress import Progress
+from ball_world.tools.repair_rrd import describe as describe_rrd, repair_rrd
 
 PROG = 'ball_world_repair'
 
@@ -177,27 +180,33 @@ def describe(report, source, target):
 def main(argv=None):
     parser = argparse.ArgumentParser(
         prog=PROG,
-        description='Recover a truncated MCAP recording (writer killed: no summary, torn '
-                    'last record) into a complete file holding every complete record.')
-    parser.add_argument('input', help='the damaged .mcap, or a bag directory of split files '
-                                      '(repaired in place, metadata.yaml rewritten)')
+        description='Recover a truncated recording (writer killed: an MCAP without summary, '
+                    'an .rrd without footer, a torn last record) into a complete file holding '
+                    'every complete record; a bag directory of split files is repaired in '
+                    'place and its metadata.yaml rewritten.')
+    parser.add_argument('input', help='the damaged .mcap or .rrd (Rerun), or a bag directory')
     parser.add_argument('-o', '--output', help='where to write (default: '
-                                               'INPUT.repaired.mcap; may be INPUT itself)')
+                                               'INPUT.repaired.mcap or .rrd; may be INPUT '
+                                               'itself)')
     parser.add_argument('--force', action='store_true',
                         help='replace the output file if it exists')
     args = parser.parse_args(argv)
     if os.path.isdir(args.input):
         return _main_bag(args)
     target = args.output or default_target(args.input)
+    rrd = args.input.endswith('.rrd')
     try:
-        report = repair(args.input, target, args.force)
+        if rrd:
+            report = repair_rrd(args.input, target, args.force)
+        else:
+            report = repair(args.input, target, args.force)
     except RecordingError as error:
         print(f'{PROG}: {args.input}: {error}', file=sys.stderr)
         return 2
     except OSError as error:
         print(f'{PROG}: {error}', file=sys.stderr)
         return 2
-    print_report(describe(report, args.input, target))
+    print_report((describe_rrd if rrd else describe)(report, args.input, target))
     return 0
 
 
