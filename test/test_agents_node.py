@@ -5,8 +5,9 @@ a Nav2 controller would be. Speeds are checked against closed forms in steps of 
 time (odom's stamps), never against the wall clock.
 """
 import math
+import re
 
-from ball_world_testing.harness import finish, node_command, RECEIVE_QOS
+from ball_world_testing.harness import finish, node_command, RECEIVE_QOS, run_tool
 from geometry_msgs.msg import PoseArray, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 import pytest
@@ -213,3 +214,23 @@ def test_hostile_cmd_vel_leaves_the_node_stepping_and_listening(probe, processes
     assert code == 0 and 'Traceback' not in err
     assert 'refused cmd_vel for ball_0' in err
     assert err.count('refused cmd_vel') <= 3  # at most one warning per 5 s
+
+
+def test_a_recorded_run_with_agents_resimulates_bit_for_bit(probe, processes, tmp_path):
+    path = tmp_path / 'agents.mcap'
+    process = processes.start(node_command(*WORLD, 'max_steps:=150', f'record.mcap:={path}'))
+    odom = probe.listen(Odometry, 'ball_1/odom')
+    command = probe.node.create_publisher(Twist, 'ball_1/cmd_vel', 10)
+    probe.spin_until(lambda: command.get_subscription_count() > 0 and odom,
+                     'a reader of cmd_vel', process=process)
+    for _ in range(20):
+        command.publish(twist(x=1.0, y=-0.5, wz=2.0))
+        probe.spin_for(0.02)
+    code, _, err = finish(process)
+    assert code == 0, err
+    code, out, err = run_tool('ball_world_resim', str(path))
+    assert code == 0, out + err
+    assert 'all 151 recorded steps re-simulate bit-identically' in out
+    code, out, _ = run_tool('ball_world_info', str(path))
+    commands = re.search(r'agents: +2 \(ball_0, ball_1\), ([0-9]+) commands', out)
+    assert commands and int(commands.group(1)) >= 1, out

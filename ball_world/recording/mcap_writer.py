@@ -41,6 +41,7 @@ import yaml
 from ball_world import __version__
 from ball_world.msgs.cdr import encode_clock, encode_string
 from ball_world.msgs.definitions import message_definition, type_hash
+from ball_world.recording import agent_topics
 from ball_world.recording.files import claim_output, OutputClaim
 from ball_world.recording.resume import RESUME_STEP
 from ball_world.step_record import PACKAGE_NAME
@@ -133,6 +134,11 @@ ROLE_QOS = {
     'edits': offered_qos_profiles(1000),
     'markers': offered_qos_profiles(1, durability='transient_local'),
     'clock': offered_qos_profiles(1, reliability='best_effort'),
+    # The agents' topics (recording.agent_topics), as ros/agents.py offers them.
+    agent_topics.COMMAND: offered_qos_profiles(100),
+    agent_topics.ODOM: offered_qos_profiles(10),
+    agent_topics.TF: offered_qos_profiles(100),
+    agent_topics.TF_STATIC: offered_qos_profiles(1, durability='transient_local'),
 }
 
 _SEQUENCE_MODULO = 2 ** 32  # MCAP message sequence numbers are uint32
@@ -300,6 +306,7 @@ class McapSink:
         self._pending = 0  # uncompressed bytes in the open chunk
         self._last_log_ns = None
         self._clock = False  # whether this segment records /clock
+        self._agent_parameters = {}  # the segment's parameters (agent.cmd_vel_stamped)
         self._world = None  # the segment's WorldSnapshot: its walls and frame for markers
         self._markers = None if markers_period_ns is None else _Markers(markers_period_ns)
         self._file = claim.writer()
@@ -373,6 +380,7 @@ class McapSink:
     def _start_segment(self, world, info):
         self._world = world
         self._clock = bool(info.parameters.get('publish_clock'))
+        self._agent_parameters = info.parameters
         topics = segment_topics(info, self._clock)
         self._topics = topics
         self._roles = {role: self._channel(topic, role) for role, topic in topics.items()
@@ -395,8 +403,8 @@ class McapSink:
             self._markers.reset(world)
             self._add('markers', log_time_ns, self._markers.delete_all)
 
-    def _channel(self, topic, role):
-        type_name = TOPIC_TYPES[role]
+    def _channel(self, topic, role, type_name=None):
+        type_name = type_name or TOPIC_TYPES[role]
         channel = self._channels.get(topic)
         if channel is None:
             schema = self._schemas.get(type_name)
@@ -414,6 +422,16 @@ class McapSink:
         channel = self._roles.get(role)
         if channel is None:  # a LAZY_ROLES topic's first message
             channel = self._roles[role] = self._channel(self._topics[role], role)
+        self._put(channel, log_time_ns, data)
+
+    def _add_agent(self, log_time_ns, topic, type_name, role, data):
+        """An agent message (recording.agent_topics): its channel is made at its first one."""
+        channel = self._channels.get(topic)
+        if channel is None:
+            channel = self._channel(topic, role, type_name)
+        self._put(channel, log_time_ns, data)
+
+    def _put(self, channel, log_time_ns, data):
         sequence = (self._sequences.get(channel, 0) + 1) % _SEQUENCE_MODULO
         self._sequences[channel] = sequence
         self._writer.add_message(channel, log_time=log_time_ns, data=data,
@@ -436,12 +454,17 @@ class McapSink:
         # Impulses and edits come first, in the order they were applied: all of them were
         # applied before the step whose stamp they carry.
         self._write_events(log_time_ns, record.impulses, record.edits)
+        namespace = agent_topics.namespace_of(self._topics)
+        for message in agent_topics.before_step(record, namespace, self._agent_parameters):
+            self._add_agent(log_time_ns, *message)
         if record.world_changed:
             self._restart_markers(dataclasses.replace(self._world, radii=record.radii),
                                   log_time_ns)
         self._add('balls', log_time_ns, record.balls_cdr)
         self._add('state', log_time_ns, record.state_cdr)
         self._add('stats', log_time_ns, record.stats_cdr)
+        for message in agent_topics.after_step(record, namespace):
+            self._add_agent(log_time_ns, *message)
         if self._clock:
             self._add('clock', log_time_ns, encode_clock(record.stamp_ns))
         if self._markers is not None and self._markers.due(record.stamp_ns):
