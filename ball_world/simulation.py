@@ -295,8 +295,14 @@ class Simulation:
         return rejected
 
     def set_state(self, name, x, y, vx, vy):
-        """Put the ball named `name` at (x, y) with velocity (vx, vy); returns rejections."""
+        """Put the ball named `name` at (x, y) with velocity (vx, vy); returns rejections.
+
+        The impulses queued before it are applied first, so its energy check meets the
+        velocities the edit will really replace and keep (a refused edit leaves them
+        applied, as the next step would have).
+        """
         index = self.entities.index(name)
+        rejected = self.apply_queued()
         world = self.world
         what = f"'{name}' at"
         radius = float(world.radii[index])
@@ -310,7 +316,6 @@ class Simulation:
             vx * vx + vy * vy - float(old[0] * old[0] + old[1] * old[1]))
         check_speeds(energy, float(world.masses.min()), world.min_radius, self.dt_ns,
                      f"'{name}'")
-        rejected = self.apply_queued()
         world.set_ball_state(index, (x, y), (vx, vy))
         self._record_edit('set_state', name, x, y, vx, vy)
         return rejected
