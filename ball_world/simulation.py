@@ -401,7 +401,10 @@ class Simulation:
     def set_state(self, name, x, y, vx, vy, yaw=None):
         """Put the ball named `name` at (x, y) with velocity (vx, vy); returns rejections.
 
-        yaw (rad) sets an agent's heading; a plain ball has none (only yaw 0 is taken).
+        yaw (rad) sets an agent's heading; a plain ball has none (only yaw 0 is taken). The
+        impulses queued before it are applied first, so its energy check meets the
+        velocities the edit will really replace and keep (a refused edit leaves them
+        applied, as the next step would have).
         """
         index = self.entities.index(name)
         if yaw is not None and name not in self.agents and yaw != 0.0:
@@ -409,6 +412,7 @@ class Simulation:
                                             'heading to set (only the identity orientation)')
         if yaw is not None and not math.isfinite(yaw):
             raise EditRefused(INVALID_POSE, f'yaw {yaw} is not finite')
+        rejected = self.apply_queued()
         world = self.world
         what = f"'{name}' at"
         radius = float(world.radii[index])
@@ -422,7 +426,6 @@ class Simulation:
             vx * vx + vy * vy - float(old[0] * old[0] + old[1] * old[1]))
         check_speeds(energy, float(world.masses.min()), world.min_radius, self.dt_ns,
                      f"'{name}'")
-        rejected = self.apply_queued()
         world.set_ball_state(index, (x, y), (vx, vy))
         if name in self.agents and yaw is not None:
             self.agents.set_yaw(name, yaw)

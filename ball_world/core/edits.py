@@ -69,13 +69,79 @@ class Ball:
     mass: float
 
 
-class _NoAliasLoader(yaml.SafeLoader):
-    """A YAML loader without anchors and aliases: a 4 KB alias bomb cannot expand."""
+#: The YAML loader: libyaml's when PyYAML has it (about 100 times faster than pure Python).
+_LOADER = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)
+#: Most YAML events (nodes, starts and ends) a resource_string may hold: the format needs
+#: about 15, and counting stops here, so no input costs more than this to look at.
+MAX_RESOURCE_EVENTS = 64
+#: Deepest nesting of mappings and sequences in a resource_string (the format needs 2).
+MAX_RESOURCE_DEPTH = 4
+_OPENS = (yaml.MappingStartEvent, yaml.SequenceStartEvent)
+_CLOSES = (yaml.MappingEndEvent, yaml.SequenceEndEvent)
 
-    def compose_node(self, parent, index):
-        if self.check_event(yaml.AliasEvent):
-            raise yaml.YAMLError('aliases are not accepted')
-        return super().compose_node(parent, index)
+
+def brief(value, limit=64):
+    """A bounded rendering of any value from a request, safe to put in a message.
+
+    Why: repr() of an integer read from 4 KB of YAML can fail (Python's digit limit) or run
+    to kilobytes, and a list can hold either; a refusal must never fail or flood.
+    """
+    if isinstance(value, bool) or value is None or isinstance(value, float):
+        return repr(value)
+    if isinstance(value, int):
+        bits = value.bit_length()
+        return repr(value) if bits <= 64 else f'an integer of {bits:,} bits'
+    if isinstance(value, str):
+        return repr(value[:limit]) + ('...' if len(value) > limit else '')
+    if isinstance(value, (list, tuple, dict)):
+        count = len(value)
+        return f'a {type(value).__name__} of {count:,} item' + ('' if count == 1 else 's')
+    return f'a {type(value).__name__}'
+
+
+def _check_shape(text):
+    """Refuse aliases, deep nesting and long documents from the parser's events alone.
+
+    Why: PyYAML composes and constructs recursively (400 brackets raise RecursionError) and
+    expands aliases (a 4 KB alias bomb); the event stream shows all three at a bounded cost.
+    """
+    loader = _LOADER(text)
+    try:
+        depth = 0
+        for count in range(MAX_RESOURCE_EVENTS + 1):
+            if not loader.check_event():
+                return
+            event = loader.get_event()
+            if isinstance(event, yaml.AliasEvent):
+                raise EditRefused(RESOURCE_PARSE_ERROR, 'resource_string: aliases are not '
+                                                        'accepted')
+            if isinstance(event, _OPENS):
+                depth += 1
+                if depth > MAX_RESOURCE_DEPTH:
+                    raise EditRefused(RESOURCE_PARSE_ERROR, 'resource_string nests deeper '
+                                                            f'than {MAX_RESOURCE_DEPTH} levels')
+            elif isinstance(event, _CLOSES):
+                depth -= 1
+        raise EditRefused(RESOURCE_PARSE_ERROR, 'resource_string holds more than '
+                                                f'{MAX_RESOURCE_EVENTS} YAML nodes; expected '
+                                                'radius, mass, velocity')
+    finally:
+        loader.dispose()
+
+
+def _load(text):
+    """The YAML (or JSON) value of a resource_string, or EditRefused saying why not."""
+    try:
+        _check_shape(text)
+        return yaml.load(text, Loader=_LOADER)
+    except EditRefused:
+        raise
+    except yaml.YAMLError as error:
+        reason = (str(error).splitlines() or [''])[0][:160]
+        raise EditRefused(RESOURCE_PARSE_ERROR, f'resource_string is not YAML: {reason}')
+    except Exception as error:  # noqa: B902 - a value YAML reads but Python cannot build
+        raise EditRefused(RESOURCE_PARSE_ERROR, 'resource_string cannot be read: '
+                                                f'{type(error).__name__}') from None
 
 
 def _number(value, what):
@@ -85,8 +151,12 @@ def _number(value, what):
         except ValueError:
             pass
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise EditRefused(RESOURCE_PARSE_ERROR, f'{what} must be a number, got {value!r:.64}')
-    value = float(value)
+        raise EditRefused(RESOURCE_PARSE_ERROR, f'{what} must be a number, got {brief(value)}')
+    try:
+        value = float(value)
+    except OverflowError:
+        raise EditRefused(RESOURCE_PARSE_ERROR, f'{what} must be finite, got '
+                                                f'{brief(value)}') from None
     if not math.isfinite(value):
         raise EditRefused(RESOURCE_PARSE_ERROR, f'{what} must be finite, got {value}')
     return value
@@ -98,24 +168,23 @@ def parse_resource(text):
 
 
 def parse_spawn(text):
-    """(radius, mass, (vx, vy), agent) from a resource_string (see RESOURCE_FORMAT)."""
+    """(radius, mass, (vx, vy), agent) from a resource_string (see RESOURCE_FORMAT).
+
+    Any text gets a result or EditRefused, at a cost bounded by MAX_RESOURCE_LENGTH and
+    MAX_RESOURCE_EVENTS.
+    """
     if len(text) > MAX_RESOURCE_LENGTH:
         raise EditRefused(RESOURCE_PARSE_ERROR, f'resource_string is {len(text):,} characters; '
                                                 f'at most {MAX_RESOURCE_LENGTH} are accepted')
     fields = {}
     if text.strip():
-        try:
-            fields = yaml.load(text, Loader=_NoAliasLoader)
-        except yaml.YAMLError as error:
-            reason = str(error).splitlines()[0]
-            raise EditRefused(RESOURCE_PARSE_ERROR, f'resource_string is not YAML: {reason}')
+        fields = _load(text)
         if not isinstance(fields, dict):
             raise EditRefused(RESOURCE_PARSE_ERROR, 'resource_string must be a mapping such '
                                                     "as '{radius: 0.2, mass: 1.0}'")
-    unknown = sorted(str(key) for key in fields
-                     if key not in ('radius', 'mass', 'velocity', 'agent'))
+    unknown = [key for key in fields if key not in ('radius', 'mass', 'velocity', 'agent')]
     if unknown:
-        raise EditRefused(RESOURCE_PARSE_ERROR, f'unknown key {unknown[0][:64]!r} in '
+        raise EditRefused(RESOURCE_PARSE_ERROR, f'unknown key {brief(unknown[0])} in '
                                                 'resource_string; expected radius, mass, '
                                                 'velocity, agent')
     agent = fields.get('agent', False)
@@ -128,7 +197,7 @@ def parse_spawn(text):
     velocity = fields.get('velocity', [0.0, 0.0])
     if not isinstance(velocity, (list, tuple)) or len(velocity) != 2:
         raise EditRefused(RESOURCE_PARSE_ERROR, f'velocity must be [vx, vy], got '
-                                                f'{velocity!r:.64}')
+                                                f'{brief(velocity)}')
     vx, vy = (_number(v, 'velocity') for v in velocity)
     for what, value, low, high, unit in (
             ('radius', radius, limits.MIN_RADIUS, limits.MAX_RADIUS, 'm'),
@@ -138,6 +207,10 @@ def parse_spawn(text):
                                                     f'outside {number_text(low)} to '
                                                     f'{number_text(high)} {unit}')
     return radius, mass, (vx, vy), agent
+
+
+def _has_control(text):
+    return any(ord(c) < 32 or 127 <= ord(c) < 160 for c in text)
 
 
 class Entities:
@@ -178,6 +251,11 @@ class Entities:
 
         taken: names already given to other balls of the same request.
         """
+        if _has_control(requested):
+            # Refused even with allow_renaming: a client that sends control characters has
+            # a bug to hear about (a NUL cuts the name short on its way into rclpy).
+            raise EditRefused(NAME_INVALID, f'name {brief(requested)} holds control '
+                                            'characters')
         if requested and NAME_PATTERN.fullmatch(requested) \
                 and len(requested) <= limits.MAX_NAME_LENGTH:
             if not self._used(requested, taken):

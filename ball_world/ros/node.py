@@ -38,6 +38,7 @@ from ball_world.msgs.cdr import decode_vector3_stamped, encode_clock
 from ball_world.msgs.markers import MarkerBuilder
 from ball_world.recording.writer_thread import BackgroundSink
 from ball_world.ros.agents import AgentTopics
+from ball_world.ros.calls import SERVICE_QOS
 from ball_world.ros.parameters import converted, current_values, declare_all, ParameterError
 from ball_world.ros.rcl_init import init_quietly
 from ball_world.ros.sim_interfaces import ACTION, SimulationInterfaces
@@ -212,9 +213,10 @@ class BallWorld(Node):
         # it is pending). _wake resumes a waiting coroutine without waiting for a timer.
         self.long_calls = MutuallyExclusiveCallbackGroup()
         self._wake = self.create_guard_condition(lambda: None)
-        self.create_service(Trigger, '~/reset', self._on_reset, callback_group=self.long_calls)
-        self.create_service(SetBool, '~/pause', self._on_pause)
-        self.create_service(Trigger, '~/step', self._on_step)
+        self.create_service(Trigger, '~/reset', self._on_reset, qos_profile=SERVICE_QOS,
+                            callback_group=self.long_calls)
+        self.create_service(SetBool, '~/pause', self._on_pause, qos_profile=SERVICE_QOS)
+        self.create_service(Trigger, '~/step', self._on_step, qos_profile=SERVICE_QOS)
         self.interfaces = SimulationInterfaces(self)
         self.agent_topics = AgentTopics(self, values['agent.cmd_vel_stamped'])
         self.add_pre_set_parameters_callback(converted)
@@ -661,6 +663,8 @@ def run(args=None):
         node = BallWorld()
         while rclpy.ok() and not node.finished:
             rclpy.spin_once(node, timeout_sec=0.1)
+        if rclpy.ok():  # QUITTING or max_steps: answer the calls and goals still running
+            node.interfaces.finish(lambda: rclpy.spin_once(node, timeout_sec=0.05))
     except StartupError as error:
         print(f'ball_world: {error}', file=sys.stderr)
         code = 2

@@ -1,0 +1,219 @@
+"""Hostile requests to the simulation_interfaces services, against the node as a process.
+
+Each request comes from a real rclpy client in another DDS participant; the node's steps are
+counted from outside (its `stats` topic), so "the world kept stepping" means steps were
+published while the request was being answered. Nothing here is timed: a loaded machine may
+make everything slow, never wrong.
+"""
+from ball_world_testing.harness import check_running, finish, node_command
+from geometry_msgs.msg import PoseStamped
+import pytest
+from rclpy.action import ActionClient
+from rclpy.qos import QoSProfile
+from simulation_interfaces.action import SimulateSteps
+from simulation_interfaces.msg import (Result, SimulationState, SpawnEntity as SpawnEntityMsg,
+                                       SpawnResult)
+from simulation_interfaces.srv import (GetEntities, GetEntitiesStates, GetSimulationState,
+                                       GetSpawnables, ResetSimulation, SetSimulationState,
+                                       SpawnEntities, SpawnEntity, StepSimulation)
+from std_msgs.msg import Float64MultiArray
+
+from ball_world.core.edits import MAX_RESOURCE_LENGTH
+
+OK = Result.RESULT_OK
+NODE = '/ball_world'
+#: Resource strings that once ended the node (OverflowError, RecursionError, the digit limit
+#: while writing the refusal, a base-60 integer), and their kin at other sizes.
+CRASHERS = [
+    'radius: ' + '9' * 400, 'radius: ' + '9' * 4000, 'mass: -' + '9' * 1000,
+    '[' * 400 + ']' * 400, '{' * 2000, '[' * 330 + '1' + ']' * 330, '- ' * 2000 + 'x',
+    'radius: [0x' + 'f' * 4000 + ']', 'radius: 0x' + 'f' * 4080,
+    'velocity: [0o' + '7' * 4000 + ', 0]',
+    'radius: ' + ':'.join(['59'] * 1300), 'mass: 1:' + '59:' * 1000 + '1',
+    'velocity: [' + ', '.join(['1'] * 1300) + ']', 'radius: 2001-13-45',
+    '{' + ', '.join(f'k{i}: [1]' for i in range(300)) + '}',
+]
+
+
+@pytest.fixture
+def node(probe, processes):
+    """A playing node at 50 Hz and a way to count its steps from outside."""
+    process = processes.start(node_command('rate_hz:=50.0', 'markers.rate_hz:=0.0'))
+    stats = probe.listen(Float64MultiArray, 'stats')
+    probe.spin_until(lambda: len(stats) >= 3, 'the node to step', process=process)
+    process.stats = stats
+    return process
+
+
+def call_async(probe, srv_type, name, request):
+    client = probe.node.create_client(srv_type, f'{NODE}/{name}')
+    probe.spin_until(client.service_is_ready, f'the service {name}')
+    return client.call_async(request)
+
+
+def while_stepping(probe, node, future, what):
+    """The answer of `future`, asserting that the node published steps while it was pending
+    (at least two, so one step already in flight does not count) and is still running."""
+    before = len(node.stats)
+    answer = probe.result(future, what)
+    stepped = len(node.stats) - before
+    check_running(node)
+    return answer, stepped
+
+
+def pose_at(x, y):
+    pose = PoseStamped()
+    pose.pose.position.x, pose.pose.position.y = x, y
+    pose.pose.orientation.w = 1.0
+    return pose
+
+
+def test_resource_strings_that_once_crashed_the_node_are_refused_as_parse_errors(probe, node):
+    for text in CRASHERS:
+        assert len(text) <= MAX_RESOURCE_LENGTH, len(text)
+        answer = probe.call(SpawnEntity, f'{NODE}/spawn_entity', SpawnEntity.Request(
+            name='hostile', uri='ball', resource_string=text, initial_pose=pose_at(5.0, 5.0)))
+        assert answer.result.result == SpawnResult.RESOURCE_PARSE_ERROR, (text[:40], answer)
+        assert len(answer.result.error_message) < 300, answer.result.error_message
+    items = [SpawnEntityMsg(name=f'h{i}', initial_pose=pose_at(5.0, 5.0))
+             for i in range(len(CRASHERS))]
+    for item, text in zip(items, CRASHERS):
+        item.entity_resource.resource_string = text
+    batch = probe.call(SpawnEntities, f'{NODE}/spawn_entities',
+                       SpawnEntities.Request(spawn_requests=items))
+    assert [r.result.result for r in batch.results] == \
+        [SpawnResult.RESOURCE_PARSE_ERROR] * len(CRASHERS)
+    before = len(node.stats)
+    probe.spin_until(lambda: len(node.stats) > before + 5, 'more steps', process=node)
+
+
+@pytest.mark.parametrize('pattern', ['.*' * 40 + 'x', '.*.*.*.*x', '(_+)+$', '(a|aa)*$b',
+                                     '(x+x+)+y', '(?>(_+)+$)', '((a*)*)*' * 20 + 'c'])
+def test_name_filters_never_stop_the_world(probe, node, pattern):
+    """Two 256-character names are spawned first: the longest a backtracking matcher chews
+    on (a name like them matched by .*.*.*.*x took 26 s)."""
+    for name, x in (('a' + '_' * 254 + 'b', 0.06), ('q' * 256, 9.94)):
+        spawned = probe.call(SpawnEntity, f'{NODE}/spawn_entity', SpawnEntity.Request(
+            name=name, uri='ball', resource_string='{radius: 0.05, mass: 1.0}',
+            initial_pose=pose_at(x, 0.06)))
+        assert spawned.result.result == OK, spawned.result.error_message
+    for srv_type, service in ((GetEntities, 'get_entities'),
+                              (GetEntitiesStates, 'get_entities_states')):
+        request = srv_type.Request()
+        request.filters.filter = pattern
+        answer, _ = while_stepping(probe, node, call_async(probe, srv_type, service, request),
+                                   f'{service} with {pattern[:20]}')
+        assert answer.result.result in (OK, Result.RESULT_OPERATION_FAILED), answer.result
+        if answer.result.result != OK:
+            assert 'atomic groups' in answer.result.error_message
+    before = len(node.stats)
+    probe.spin_until(lambda: len(node.stats) > before + 5, 'more steps', process=node)
+
+
+def test_a_full_spawn_entities_of_the_largest_items_is_answered_while_the_world_steps(probe,
+                                                                                      node):
+    padding = '# ' + 'p' * (MAX_RESOURCE_LENGTH - 30)
+    items = []
+    for i in range(1000):
+        x, y = 0.1 + 0.3 * (i % 32), 0.1 + 0.3 * (i // 32)
+        item = SpawnEntityMsg(name=f'big_{i}', initial_pose=pose_at(x, y))
+        item.entity_resource.resource_string = f'radius: 0.05\nmass: 1.0\n{padding}'
+        items.append(item)
+    assert len(items[0].entity_resource.resource_string) <= MAX_RESOURCE_LENGTH
+    answer, _ = while_stepping(
+        probe, node, call_async(probe, SpawnEntities, 'spawn_entities',
+                                SpawnEntities.Request(spawn_requests=items)), 'SpawnEntities')
+    assert len(answer.results) == 1000
+    assert sum(r.result.result == OK for r in answer.results) > 900
+    before = len(node.stats)
+    probe.spin_until(lambda: len(node.stats) > before + 5, 'more steps', process=node)
+
+
+def set_state(probe, state):
+    return call_async(probe, SetSimulationState, 'set_simulation_state',
+                      SetSimulationState.Request(state=SimulationState(state=state)))
+
+
+@pytest.mark.parametrize('stop', ['playing', 'reset', 'stopped'])
+def test_an_endless_step_simulation_is_stopped_by_the_standards_own_calls(probe, node, stop):
+    assert probe.result(set_state(probe, SimulationState.STATE_PAUSED)).result.result == OK
+    stepping = call_async(probe, StepSimulation, 'step_simulation',
+                          StepSimulation.Request(steps=2**63 - 1))
+    before = len(node.stats)
+    probe.spin_until(lambda: len(node.stats) > before + 20, 'StepSimulation to step',
+                     process=node)
+    if stop == 'playing':
+        stopper = set_state(probe, SimulationState.STATE_PLAYING)
+    elif stop == 'stopped':
+        stopper = set_state(probe, SimulationState.STATE_STOPPED)
+    else:
+        stopper = call_async(probe, ResetSimulation, 'reset_simulation',
+                             ResetSimulation.Request())
+    assert probe.result(stopper, 'the stopping call').result.result == OK
+    stopped = probe.result(stepping, 'StepSimulation to stop')
+    assert stopped.result.result == Result.RESULT_OPERATION_FAILED
+    assert 'stopped after' in stopped.result.error_message
+    assert 'resumed or reset' in stopped.result.error_message
+
+
+def test_fifty_concurrent_calls_and_goals_are_all_answered(probe, node):
+    """One client sends 50 requests at once, then 50 goals (rclpy's services keep 10 requests
+    by default and dropped the rest, unanswered; the client keeps as many as it sends)."""
+    client = probe.node.create_client(GetSimulationState, f'{NODE}/get_simulation_state',
+                                      qos_profile=QoSProfile(depth=1000))
+    probe.spin_until(client.service_is_ready, 'the service get_simulation_state')
+    futures = [client.call_async(GetSimulationState.Request()) for _ in range(50)]
+    for future in futures:
+        assert probe.result(future).state.state == SimulationState.STATE_PLAYING
+    assert probe.result(set_state(probe, SimulationState.STATE_PAUSED)).result.result == OK
+    deep = QoSProfile(depth=1000)
+    client = ActionClient(probe.node, SimulateSteps, f'{NODE}/simulate_steps',
+                          goal_service_qos_profile=deep, result_service_qos_profile=deep,
+                          cancel_service_qos_profile=deep)
+    probe.spin_until(client.server_is_ready, 'the action server')
+    goals = [client.send_goal_async(SimulateSteps.Goal(steps=10**7)) for _ in range(50)]
+    handles = [probe.result(goal, 'a goal response') for goal in goals]
+    assert all(handle.accepted for handle in handles)
+    results = [handle.get_result_async() for handle in handles]
+    # Each newer goal takes over from the one before; the one left is cancelled. Every goal
+    # gets a result with its reason.
+    probe.spin_until(lambda: sum(r.done() for r in results) >= 49, '49 superseded goals')
+    [last] = [handle for handle, r in zip(handles, results) if not r.done()]
+    probe.result(last.cancel_goal_async())
+    answers = [probe.result(r).result.result for r in results]
+    superseded = [a for a in answers if 'took over' in a.error_message]
+    cancelled = [a for a in answers if a.error_message.startswith('cancelled after')]
+    assert (len(superseded), len(cancelled)) == (49, 1), [a.error_message for a in answers]
+    client.destroy()
+
+
+def test_quitting_answers_the_running_goal_before_the_node_leaves(probe, node):
+    assert probe.result(set_state(probe, SimulationState.STATE_PAUSED)).result.result == OK
+    client = ActionClient(probe.node, SimulateSteps, f'{NODE}/simulate_steps')
+    probe.spin_until(client.server_is_ready, 'the action server')
+    goal = probe.result(client.send_goal_async(SimulateSteps.Goal(steps=2**63)))
+    result = goal.get_result_async()
+    before = len(node.stats)
+    probe.spin_until(lambda: len(node.stats) > before + 20, 'the goal to step', process=node)
+    assert probe.result(set_state(probe, SimulationState.STATE_QUITTING)).result.result == OK
+    ended = probe.result(result, 'the goal result after QUITTING')
+    assert ended.result.result.result == Result.RESULT_OPERATION_FAILED
+    assert 'the run ended after' in ended.result.result.error_message
+    code, _, err = finish(node)
+    assert code == 0 and 'Traceback' not in err, err
+    client.destroy()
+
+
+def test_spawnables_echo_a_bounded_remark_and_control_characters_are_no_names(probe, node):
+    answer = probe.call(GetSpawnables, f'{NODE}/get_spawnables', GetSpawnables.Request(
+        sources=[f'/very/long/source/{i}/' + 'x' * 60 for i in range(10_000)]))
+    assert answer.result.result == OK
+    assert '10,000 sources ignored' in answer.result.error_message
+    assert len(answer.result.error_message) < 400
+    for name in ('ab\x01c', 'tab\there', 'bell\x07', 'del\x7f'):
+        for renaming in (False, True):
+            spawned = probe.call(SpawnEntity, f'{NODE}/spawn_entity', SpawnEntity.Request(
+                name=name, allow_renaming=renaming, uri='ball',
+                initial_pose=pose_at(5.0, 5.0)))
+            assert spawned.result.result == SpawnResult.NAME_INVALID, (name, spawned)
+            assert 'control characters' in spawned.result.error_message
