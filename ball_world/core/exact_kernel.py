@@ -1,4 +1,4 @@
-"""Exact mode's event loop: per-ball predictions, a tournament tree, a cell list.
+"""Exact mode's event loop: per-ball predictions, a tournament tree, a cell list per radius class.
 
 Each ball holds two predictions: its earliest impact (with another ball or a wall segment)
 and the time it leaves its grid cell; its next event is the earlier of the two. A tournament
@@ -7,19 +7,26 @@ balls involved (each ball keeps its own clock) and predicts again for them; ever
 prediction that named one of them as partner is recognised as stale by the partner's
 collision counter when it comes up, and is then predicted again.
 
-Cells are squares at least a little wider than the largest diameter, so touching balls are
-always in neighbouring cells, and as wide as the area per ball where the balls are spread
-evenly (see _cell_width: in a dilute gas most events would otherwise be cell crossings,
-which only keep the books). A ball looks for partners in its 3 x 3 block and for walls in its own
-cell. When it enters a new cell it only looks at the strip of three cells new to its block
-and the new cell's walls, keeping its stored impact for the rest. Nothing is missed: for
-any two balls in neighbouring cells, their next impact on their current paths is no earlier
-than the stored impact of one of them (the one that changed course, or came into reach,
-last), and balls further apart cannot touch before one of them changes cell. Buckets of
-cells form a torus laid over the plane, so the world needs no bounds (distant cells sharing
-a bucket only add candidates, and a predicted impact is exact whatever the cells). Each
-wall is listed in the buckets of every cell where a ball could touch it; a wall too long
-for that is checked by every ball.
+Balls whose radii lie within a factor CLASS_RATIO of each other form a radius class, and each
+class has its own grid (one grid sized by the largest ball would put thousands of small balls
+in one cell when radii differ 100-fold). A class's cells are squares at least a little wider
+than its largest diameter, so touching balls of the class are always in neighbouring cells,
+and as wide as the class's area per ball where its balls are spread evenly (see _cell_width:
+in a dilute gas most events would otherwise be cell crossings, which only keep the books);
+their width is the smallest class's times a power of two, so all cell edges lie on one grid
+of units. A ball lives in its own class's grid, looks for partners in the cells of every
+grid within reach of its cell (_span: in its own grid, its 3 x 3 block) and for walls in
+its own cell. When it enters a new cell it only looks at the strip of cells new to its reach
+in each grid and the new cell's walls, keeping its stored impact for the rest. Nothing is
+missed: for any two balls in cells within reach of each other (a symmetric relation), their
+next impact on their current paths is no earlier than the stored impact of one of them (the
+one that changed course, or came into reach, last), and balls further apart cannot touch
+before one of them changes cell. With radii within CLASS_RATIO there is one grid, cell for
+cell the single grid exact mode had before classes. Buckets of cells form a torus laid over
+the plane (one torus per grid), so the world needs no bounds (distant cells sharing a bucket
+only add candidates, and a predicted impact is exact whatever the cells). Each wall is
+listed in the buckets of every cell of each grid where a ball of its class could touch it;
+a wall too long for that is checked by every ball of the class.
 
 Robustness near contact (why rounding cannot creep into overlap or loop):
 - A pair or a wall collides only while approaching, and a pair that already overlaps and
@@ -86,7 +93,8 @@ BUCKETS_PER_BALL = 4
 #: Wall entries in the buckets, per bucket, before further long walls become global.
 WALL_ENTRIES_PER_BUCKET = 16
 #: Largest radius over smallest within one radius class: radii from r_min * 4 ** c up to
-#: (not including) r_min * 4 ** (c + 1) share class c's grid (empty classes are left out).
+#: (not including) r_min * 4 ** (c + 1) share class c's grid (empty classes are left out),
+#: as seed mode's broadphase groups them (broadphase.LEVEL_RATIO).
 CLASS_RATIO = 4.0
 
 State = collections.namedtuple('State', (
@@ -601,9 +609,10 @@ def _torus(n, extent, cell):
 
 
 @compile_kernel
-def _classes(radii):
-    """Each ball's radius class (see CLASS_RATIO), numbered from 0 up in increasing radius
-    with empty classes left out, and the number of classes."""
+def _classes(radii, ratio):
+    """Each ball's radius class (radii from r_min * ratio ** c up to r_min * ratio ** (c + 1)),
+    numbered from 0 up in increasing radius with empty classes left out, and the number of
+    classes. An infinite ratio puts every ball in one class."""
     n = radii.shape[0]
     smallest = radii[0]
     for i in range(n):
@@ -611,10 +620,10 @@ def _classes(radii):
     band = np.zeros(n, dtype=np.int64)
     top = 0
     for i in range(n):
-        bound = smallest * CLASS_RATIO
+        bound = smallest * ratio
         while radii[i] >= bound:
             band[i] += 1
-            bound *= CLASS_RATIO
+            bound *= ratio
         top = max(top, band[i])
     used = np.zeros(top + 1, dtype=np.bool_)
     for i in range(n):
@@ -712,10 +721,15 @@ def _class_walls(cells, column_masks, row_bits, offsets, starts, directions, len
 
 
 @compile_kernel
-def build(x, v, radii, segments, starts, ends, directions, lengths):
-    """A fresh state for the world at the start of a step: cells, walls, predictions, tree."""
+def build(x, v, radii, segments, starts, ends, directions, lengths, class_ratio=CLASS_RATIO):
+    """A fresh state for the world at the start of a step: cells, walls, predictions, tree.
+
+    class_ratio: the radius classes' width (CLASS_RATIO); math.inf makes the single grid of
+    cells one largest diameter wide (or wider) that exact mode had before radius classes,
+    which the tests compare against.
+    """
     n = x.shape[0]
-    classes, count = _classes(radii)
+    classes, count = _classes(radii, class_ratio)
     cells, shifts, column_masks, row_bits, offsets, reach = _grids(x, radii, classes, count)
     leaves = 1
     while leaves < n:
