@@ -6,6 +6,7 @@ times from the initial gap, the textbook outgoing velocities), never from the ke
 """
 import math
 
+from benchmarks.exact_speed import bidisperse_worlds
 from benchmarks.gas import enskog_collision_rate, Gas, henderson_z, Rates
 from hypothesis import given, settings, strategies as st
 from numba import njit
@@ -455,3 +456,120 @@ def test_cells_are_one_ball_wide_in_an_even_gas_and_narrow_otherwise():
     assert _cell_width(line, _extent(line), narrowest) == narrowest
     one = np.array([[3.0, 4.0]])
     assert _cell_width(one, _extent(one), narrowest) == narrowest
+
+
+# Radii 100 times apart: a grid per radius class ---------------------------------------------
+
+def resting_field(count, spacing, corner):
+    """count small balls (r = 1 cm) at rest on a square lattice from `corner`."""
+    per_row = math.ceil(math.sqrt(count))
+    cells = np.stack(np.divmod(np.arange(count), per_row), axis=1)
+    return np.asarray(corner) + spacing * cells
+
+
+@pytest.mark.parametrize('heading', [0.0, 0.5 * math.pi, 1.25 * math.pi, 1.9])
+@pytest.mark.parametrize('mover', ['small', 'large'])
+def test_a_small_and_a_large_ball_meet_from_afar_at_the_closed_form_time(mover, heading):
+    """A ball of 1 cm and one of 1 m (grids of cells 128 times apart in width), 30 m apart,
+    one moving head on at the other; 400 small balls rest off their line, filling the small
+    grid. Neither is within reach of the other at first: they are found when the mover's
+    cell crossings bring them into reach, and must meet at (30 m - 1.01 m) / speed and
+    leave with the 1D elastic velocities."""
+    u = np.array([math.cos(heading), math.sin(heading)])
+    normal = np.array([-u[1], u[0]])
+    distance, speed, small_mass, large_mass = 30.0, 10.0, 1.0, 100.0
+    start = np.array([2.0, -3.0])
+    target = start + distance * u
+    # Lattice coordinates along the line (-5 to 5 m from its middle) and across it (4 to 14 m).
+    field = resting_field(400, 0.5, [-5.0, 4.0])
+    field = start + 15.0 * u + field @ np.stack((u, normal))
+    if mover == 'small':
+        masses = [small_mass, large_mass]
+        radii = [0.01, 1.0]
+    else:
+        masses = [large_mass, small_mass]
+        radii = [1.0, 0.01]
+    positions = np.vstack(([start, target], field))
+    velocities = np.zeros_like(positions)
+    velocities[0] = speed * u
+    world = World(positions, velocities, radii + [0.01] * len(field),
+                  masses + [1.0] * len(field))
+    dt, steps = 0.05, 70
+    ball_ball, ball_wall, _ = run(world, dt, steps)
+    assert (ball_ball, ball_wall) == (1, 0)
+    t_contact = (distance - 1.01) / speed
+    m1, m2 = masses
+    after_mover = (m1 - m2) / (m1 + m2) * speed
+    after_target = 2.0 * m1 / (m1 + m2) * speed
+    end = dt * steps
+    scale = distance * ROUNDING
+    np.testing.assert_allclose(world.velocities[:2], [after_mover * u, after_target * u],
+                               rtol=0, atol=speed * ROUNDING)
+    np.testing.assert_allclose(world.positions[0], start + u * (speed * t_contact
+                               + after_mover * (end - t_contact)), rtol=0, atol=scale)
+    np.testing.assert_allclose(world.positions[1], target + u * after_target * (end - t_contact),
+                               rtol=0, atol=scale)
+    np.testing.assert_array_equal(world.positions[2:], field)
+
+
+def polydisperse_world(kind, seed):
+    """A few thousand balls with radii 100 times apart in a box, at area fraction 0.3:
+    'spread' has radii log-uniform from 1 cm to 1 m (four radius classes), placed largest
+    first without overlap; 'bidisperse' is benchmarks.exact_speed's (one 1 m ball among
+    3,000 of 1 cm, each size at area fraction 0.2). Speeds normal, 1 m/s per axis."""
+    if kind == 'bidisperse':
+        return bidisperse_worlds(3000, seed)[0], None
+    rng = np.random.default_rng(seed)
+    radii = np.sort(np.exp(rng.uniform(math.log(0.01), math.log(1.0), 2500)))[::-1]
+    side = math.sqrt(math.pi * (radii ** 2).sum() / 0.3)
+    x = np.empty((len(radii), 2))
+    for i, radius in enumerate(radii):
+        while True:
+            x[i] = rng.uniform(radius, side - radius, 2)
+            if (np.hypot(*(x[:i] - x[i]).T) > radii[:i] + radius).all():
+                break
+    masses = radii ** 2 / 1e-4
+    return World(x, rng.normal(0.0, 1.0, x.shape), radii, masses, walls=box(side)), side
+
+
+def single_grid_run(world, dt, steps):
+    """Step `world` as exact mode did before radius classes (one grid, cells at least one
+    largest diameter wide); return each ball's ball-ball collisions."""
+    from ball_world.core import exact_kernel as kernel
+    walls = world.walls
+    geometry = (walls.segments, walls.starts, walls.ends, walls.directions, walls.lengths)
+    state = kernel.build(world.positions, world.velocities, world.radii, *geometry, math.inf)
+    assert len(state.cells) == 1
+    per_ball = np.zeros(len(world), dtype=np.int64)
+    for _ in range(steps):
+        status = kernel.advance(state, world.positions, world.velocities, world.radii,
+                                world.masses, *geometry, dt, exact.event_budget(len(world)),
+                                np.zeros(3, dtype=np.int64), per_ball)
+        assert status == kernel.DONE
+    return per_ball
+
+
+@pytest.mark.parametrize('kind', ['spread', 'bidisperse'])
+def test_radii_100_apart_keep_energy_never_overlap_and_match_the_single_grid(kind):
+    """Both the class grids (exact.step) and the single grid step the same world for 30
+    steps of 0.02 s (one or two collisions per ball). Energy holds to rounding, no pair or wall
+    overlaps beyond it, and every ball takes part in the same collisions and ends where the
+    single grid puts it: the two differ only in which cells they search, so only in the
+    last bits of the impact times (prediction times differ)."""
+    from ball_world.core.exact_kernel import _classes, CLASS_RATIO
+    world, side = polydisperse_world(kind, seed=4)
+    twin, _ = polydisperse_world(kind, seed=4)
+    classes = _classes(world.radii, CLASS_RATIO)[1]
+    assert classes == (4 if kind == 'spread' else 2)
+    side = side or world.walls.segments.max()
+    dt, steps = 0.02, 30
+    energy = world.kinetic_energy()
+    per_ball = np.zeros(len(world), dtype=np.int64)
+    for _ in range(steps):
+        exact.step(world, dt, per_ball)
+        pair, wall = smallest_gaps(world.positions, world.radii, side)
+        assert pair > -ROUNDING and wall > -ROUNDING
+    assert world.kinetic_energy() == pytest.approx(energy, rel=ROUNDING)
+    assert per_ball.mean() > 1.0  # collisions per ball
+    np.testing.assert_array_equal(per_ball, single_grid_run(twin, dt, steps))
+    np.testing.assert_allclose(world.positions, twin.positions, rtol=0, atol=1e-9)

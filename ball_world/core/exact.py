@@ -37,8 +37,9 @@ import numpy as np
 #: bound seed mode has (core.limits.MAX_SUBSTEPS passes over every ball per step). Measured
 #: needs: a gas at area fraction 0.5 moving half a radius per step, about 1.6 events per
 #: ball; the node's scene (0.2, 0.48 R per step) about 0.4. Cell crossings are at most
-#: 2 + (distance travelled) / (largest diameter) per ball, about 500 for a ball at the World's
-#: speed limit (500 smallest radii per step); collisions about (distance) / (mean free path),
+#: 2 + (distance travelled) / (the largest diameter of the ball's radius class) per ball,
+#: at most about 250 for a ball at the World's speed limit (500 smallest radii per step);
+#: collisions about (distance) / (mean free path),
 #: so only a dense gas with every ball at that limit, or a jammed world, reaches the budget.
 EVENTS_PER_BALL = 1000
 MIN_EVENT_BUDGET = 1_000_000

@@ -1,4 +1,4 @@
-"""Exact mode's event loop: per-ball predictions, a tournament tree, a cell list.
+"""Exact mode's event loop: per-ball predictions, a tournament tree, a cell list per radius class.
 
 Each ball holds two predictions: its earliest impact (with another ball or a wall segment)
 and the time it leaves its grid cell; its next event is the earlier of the two. A tournament
@@ -7,19 +7,26 @@ balls involved (each ball keeps its own clock) and predicts again for them; ever
 prediction that named one of them as partner is recognised as stale by the partner's
 collision counter when it comes up, and is then predicted again.
 
-Cells are squares at least a little wider than the largest diameter, so touching balls are
-always in neighbouring cells, and as wide as the area per ball where the balls are spread
-evenly (see _cell_width: in a dilute gas most events would otherwise be cell crossings,
-which only keep the books). A ball looks for partners in its 3 x 3 block and for walls in its own
-cell. When it enters a new cell it only looks at the strip of three cells new to its block
-and the new cell's walls, keeping its stored impact for the rest. Nothing is missed: for
-any two balls in neighbouring cells, their next impact on their current paths is no earlier
-than the stored impact of one of them (the one that changed course, or came into reach,
-last), and balls further apart cannot touch before one of them changes cell. Buckets of
-cells form a torus laid over the plane, so the world needs no bounds (distant cells sharing
-a bucket only add candidates, and a predicted impact is exact whatever the cells). Each
-wall is listed in the buckets of every cell where a ball could touch it; a wall too long
-for that is checked by every ball.
+Balls whose radii lie within a factor CLASS_RATIO of each other form a radius class, and each
+class has its own grid (one grid sized by the largest ball would put thousands of small balls
+in one cell when radii differ 100-fold). A class's cells are squares at least a little wider
+than its largest diameter, so touching balls of the class are always in neighbouring cells,
+and as wide as the class's area per ball where its balls are spread evenly (see _cell_width:
+in a dilute gas most events would otherwise be cell crossings, which only keep the books);
+their width is the smallest class's times a power of two, so all cell edges lie on one grid
+of units. A ball lives in its own class's grid, looks for partners in the cells of every
+grid within reach of its cell (_span: in its own grid, its 3 x 3 block) and for walls in
+its own cell. When it enters a new cell it only looks at the strip of cells new to its reach
+in each grid and the new cell's walls, keeping its stored impact for the rest. Nothing is
+missed: for any two balls in cells within reach of each other (a symmetric relation), their
+next impact on their current paths is no earlier than the stored impact of one of them (the
+one that changed course, or came into reach, last), and balls further apart cannot touch
+before one of them changes cell. With radii within CLASS_RATIO there is one grid, cell for
+cell the single grid exact mode had before classes. Buckets of cells form a torus laid over
+the plane (one torus per grid), so the world needs no bounds (distant cells sharing a bucket
+only add candidates, and a predicted impact is exact whatever the cells). Each wall is
+listed in the buckets of every cell of each grid where a ball of its class could touch it;
+a wall too long for that is checked by every ball of the class.
 
 Robustness near contact (why rounding cannot creep into overlap or loop):
 - A pair or a wall collides only while approaching, and a pair that already overlaps and
@@ -64,7 +71,8 @@ HIT_PARTNER = 7   # its partner: a ball or a wall
 HIT_STAMP = 8     # the partner ball's COUNTER when predicted
 EXIT = 9          # where the ball leaves its cell: 0 (+x), 1 (-x), 2 (+y), 3 (-y), NO_PARTNER
 KIND = 10         # the next event: HIT_KIND, or CROSSING when leaving the cell comes first
-COLUMNS = 11
+CLASS = 11        # the ball's radius class: whose grid it lives in
+COLUMNS = 12
 NO_BALL = -1
 NO_PARTNER = -1
 
@@ -84,11 +92,19 @@ MAX_CROWDING = 3.0
 BUCKETS_PER_BALL = 4
 #: Wall entries in the buckets, per bucket, before further long walls become global.
 WALL_ENTRIES_PER_BUCKET = 16
+#: Largest radius over smallest within one radius class: radii from r_min * 4 ** c up to
+#: (not including) r_min * 4 ** (c + 1) share class c's grid (empty classes are left out),
+#: as seed mode's broadphase groups them (broadphase.LEVEL_RATIO).
+CLASS_RATIO = 4.0
 
 State = collections.namedtuple('State', (
-    'cell',             # cell width, m
-    'column_mask',      # the buckets tile the plane: column_mask + 1 columns of cells,
-    'row_bits',         # 2 ** row_bits rows (see _bucket)
+    'cells',            # (C,) cell width of each radius class's grid, m: unit * 2 ** shift
+    'shifts',           # (C,) int64
+    'column_masks',     # (C,) each class's buckets tile the plane: column_mask + 1 columns
+    'row_bits',         # (C,) of cells, 2 ** row_bits rows (see _bucket)
+    'offsets',          # (C + 1,) class c's buckets are heads[offsets[c]:offsets[c + 1]]
+    'reach',            # (C, C) int64: how far (in units) class b's cells are searched
+                        # around a cell of class a (see _span)
     'leaves',           # leaves of the tournament tree (a power of two >= balls)
     'clock',            # (N,) each ball's own time within the step, s
     'hit_time',         # (N,) each ball's earliest impact, s from the step's start
@@ -98,7 +114,8 @@ State = collections.namedtuple('State', (
     'heads',            # (buckets,) first ball of each bucket
     'wall_first',       # (buckets + 1,) each bucket's walls: wall_items[first[b]:first[b+1]]
     'wall_items',
-    'global_walls',     # walls every ball checks
+    'global_first',     # (C + 1,) walls every ball of class c checks:
+    'global_walls',     # global_walls[global_first[c]:global_first[c + 1]]
     'tree',             # (2 leaves,) winner ball of each node, NO_BALL if none
     'seen_positions',   # what the kernel left in the world, to notice edits
     'seen_velocities',
@@ -121,6 +138,28 @@ def _bucket(cx, cy, column_mask, row_bits):
     case), and a 3 x 3 block reads three short runs of memory.
     """
     return ((cx & column_mask) << row_bits) | (cy & ((1 << row_bits) - 1))
+
+
+@compile_inline
+def _home(state, c, cx, cy):
+    """Cell (cx, cy) of class c's grid: its bucket in heads (and in wall_first)."""
+    return state.offsets[c] + _bucket(cx, cy, state.column_masks[c], state.row_bits[c])
+
+
+@compile_inline
+def _span(c, shift_a, shift_b, reach):
+    """Cells of grid b to search, along one axis, around cell c of grid a: [low, high].
+
+    In units of the finest cell (unit), cell c of grid a covers [c, c + 1) * 2 ** shift_a;
+    the cells of grid b that meet it widened by `reach` units on both sides are searched.
+    The relation is symmetric (cell d of grid b is searched around cell c of grid a exactly
+    when c is searched around d), in integers, so a pair is always found by whichever ball
+    came into reach last. reach * unit exceeds the largest radius of a plus that of b, so
+    balls in cells not searched cannot touch.
+    """
+    low = (c * (1 << shift_a) - reach) >> shift_b
+    high = ((c + 1) * (1 << shift_a) + reach - 1) >> shift_b
+    return low, high
 
 
 @compile_inline
@@ -152,12 +191,13 @@ def _unlink(balls, heads, i, bucket):
 
 @compile_kernel
 def _place(state, i, px, py):
-    """Put ball i in the cell of (px, py)."""
-    cx = _cell_of(px, state.cell)
-    cy = _cell_of(py, state.cell)
+    """Put ball i in the cell of (px, py) of its class's grid."""
+    c = state.balls[i, CLASS]
+    cx = _cell_of(px, state.cells[c])
+    cy = _cell_of(py, state.cells[c])
     state.balls[i, CELL_X] = cx
     state.balls[i, CELL_Y] = cy
-    _link(state.balls, state.heads, i, _bucket(cx, cy, state.column_mask, state.row_bits))
+    _link(state.balls, state.heads, i, _home(state, c, cx, cy))
 
 
 @compile_inline
@@ -182,8 +222,10 @@ def _precedes(t, kind, partner, best_t, best_kind, best_partner):
 
 @compile_inline
 def _scan_walls(i, now, px, py, vx, vy, bucket, balls, hit_time, wall_first, wall_items,
-                global_walls, radii, starts, ends, directions, lengths):
-    """Merge ball i's impacts with the walls of `bucket` and the global walls into its hit."""
+                global_walls, global_low, global_high, radii, starts, ends, directions,
+                lengths):
+    """Merge ball i's impacts with the walls of `bucket` and its class's global walls
+    (global_walls[global_low:global_high]) into its hit."""
     best_t = hit_time[i]
     best_kind = balls[i, HIT_KIND]
     best_partner = balls[i, HIT_PARTNER]
@@ -192,8 +234,8 @@ def _scan_walls(i, now, px, py, vx, vy, bucket, balls, hit_time, wall_first, wal
     radius = radii[i]
     first = wall_first[bucket]
     listed = wall_first[bucket + 1] - first
-    for s in range(listed + global_walls.shape[0]):
-        k = wall_items[first + s] if s < listed else global_walls[s - listed]
+    for s in range(listed + global_high - global_low):
+        k = wall_items[first + s] if s < listed else global_walls[global_low + s - listed]
         if last == wall_code(k):
             continue
         t = wall_impact_time(px, py, vx, vy, radius, starts[k, 0], starts[k, 1], ends[k, 0],
@@ -213,8 +255,15 @@ def _scan_walls(i, now, px, py, vx, vy, bucket, balls, hit_time, wall_first, wal
 
 @compile_inline
 def _scan_balls(i, now, px, py, vx, vy, gx_low, gx_high, gy_low, gy_high, balls, hit_time,
-                heads, clock, column_mask, row_bits, x, v, radii):
-    """Merge ball i's impacts with the balls of cells [gx_low, gx_high] x [gy_low, gy_high]."""
+                heads, clock, offset, column_mask, row_bits, x, v, radii):
+    """Merge ball i's impacts with the balls of cells [gx_low, gx_high] x [gy_low, gy_high]
+    of the grid whose buckets start at `offset`.
+
+    A range wider than the torus visits each of its columns (rows) once: a bucket seen
+    twice would only offer the same candidates again.
+    """
+    gx_high = min(gx_high, gx_low + column_mask)
+    gy_high = min(gy_high, gy_low + (1 << row_bits) - 1)
     best_t = hit_time[i]
     best_kind = balls[i, HIT_KIND]
     best_partner = balls[i, HIT_PARTNER]
@@ -224,7 +273,7 @@ def _scan_balls(i, now, px, py, vx, vy, gx_low, gx_high, gy_low, gy_high, balls,
     radius = radii[i]
     for gx in range(gx_low, gx_high + 1):
         for gy in range(gy_low, gy_high + 1):
-            j = heads[_bucket(gx, gy, column_mask, row_bits)]
+            j = heads[offset + _bucket(gx, gy, column_mask, row_bits)]
             while j != NO_BALL:
                 if j != i and not (last == j and balls[j, LAST] == i):
                     qx = x[j, 0] + v[j, 0] * (now - clock[j])
@@ -291,39 +340,49 @@ def _schedule(i, balls, hit_time, exit_time, event_time):
 
 @compile_kernel
 def _predict(state, i, now, x, v, radii, starts, ends, directions, lengths):
-    """Ball i's earliest events from time `now` on, over its whole 3 x 3 block (not the tree)."""
+    """Ball i's earliest events from time `now` on, over every grid's cells within reach of its
+    cell (in its own grid: the 3 x 3 block), and its own cell's walls (not the tree)."""
     balls = state.balls
     px = x[i, 0] + v[i, 0] * (now - state.clock[i])
     py = x[i, 1] + v[i, 1] * (now - state.clock[i])
     vx = v[i, 0]
     vy = v[i, 1]
+    a = balls[i, CLASS]
     cx = balls[i, CELL_X]
     cy = balls[i, CELL_Y]
     state.hit_time[i] = INFINITY
     balls[i, HIT_KIND] = NOTHING
     balls[i, HIT_PARTNER] = NO_PARTNER
     balls[i, HIT_STAMP] = 0
-    _predict_exit(i, now, px, py, vx, vy, balls, state.exit_time, state.cell)
-    _scan_walls(i, now, px, py, vx, vy, _bucket(cx, cy, state.column_mask, state.row_bits),
-                balls, state.hit_time, state.wall_first, state.wall_items, state.global_walls,
-                radii, starts, ends, directions, lengths)
-    _scan_balls(i, now, px, py, vx, vy, cx - 1, cx + 1, cy - 1, cy + 1, balls, state.hit_time,
-                state.heads, state.clock, state.column_mask, state.row_bits, x, v, radii)
+    _predict_exit(i, now, px, py, vx, vy, balls, state.exit_time, state.cells[a])
+    _scan_walls(i, now, px, py, vx, vy, _home(state, a, cx, cy), balls, state.hit_time,
+                state.wall_first, state.wall_items, state.global_walls, state.global_first[a],
+                state.global_first[a + 1], radii, starts, ends, directions, lengths)
+    shifts = state.shifts
+    for b in range(shifts.shape[0]):
+        reach = state.reach[a, b]
+        low_x, high_x = _span(cx, shifts[a], shifts[b], reach)
+        low_y, high_y = _span(cy, shifts[a], shifts[b], reach)
+        _scan_balls(i, now, px, py, vx, vy, low_x, high_x, low_y, high_y, balls,
+                    state.hit_time, state.heads, state.clock, state.offsets[b],
+                    state.column_masks[b], state.row_bits[b], x, v, radii)
     _schedule(i, balls, state.hit_time, state.exit_time, state.event_time)
 
 
 @compile_kernel
 def _cross(state, i, now, x, v, radii, starts, ends, directions, lengths):
-    """Move ball i into the next cell and predict against what is new there only.
+    """Move ball i into the next cell of its grid and predict against what is new there only.
 
-    Its stored hit was the earliest over the old 3 x 3 block, which shares all but one
-    strip of three cells with the new block; only that strip and the new cell's walls need
-    looking at (an impact already predicted with a ball now out of reach is still exact).
+    Its stored hit was the earliest over the cells within reach of the old cell, in every
+    grid; the new cell's reach differs from it by a strip on the side it moved to (in its
+    own grid, three cells), which is searched with the new cell's walls (an impact already
+    predicted with a ball now out of reach is still exact).
     """
     balls = state.balls
-    mask = state.column_mask
-    bits = state.row_bits
-    _unlink(balls, state.heads, i, _bucket(balls[i, CELL_X], balls[i, CELL_Y], mask, bits))
+    a = balls[i, CLASS]
+    old_x = balls[i, CELL_X]
+    old_y = balls[i, CELL_Y]
+    _unlink(balls, state.heads, i, _home(state, a, old_x, old_y))
     direction = balls[i, EXIT]
     if direction < 2:
         balls[i, CELL_X] += 1 if direction == 0 else -1
@@ -331,23 +390,39 @@ def _cross(state, i, now, x, v, radii, starts, ends, directions, lengths):
         balls[i, CELL_Y] += 1 if direction == 2 else -1
     cx = balls[i, CELL_X]
     cy = balls[i, CELL_Y]
-    _link(balls, state.heads, i, _bucket(cx, cy, mask, bits))
+    _link(balls, state.heads, i, _home(state, a, cx, cy))
     px = x[i, 0] + v[i, 0] * (now - state.clock[i])
     py = x[i, 1] + v[i, 1] * (now - state.clock[i])
     vx = v[i, 0]
     vy = v[i, 1]
-    _predict_exit(i, now, px, py, vx, vy, balls, state.exit_time, state.cell)
-    _scan_walls(i, now, px, py, vx, vy, _bucket(cx, cy, mask, bits), balls, state.hit_time,
-                state.wall_first, state.wall_items, state.global_walls, radii, starts, ends,
-                directions, lengths)
-    if direction < 2:
-        strip = cx + 1 if direction == 0 else cx - 1
-        _scan_balls(i, now, px, py, vx, vy, strip, strip, cy - 1, cy + 1, balls, state.hit_time,
-                    state.heads, state.clock, mask, bits, x, v, radii)
-    else:
-        strip = cy + 1 if direction == 2 else cy - 1
-        _scan_balls(i, now, px, py, vx, vy, cx - 1, cx + 1, strip, strip, balls, state.hit_time,
-                    state.heads, state.clock, mask, bits, x, v, radii)
+    _predict_exit(i, now, px, py, vx, vy, balls, state.exit_time, state.cells[a])
+    _scan_walls(i, now, px, py, vx, vy, _home(state, a, cx, cy), balls, state.hit_time,
+                state.wall_first, state.wall_items, state.global_walls, state.global_first[a],
+                state.global_first[a + 1], radii, starts, ends, directions, lengths)
+    shifts = state.shifts
+    for b in range(shifts.shape[0]):
+        reach = state.reach[a, b]
+        # Along the axis of the move: the cells within reach of the new cell, not the old.
+        old_low, old_high = _span(old_x if direction < 2 else old_y, shifts[a], shifts[b],
+                                  reach)
+        low, high = _span(cx if direction < 2 else cy, shifts[a], shifts[b], reach)
+        if direction == 0 or direction == 2:
+            low = old_high + 1
+        else:
+            high = old_low - 1
+        if low > high:
+            continue
+        # Across it: the same cells as before.
+        across_low, across_high = _span(cy if direction < 2 else cx, shifts[a], shifts[b],
+                                        reach)
+        if direction < 2:
+            _scan_balls(i, now, px, py, vx, vy, low, high, across_low, across_high, balls,
+                        state.hit_time, state.heads, state.clock, state.offsets[b],
+                        state.column_masks[b], state.row_bits[b], x, v, radii)
+        else:
+            _scan_balls(i, now, px, py, vx, vy, across_low, across_high, low, high, balls,
+                        state.hit_time, state.heads, state.clock, state.offsets[b],
+                        state.column_masks[b], state.row_bits[b], x, v, radii)
     _schedule(i, balls, state.hit_time, state.exit_time, state.event_time)
 
 
@@ -534,31 +609,145 @@ def _torus(n, extent, cell):
 
 
 @compile_kernel
-def build(x, v, radii, segments, starts, ends, directions, lengths):
-    """A fresh state for the world at the start of a step: cells, walls, predictions, tree."""
-    n = x.shape[0]
-    largest = 0.0
+def _classes(radii, ratio):
+    """Each ball's radius class (radii from r_min * ratio ** c up to r_min * ratio ** (c + 1)),
+    numbered from 0 up in increasing radius with empty classes left out, and the number of
+    classes. An infinite ratio puts every ball in one class."""
+    n = radii.shape[0]
+    smallest = radii[0]
     for i in range(n):
-        largest = max(largest, radii[i])
-    extent = _extent(x)
-    cell = _cell_width(x, extent, 2.0 * largest * CELL_MARGIN)
-    column_mask, row_bits = _torus(n, extent, cell)
+        smallest = min(smallest, radii[i])
+    band = np.zeros(n, dtype=np.int64)
+    top = 0
+    for i in range(n):
+        bound = smallest * ratio
+        while radii[i] >= bound:
+            band[i] += 1
+            bound *= ratio
+        top = max(top, band[i])
+    used = np.zeros(top + 1, dtype=np.bool_)
+    for i in range(n):
+        used[band[i]] = True
+    number = np.zeros(top + 1, dtype=np.int64)
+    count = 0
+    for c in range(top + 1):
+        if used[c]:
+            number[c] = count
+            count += 1
+    for i in range(n):
+        band[i] = number[band[i]]
+    return band, count
+
+
+@compile_kernel
+def _grids(x, radii, classes, count):
+    """Each class's grid: (cells, shifts, column_masks, row_bits, offsets, reach) of State.
+
+    A class's cells are as _cell_width makes them for its own balls and largest radius,
+    rounded up to the smallest class's width (the unit) times a power of two, so the cells
+    of all grids have edges on the unit grid and reaches can be counted in whole units.
+    With one class this is the single grid of equal radii, cells exactly _cell_width's.
+    """
+    largest = np.zeros(count)
+    members = np.zeros(count, dtype=np.int64)
+    for i in range(x.shape[0]):
+        c = classes[i]
+        largest[c] = max(largest[c], radii[i])
+        members[c] += 1
+    wanted = np.empty(count)
+    extents = np.empty((count, 4))
+    for c in range(count):
+        own = x if count == 1 else x[np.flatnonzero(classes == c)]
+        extent = _extent(own)
+        extents[c, 0], extents[c, 1], extents[c, 2], extents[c, 3] = extent
+        wanted[c] = _cell_width(own, extent, 2.0 * largest[c] * CELL_MARGIN)
+    unit = wanted[0]
+    cells = np.empty(count)
+    shifts = np.zeros(count, dtype=np.int64)
+    column_masks = np.empty(count, dtype=np.int64)
+    row_bits = np.empty(count, dtype=np.int64)
+    offsets = np.zeros(count + 1, dtype=np.int64)
+    for c in range(count):
+        width = unit
+        while width < wanted[c]:
+            width *= 2.0
+            shifts[c] += 1
+        cells[c] = width
+        extent = (extents[c, 0], extents[c, 1], extents[c, 2], extents[c, 3])
+        column_masks[c], row_bits[c] = _torus(members[c], extent, width)
+        offsets[c + 1] = offsets[c] + ((column_masks[c] + 1) << row_bits[c])
+    reach = np.empty((count, count), dtype=np.int64)
+    for a in range(count):
+        for b in range(count):
+            units = math.ceil((largest[a] + largest[b]) * CELL_MARGIN / unit)
+            reach[a, b] = max(1, int(units))
+    return cells, shifts, column_masks, row_bits, offsets, reach
+
+
+@compile_kernel
+def _class_walls(cells, column_masks, row_bits, offsets, starts, directions, lengths):
+    """The walls of every class's buckets, one after another (wall_first, wall_items), and
+    each class's global walls (global_first, global_walls): _register_walls per grid."""
+    count = cells.shape[0]
+    firsts = []
+    items = []
+    globals_ = []
+    listed = 0
+    unlisted = 0
+    for c in range(count):
+        first, entries, global_walls = _register_walls(cells[c], column_masks[c], row_bits[c],
+                                                       starts, directions, lengths)
+        firsts.append(first)
+        items.append(entries)
+        globals_.append(global_walls)
+        listed += first[first.shape[0] - 1]
+        unlisted += global_walls.shape[0]
+    wall_first = np.zeros(offsets[count] + 1, dtype=np.int64)
+    wall_items = np.empty(max(1, listed), dtype=np.int64)
+    global_first = np.zeros(count + 1, dtype=np.int64)
+    global_walls = np.empty(unlisted, dtype=np.int64)
+    filled = 0
+    for c in range(count):
+        first = firsts[c]
+        buckets = first.shape[0] - 1
+        for b in range(buckets):
+            wall_first[offsets[c] + b] = filled + first[b]
+        wall_items[filled:filled + first[buckets]] = items[c][:first[buckets]]
+        filled += first[buckets]
+        global_first[c + 1] = global_first[c] + globals_[c].shape[0]
+        global_walls[global_first[c]:global_first[c + 1]] = globals_[c]
+    wall_first[offsets[count]] = filled
+    return wall_first, wall_items, global_first, global_walls
+
+
+@compile_kernel
+def build(x, v, radii, segments, starts, ends, directions, lengths, class_ratio=CLASS_RATIO):
+    """A fresh state for the world at the start of a step: cells, walls, predictions, tree.
+
+    class_ratio: the radius classes' width (CLASS_RATIO); math.inf makes the single grid of
+    cells one largest diameter wide (or wider) that exact mode had before radius classes,
+    which the tests compare against.
+    """
+    n = x.shape[0]
+    classes, count = _classes(radii, class_ratio)
+    cells, shifts, column_masks, row_bits, offsets, reach = _grids(x, radii, classes, count)
     leaves = 1
     while leaves < n:
         leaves *= 2
-    wall_first, wall_items, global_walls = _register_walls(cell, column_mask, row_bits, starts,
-                                                           directions, lengths)
-    state = State(cell, column_mask, row_bits, leaves, np.zeros(n), np.empty(n), np.empty(n),
-                  np.empty(n),
+    wall_first, wall_items, global_first, global_walls = _class_walls(
+        cells, column_masks, row_bits, offsets, starts, directions, lengths)
+    state = State(cells, shifts, column_masks, row_bits, offsets, reach, leaves, np.zeros(n),
+                  np.empty(n), np.empty(n), np.empty(n),
                   np.empty((n, COLUMNS), dtype=np.int64),
-                  np.full(wall_first.shape[0] - 1, NO_BALL, np.int64),
-                  wall_first, wall_items, global_walls,
+                  np.full(offsets[count], NO_BALL, np.int64),
+                  wall_first, wall_items, global_first, global_walls,
                   np.full(2 * leaves, NO_BALL, np.int64), x.copy(), v.copy(), radii.copy(),
                   segments.copy())
     balls = state.balls
     for i in range(n):
         balls[i, COUNTER] = 0
         balls[i, LAST] = NO_PARTNER
+        balls[i, CLASS] = classes[i]
         _place(state, i, x[i, 0], x[i, 1])
     for i in range(n):
         _predict(state, i, 0.0, x, v, radii, starts, ends, directions, lengths)
@@ -608,8 +797,8 @@ def _absorb_edits(state, x, v, radii, starts, ends, directions, lengths):
             return NOT_FINITE
     for c in range(count):
         i = changed[c]
-        _unlink(balls, state.heads, i, _bucket(balls[i, CELL_X], balls[i, CELL_Y],
-                                               state.column_mask, state.row_bits))
+        _unlink(balls, state.heads, i, _home(state, balls[i, CLASS], balls[i, CELL_X],
+                                             balls[i, CELL_Y]))
         _place(state, i, x[i, 0], x[i, 1])
         balls[i, COUNTER] += 1
         balls[i, LAST] = NO_PARTNER
