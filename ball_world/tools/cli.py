@@ -11,10 +11,11 @@ lines of the README do, one subcommand each, like `gz service` / `gz topic` do f
     ball_world_cli set-param rate_hz 30       # what ros2 param set does
 
 It speaks only through the world's public names: the `impulse` topic, the latched
-`entity_names`, and the standard simulation_interfaces services under the world node's name,
-so it works against any world, in any namespace (`--ns /sim2`, or `--ros-args -r
-__ns:=/sim2`). Every wait has a deadline (`--timeout`): with no world answering it says so
-in one line and exits 1; a refused request prints the world's reason and exits 1.
+`entity_names`, the standard simulation_interfaces services and the parameter services of
+the world node, so it works against any world, in any namespace (`--ns /sim2`, or
+`--ros-args -r __ns:=/sim2`). Every wait has a deadline (`--timeout`): with no world
+answering it says so in one line and exits 1; a refused request prints the world's reason
+and exits 1.
 """
 import argparse
 import json
