@@ -720,11 +720,12 @@ def main(argv=None):
     if not available():
         print('numba is not installed: nothing to compile (the numpy backend needs nothing)')
         return 0
-    from ball_world.core import exact
+    from ball_world.core import exact, lidar
     began = time.perf_counter()
     warm()
     exact.warm()
-    print(f'numba kernels (seed and exact mode) ready in {time.perf_counter() - began:.1f} s')
+    lidar.warm()
+    print(f'numba kernels (seed and exact mode, lidar) ready in {time.perf_counter() - began:.1f} s')
     return 0
 
 
