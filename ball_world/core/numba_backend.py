@@ -725,7 +725,7 @@ def main(argv=None):
     warm()
     exact.warm()
     lidar.warm()
-    print(f'numba kernels (seed and exact mode, lidar) ready in {time.perf_counter() - began:.1f} s')
+    print(f'numba kernels (seed and exact mode) ready in {time.perf_counter() - began:.1f} s')
     return 0
 
 
