@@ -279,3 +279,13 @@ def test_hit_points_lie_on_what_was_hit():
 def test_a_fan_that_cannot_scan_is_refused_by_name(bad, words):
     with pytest.raises(ValueError, match=words):
         bad.check()
+
+
+def test_benchmark_times_a_scan_beside_a_step():
+    # No timing is asserted (machines differ): a row per N, every figure a positive number.
+    from benchmarks import lidar_speed
+    [row] = lidar_speed.rows([300], 1)
+    cells = [cell.strip().replace(',', '') for cell in row.strip('|').split('|')]
+    n, within, step, numba_scan, numpy_scan, ratio = cells
+    assert n == '300' and int(within) > 0
+    assert all(float(value) > 0.0 for value in (step, numba_scan, numpy_scan, ratio))

@@ -23,7 +23,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ball_world.core import lidar_kernel
-from ball_world.core.lidar_kernel import circle_terms, segment_terms
+from ball_world.core.lidar_kernel import circle_terms, rotate, segment_terms
 from ball_world.core.stepping import resolve_backend
 
 #: Most (beam, ball) pairs the numpy reference evaluates at once (memory, not speed).
@@ -71,28 +71,27 @@ class Fan(NamedTuple):
         return self
 
 
-def beam_directions(yaw, fan):
-    """Unit directions (dx, dy) of the beams in the world frame, for a heading `yaw`.
-
-    Computed once here and handed to either backend, so that both see the same bits
-    (numpy's and numba's cos and sin are not promised to round alike).
-    """
-    angles = yaw + (fan.angle_min + np.arange(fan.samples) * fan.angle_increment)
+def body_directions(fan):
+    """Unit directions (cos, sin) of the fan's beams in the scanner's frame."""
+    angles = fan.angle_min + np.arange(fan.samples) * fan.angle_increment
     return np.cos(angles), np.sin(angles)
 
 
-def _walls_array(walls):
-    """Wall segments as a contiguous (M, 4) float64 array, from a Walls or an array."""
-    segments = getattr(walls, 'segments', walls)
-    return np.ascontiguousarray(np.asarray(segments, dtype=np.float64).reshape(-1, 4))
+def beam_directions(yaw, fan):
+    """Unit directions (dx, dy) of the beams in the world frame, for a heading `yaw`: the
+    body directions turned by yaw, with the kernel's own `rotate` (so the same bits)."""
+    bx, by = body_directions(fan)
+    return rotate(math.cos(yaw), math.sin(yaw), bx, by)
 
 
-def distances_numpy(positions, radii, walls, origin, directions, exclude, reach):
-    """The reference: distance to the first hit of each beam, +inf beyond `reach`."""
+def distances_numpy(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude,
+                    range_min, range_max):
+    """The reference: each beam against every ball that can be within range_max (and every
+    wall), the nearest hit kept; REP 117's infinities."""
     px, py = float(origin[0]), float(origin[1])
-    dx, dy = directions
-    near = (np.abs(positions[:, 0] - px) <= reach + radii) & (
-        np.abs(positions[:, 1] - py) <= reach + radii)
+    dx, dy = rotate(cos_yaw, sin_yaw, body[0], body[1])
+    near = (np.abs(positions[:, 0] - px) <= range_max + radii) & (
+        np.abs(positions[:, 1] - py) <= range_max + radii)
     if 0 <= exclude < len(near):
         near[exclude] = False
     chosen = np.flatnonzero(near)
@@ -100,7 +99,7 @@ def distances_numpy(positions, radii, walls, origin, directions, exclude, reach)
     cy = np.take(positions[:, 1], chosen)
     r = np.take(radii, chosen)
     best = np.full(len(dx), np.inf)
-    rows = max(1, CHUNK_PAIRS // max(len(chosen), 1))
+    rows = max(1, CHUNK_PAIRS // max(len(chosen), len(walls), 1))
     for start in range(0, len(dx), rows):
         ux = dx[start:start + rows, None]
         uy = dy[start:start + rows, None]
@@ -114,49 +113,65 @@ def distances_numpy(positions, radii, walls, origin, directions, exclude, reach)
                                        walls[:, 3])
             best[start:start + rows] = np.minimum(best[start:start + rows],
                                                   np.where(hit, t, np.inf).min(axis=1))
-    best[best > reach] = np.inf
+    best[best < range_min] = -np.inf
+    best[best > range_max] = np.inf
     return best
 
 
-def distances_numba(positions, radii, walls, origin, directions, exclude, reach):
-    """The compiled walk through a grid: the same distances as distances_numpy."""
-    out = np.empty(len(directions[0]))
-    lidar_kernel.scan_grid(np.ascontiguousarray(positions, dtype=np.float64),
-                           np.ascontiguousarray(radii, dtype=np.float64), walls,
-                           float(origin[0]), float(origin[1]), directions[0], directions[1],
-                           int(exclude), float(reach), out)
+def distances_numba(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude,
+                    range_min, range_max):
+    """The compiled walk through a grid: the same ranges as distances_numpy."""
+    out = np.empty(len(body[0]))
+    lidar_kernel.scan_grid(positions, radii, walls, float(origin[0]), float(origin[1]),
+                           cos_yaw, sin_yaw, body[0], body[1], int(exclude), range_min,
+                           range_max, out)
     return out
 
 
 _DISTANCES = {'numpy': distances_numpy, 'numba': distances_numba}
 
 
-def distances(positions, radii, walls, origin, yaw, fan, exclude=-1, backend='auto'):
-    """True distance along each beam of `fan` from `origin` (heading `yaw`) to the first ball
-    or wall, +inf where there is none within fan.range_max; ball `exclude` is not seen."""
-    directions = beam_directions(yaw, fan)
-    return _DISTANCES[resolve_backend(backend)](
-        np.asarray(positions, dtype=np.float64).reshape(-1, 2),
-        np.asarray(radii, dtype=np.float64).reshape(-1), _walls_array(walls), origin,
-        directions, exclude, fan.range_max)
+class Scanner:
+    """One scanner: its fan, its backend and its noise, ready to scan often.
+
+    What is fixed for a scanner (body directions, the backend) is worked out once, so a scan
+    costs the kernel and little else. `name` and `seed` choose the noise, with the step.
+    """
+
+    def __init__(self, fan, backend='auto', seed=0, name=''):
+        self.fan = fan.check()
+        self.backend = resolve_backend(backend)
+        self._distances = _DISTANCES[self.backend]
+        self.body = body_directions(fan)
+        self.seed = int(seed)
+        self.key = name_key(name)
+
+    def distances(self, positions, radii, walls, origin, yaw, exclude=-1):
+        """REP 117 ranges without noise: the closed forms. positions (N, 2) and radii (N,)
+        float64, walls a Walls or (M, 4) segments."""
+        fan = self.fan
+        return self._distances(_float_array(positions), _float_array(radii),
+                               _float_array(getattr(walls, 'segments', walls)).reshape(-1, 4),
+                               origin, math.cos(yaw), math.sin(yaw), self.body, exclude,
+                               fan.range_min, fan.range_max)
+
+    def scan(self, positions, radii, walls, origin, yaw, exclude=-1, step=0):
+        """One scan as LaserScan's `ranges`: the closed forms plus the noise of this step."""
+        ranges = self.distances(positions, radii, walls, origin, yaw, exclude)
+        if self.fan.noise_stddev > 0.0:
+            add_noise(ranges, self.fan.noise_stddev,
+                      np.random.default_rng([self.seed, self.key, int(step)]))
+        return ranges
 
 
-def rep117(distances_, fan):
-    """Ranges as REP 117 wants them: -inf where the first hit is closer than range_min
-    (+inf, nothing within range_max, is already there)."""
-    ranges = np.array(distances_, dtype=np.float64)
-    ranges[ranges < fan.range_min] = -np.inf
-    return ranges
+def _float_array(values):
+    """values as a C-contiguous float64 array (no copy when it already is one)."""
+    return np.ascontiguousarray(values, dtype=np.float64)
 
 
 def name_key(name):
     """A stable 64-bit number for an entity name (the same in every process and run)."""
     return int.from_bytes(hashlib.sha256(name.encode('utf-8')).digest()[:8], 'little')
-
-
-def noise_generator(seed, name, step):
-    """The generator of one scan's noise: seeded by (seed, name_key(name), step)."""
-    return np.random.default_rng([int(seed), name_key(name), int(step)])
 
 
 def add_noise(ranges, stddev, rng):
@@ -175,16 +190,15 @@ def add_noise(ranges, stddev, rng):
 
 def scan(positions, radii, walls, origin, yaw, fan, exclude=-1, backend='auto', seed=0,
          name='', step=0):
-    """One scan as LaserScan's `ranges`: exact distances, REP 117's infinities, seeded noise.
+    """One scan as LaserScan's `ranges`: exact distances, REP 117's infinities, seeded noise
+    (see Scanner, which keeps what a scanner scanning often can)."""
+    return Scanner(fan, backend, seed, name).scan(positions, radii, walls, origin, yaw,
+                                                  exclude, step)
 
-    `name` and `step` (with `seed`) choose the noise; with fan.noise_stddev 0 they do not
-    matter and the ranges are the closed forms.
-    """
-    ranges = rep117(distances(positions, radii, walls, origin, yaw, fan, exclude, backend),
-                    fan)
-    if fan.noise_stddev > 0.0:
-        add_noise(ranges, fan.noise_stddev, noise_generator(seed, name, step))
-    return ranges
+
+def distances(positions, radii, walls, origin, yaw, fan, exclude=-1, backend='auto'):
+    """scan() without noise: each range equals its closed form."""
+    return Scanner(fan, backend).distances(positions, radii, walls, origin, yaw, exclude)
 
 
 def hit_points(origin, yaw, fan, ranges):

@@ -95,14 +95,30 @@ def segment_terms(px, py, dx, dy, ax, ay, bx, by):
     return t, (denom != 0.0) & (t >= 0.0) & (u >= -GRAZE) & (u <= 1.0 + GRAZE)
 
 
+def rotate(cos_yaw, sin_yaw, bx, by):
+    """A body-frame direction (bx, by) in the world frame, for a heading of that cos and sin."""
+    return cos_yaw * bx - sin_yaw * by, sin_yaw * bx + cos_yaw * by
+
+
+def rep117(distance, range_min, range_max):
+    """A distance as REP 117's range: -inf below range_min, +inf beyond range_max."""
+    if distance < range_min:
+        return -np.inf
+    if distance > range_max:
+        return np.inf
+    return distance
+
+
 def grid_side(count, mean_radius, reach):
     """Cells along one side of a scan's grid over the square of half-width `reach`.
 
-    About one cell per ball kept, but cells no narrower than a mean diameter (so a ball
-    lands in a few cells, not dozens), and at most MAX_CELLS_PER_SIDE per side.
+    About four cells per ball kept, but cells no narrower than a mean radius (so a ball
+    lands in a few cells, not dozens), and at most MAX_CELLS_PER_SIDE per side. Measured on
+    the benchmark's gas (benchmarks/lidar_speed.py): one cell per ball, or cells of a
+    diameter, cost 1.5x as much per scan; sixteen per ball 2x.
     """
     side = 2.0 * reach
-    width = max(side / math.sqrt(count + 1.0), 2.0 * mean_radius)
+    width = max(side / math.sqrt(4.0 * count + 1.0), mean_radius)
     return int(min(max(side / width, 1.0), float(MAX_CELLS_PER_SIDE)))
 
 
@@ -140,7 +156,8 @@ def _compile(function):
 
 
 if njit is not None:
-    for _function in (circle_terms, segment_terms, grid_side, cell_span, wall_rows):
+    for _function in (circle_terms, segment_terms, rotate, rep117, grid_side, cell_span,
+                      wall_rows):
         register_jitable(error_model='numpy')(_function)
 
 
@@ -168,45 +185,53 @@ def _fill_walls(walls, gx, gy, width, cells, slack, starts, items, fill):
 
 
 @_compile
-def _fill_balls(positions, radii, chosen, gx, gy, width, cells, slack, starts, items, fill):
-    """Count or list each chosen ball in the cells its bounding box touches (as _fill_walls)."""
-    for k in range(chosen.shape[0]):
-        i = chosen[k]
-        r = radii[i] + slack
-        cx = positions[i, 0]
-        cy = positions[i, 1]
-        first_x, last_x = cell_span(cx - r, cx + r, gx, width, cells)
-        first_y, last_y = cell_span(cy - r, cy + r, gy, width, cells)
+def _fill_balls(x, y, r, gx, gy, width, cells, slack, starts, items, fill):
+    """Count or list each ball (by its row in x, y, r) in the cells its bounding box touches,
+    as _fill_walls does."""
+    for k in range(x.shape[0]):
+        reach = r[k] + slack
+        first_x, last_x = cell_span(x[k] - reach, x[k] + reach, gx, width, cells)
+        first_y, last_y = cell_span(y[k] - reach, y[k] + reach, gy, width, cells)
         for column in range(first_x, last_x + 1):
             for row in range(first_y, last_y + 1):
                 cell = column * cells + row
                 if fill:
-                    items[starts[cell]] = i
+                    items[starts[cell]] = k
                     starts[cell] += 1
                 else:
                     starts[cell + 1] += 1
 
 
 @_compile
-def scan_grid(positions, radii, walls, px, py, dx, dy, exclude, reach, out):
-    """out[k]: distance along beam k (unit direction dx[k], dy[k]) from (px, py) to the first
-    ball or wall it meets, or +inf when that is further than `reach` or there is none.
+def scan_grid(positions, radii, walls, px, py, cos_yaw, sin_yaw, bx, by, exclude, range_min,
+              reach, out):
+    """out[k]: distance along beam k from (px, py) to the first ball or wall it meets, as
+    REP 117 has it: +inf when that is further than `reach` (range_max) or there is none,
+    -inf when it is closer than range_min.
 
-    Ball `exclude` (the scanner's own, or -1) is not seen. Walls are rows x1, y1, x2, y2.
+    Beam k's direction is the body direction (bx[k], by[k]) turned by the heading whose cos
+    and sin are given (`rotate`). Ball `exclude` (the scanner's own, or -1) is not seen.
+    Walls are rows x1, y1, x2, y2.
     """
     n = positions.shape[0]
-    chosen = np.empty(n, dtype=np.int64)
+    x = np.empty(n)
+    y = np.empty(n)
+    r = np.empty(n)
     count = 0
-    radius_sum = 0.0
     for i in range(n):
-        if i == exclude:
-            continue
-        r = radii[i]
-        if abs(positions[i, 0] - px) <= reach + r and abs(positions[i, 1] - py) <= reach + r:
-            chosen[count] = i
+        radius = radii[i]
+        if (i != exclude and abs(positions[i, 0] - px) <= reach + radius
+                and abs(positions[i, 1] - py) <= reach + radius):
+            x[count] = positions[i, 0]
+            y[count] = positions[i, 1]
+            r[count] = radius
             count += 1
-            radius_sum += r
-    chosen = chosen[:count]
+    x = x[:count]
+    y = y[:count]
+    r = r[:count]
+    radius_sum = 0.0
+    for k in range(count):
+        radius_sum += r[k]
     cells = grid_side(count, radius_sum / max(count, 1), reach)
     width = 2.0 * reach / cells
     gx = px - reach
@@ -214,8 +239,7 @@ def scan_grid(positions, radii, walls, px, py, dx, dy, exclude, reach, out):
     slack = SLACK * (width + abs(px) + abs(py) + reach)
     ball_starts = np.zeros(cells * cells + 1, dtype=np.int64)
     wall_starts = np.zeros(cells * cells + 1, dtype=np.int64)
-    _fill_balls(positions, radii, chosen, gx, gy, width, cells, slack, ball_starts,
-                ball_starts, False)
+    _fill_balls(x, y, r, gx, gy, width, cells, slack, ball_starts, ball_starts, False)
     _fill_walls(walls, gx, gy, width, cells, slack, wall_starts, wall_starts, False)
     for cell in range(cells * cells):
         ball_starts[cell + 1] += ball_starts[cell]
@@ -223,19 +247,19 @@ def scan_grid(positions, radii, walls, px, py, dx, dy, exclude, reach, out):
     ball_items = np.empty(ball_starts[-1], dtype=np.int64)
     wall_items = np.empty(wall_starts[-1], dtype=np.int64)
     # The fill passes advance each start to the next cell's; shifted back afterwards.
-    _fill_balls(positions, radii, chosen, gx, gy, width, cells, slack, ball_starts,
-                ball_items, True)
+    _fill_balls(x, y, r, gx, gy, width, cells, slack, ball_starts, ball_items, True)
     _fill_walls(walls, gx, gy, width, cells, slack, wall_starts, wall_items, True)
     for cell in range(cells * cells, 0, -1):
         ball_starts[cell] = ball_starts[cell - 1]
         wall_starts[cell] = wall_starts[cell - 1]
     ball_starts[0] = 0
     wall_starts[0] = 0
+    # The last beam that tested each ball: a ball in several cells of a beam is tested once.
+    tested = np.full(count, -1, dtype=np.int64)
     home_x = min(max(int(math.floor((px - gx) / width)), 0), cells - 1)
     home_y = min(max(int(math.floor((py - gy) / width)), 0), cells - 1)
-    for k in range(dx.shape[0]):
-        ux = dx[k]
-        uy = dy[k]
+    for k in range(bx.shape[0]):
+        ux, uy = rotate(cos_yaw, sin_yaw, bx[k], by[k])
         ix = home_x
         iy = home_y
         step_x, next_x, delta_x = _axis(ux, px, gx, ix, width)
@@ -245,8 +269,10 @@ def scan_grid(positions, radii, walls, px, py, dx, dy, exclude, reach, out):
             cell = ix * cells + iy
             for e in range(ball_starts[cell], ball_starts[cell + 1]):
                 i = ball_items[e]
-                near, ahead, inside = circle_terms(px, py, ux, uy, positions[i, 0],
-                                                   positions[i, 1], radii[i])
+                if tested[i] == k:
+                    continue
+                tested[i] = k
+                near, ahead, inside = circle_terms(px, py, ux, uy, x[i], y[i], r[i])
                 if inside:
                     best = 0.0
                 elif ahead and near < best:
@@ -268,7 +294,7 @@ def scan_grid(positions, radii, walls, px, py, dx, dy, exclude, reach, out):
                 next_y += delta_y
             if ix < 0 or ix >= cells or iy < 0 or iy >= cells:
                 break
-        out[k] = best if best <= reach else np.inf
+        out[k] = rep117(best, range_min, reach)
 
 
 @_compile
@@ -285,6 +311,6 @@ def warm():
     """Compile (or load from numba's cache) the scan kernel with a tiny scene."""
     out = np.empty(2)
     scan_grid(np.array([[0.0, 0.0], [2.0, 0.0]]), np.array([0.3, 0.4]),
-              np.array([[3.0, -1.0, 3.0, 1.0]]), 0.0, 0.0, np.array([1.0, 0.0]),
-              np.array([0.0, 1.0]), 0, 5.0, out)
+              np.array([[3.0, -1.0, 3.0, 1.0]]), 0.0, 0.0, 1.0, 0.0, np.array([1.0, 0.0]),
+              np.array([0.0, 1.0]), 0, 0.1, 5.0, out)
     return out
