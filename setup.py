@@ -37,6 +37,7 @@ setup(
             'ball_world_sim = ball_world.tools.sim:main',
             'ball_world_teleop = ball_world.tools.teleop:main',
             'ball_world_goal = ball_world.tools.goal:main',
+            'ball_world_tracker = ball_world.tools.tracker:main',
         ],
     },
 )

@@ -84,10 +84,9 @@ def beam_directions(yaw, fan):
     return rotate(math.cos(yaw), math.sin(yaw), bx, by)
 
 
-def distances_numpy(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude,
-                    range_min, range_max):
-    """The reference: each beam against every ball that can be within range_max (and every
-    wall), the nearest hit kept; REP 117's infinities."""
+def _nearest(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude, range_max):
+    """Each beam against every ball that can be within range_max and every wall: the
+    distance to the nearest hit (+inf for none) and the ball it is (-1: a wall, or none)."""
     px, py = float(origin[0]), float(origin[1])
     dx, dy = rotate(cos_yaw, sin_yaw, body[0], body[1])
     near = (np.abs(positions[:, 0] - px) <= range_max + radii) & (
@@ -99,20 +98,34 @@ def distances_numpy(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exc
     cy = np.take(positions[:, 1], chosen)
     r = np.take(radii, chosen)
     best = np.full(len(dx), np.inf)
+    ball = np.full(len(dx), -1)
     rows = max(1, CHUNK_PAIRS // max(len(chosen), len(walls), 1))
     for start in range(0, len(dx), rows):
-        ux = dx[start:start + rows, None]
-        uy = dy[start:start + rows, None]
+        part = slice(start, start + rows)
+        ux = dx[part, None]
+        uy = dy[part, None]
         if len(chosen):
             t_near, ahead, inside = circle_terms(px, py, ux, uy, cx, cy, r)
             hits = np.where(inside, 0.0, np.where(ahead, t_near, np.inf))
-            best[start:start + rows] = hits.min(axis=1)
+            first = hits.argmin(axis=1)
+            best[part] = np.take_along_axis(hits, first[:, None], axis=1)[:, 0]
+            ball[part] = np.where(np.isfinite(best[part]), np.take(chosen, first), -1)
         if len(walls):
             with np.errstate(divide='ignore', invalid='ignore'):
                 t, hit = segment_terms(px, py, ux, uy, walls[:, 0], walls[:, 1], walls[:, 2],
                                        walls[:, 3])
-            best[start:start + rows] = np.minimum(best[start:start + rows],
-                                                  np.where(hit, t, np.inf).min(axis=1))
+            wall = np.where(hit, t, np.inf).min(axis=1)
+            ball[part] = np.where(wall < best[part], -1, ball[part])
+            best[part] = np.minimum(best[part], wall)
+    return best, ball
+
+
+def distances_numpy(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude,
+                    range_min, range_max):
+    """The reference: each beam against every ball that can be within range_max (and every
+    wall), the nearest hit kept; REP 117's infinities."""
+    best, _ = _nearest(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude,
+                       range_max)
     best[best < range_min] = -np.inf
     best[best > range_max] = np.inf
     return best
@@ -199,6 +212,16 @@ def scan(positions, radii, walls, origin, yaw, fan, exclude=-1, backend='auto', 
 def distances(positions, radii, walls, origin, yaw, fan, exclude=-1, backend='auto'):
     """scan() without noise: each range equals its closed form."""
     return Scanner(fan, backend).distances(positions, radii, walls, origin, yaw, exclude)
+
+
+def seen_balls(positions, radii, walls, origin, yaw, fan, exclude=-1):
+    """Indices of the balls that at least one beam meets first, within [range_min,
+    range_max], without noise: the balls this scanner can see (ground truth for scoring)."""
+    walls = _float_array(getattr(walls, 'segments', walls)).reshape(-1, 4)
+    best, ball = _nearest(_float_array(positions).reshape(-1, 2), _float_array(radii), walls,
+                          origin, math.cos(yaw), math.sin(yaw), body_directions(fan),
+                          exclude, fan.range_max)
+    return np.unique(ball[(ball >= 0) & (best >= fan.range_min) & (best <= fan.range_max)])
 
 
 def hit_points(origin, yaw, fan, ranges):
