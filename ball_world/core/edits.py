@@ -34,7 +34,8 @@ DEFAULT_DENSITY = 1.0
 BALL_URI = 'ball'
 RESOURCE_FORMAT = ('YAML or JSON mapping, all keys optional: radius (m, default '
                    f'{DEFAULT_RADIUS}), mass (kg, default {DEFAULT_DENSITY:g} kg/m^2 x area), '
-                   'velocity ([vx, vy] in m/s, default [0, 0])')
+                   'velocity ([vx, vy] in m/s, default [0, 0]), agent (true: a robot driven '
+                   'by <name>/cmd_vel, default false)')
 
 # What an edit can be refused for (the node maps each to the standard's result code).
 NAME_NOT_UNIQUE = 'name_not_unique'
@@ -93,6 +94,11 @@ def _number(value, what):
 
 def parse_resource(text):
     """(radius, mass, (vx, vy)) from a spawn request's resource_string (see RESOURCE_FORMAT)."""
+    return parse_spawn(text)[:3]
+
+
+def parse_spawn(text):
+    """(radius, mass, (vx, vy), agent) from a resource_string (see RESOURCE_FORMAT)."""
     if len(text) > MAX_RESOURCE_LENGTH:
         raise EditRefused(RESOURCE_PARSE_ERROR, f'resource_string is {len(text):,} characters; '
                                                 f'at most {MAX_RESOURCE_LENGTH} are accepted')
@@ -106,11 +112,16 @@ def parse_resource(text):
         if not isinstance(fields, dict):
             raise EditRefused(RESOURCE_PARSE_ERROR, 'resource_string must be a mapping such '
                                                     "as '{radius: 0.2, mass: 1.0}'")
-    unknown = sorted(str(key) for key in fields if key not in ('radius', 'mass', 'velocity'))
+    unknown = sorted(str(key) for key in fields
+                     if key not in ('radius', 'mass', 'velocity', 'agent'))
     if unknown:
         raise EditRefused(RESOURCE_PARSE_ERROR, f'unknown key {unknown[0][:64]!r} in '
                                                 'resource_string; expected radius, mass, '
-                                                'velocity')
+                                                'velocity, agent')
+    agent = fields.get('agent', False)
+    if not isinstance(agent, bool):
+        raise EditRefused(RESOURCE_PARSE_ERROR, f'agent must be true or false, got '
+                                                f'{agent!r:.64}')
     radius = _number(fields.get('radius', DEFAULT_RADIUS), 'radius')
     mass = _number(fields['mass'], 'mass') if 'mass' in fields else \
         DEFAULT_DENSITY * math.pi * radius * radius
@@ -126,7 +137,7 @@ def parse_resource(text):
             raise EditRefused(RESOURCE_PARSE_ERROR, f'{what} {number_text(value)} {unit} is '
                                                     f'outside {number_text(low)} to '
                                                     f'{number_text(high)} {unit}')
-    return radius, mass, (vx, vy)
+    return radius, mass, (vx, vy), agent
 
 
 class Entities:

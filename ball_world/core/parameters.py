@@ -12,6 +12,7 @@ that names the parameter (for combinations, such as balls that overlap).
 """
 from dataclasses import dataclass
 import math
+import re
 from typing import Any, Callable, Optional
 
 import numpy as np
@@ -24,6 +25,7 @@ INTEGER = 'integer'
 BOOL = 'bool'
 STRING = 'string'
 DOUBLE_ARRAY = 'double[]'
+STRING_ARRAY = 'string[]'
 
 #: When a change takes effect: on the next ~/reset, at once, or never (read-only, set at start).
 ON_RESET = 'reset'
@@ -36,6 +38,10 @@ MAX_PATH_LENGTH = 4096
 #: Largest |v| of an explicit ball or of random.speed, m/s (the world's own speed limit, which
 #: depends on dt and the radii, is checked when it is built).
 MAX_SPEED = 1e6
+#: An entity name (core.edits.NAME_PATTERN: the same rule, without importing the edits).
+_NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
+#: Most agents a world may have (each costs a subscription and two messages per step).
+MAX_AGENTS = 10_000
 
 
 class ParameterError(ValueError):
@@ -131,6 +137,8 @@ class Parameter:
             return value
         if self.kind == STRING:
             value = self._check_string(value)
+        elif self.kind == STRING_ARRAY:
+            value = self._check_strings(value)
         else:
             value = self._check_array(value)
         reason = self.rule(value) if self.rule is not None else None
@@ -159,6 +167,21 @@ class Parameter:
             raise ParameterError(self.name, f'expected one of {", ".join(self.choices)}, got '
                                             f'{value[:64]!r}')
         return value
+
+    def _check_strings(self, value):
+        if isinstance(value, (str, bytes)) or not hasattr(value, '__len__'):
+            raise ParameterError(self.name, f'expected a list of names, got {value!r:.64}')
+        if self.max_size is not None and len(value) > self.max_size:
+            raise ParameterError(self.name, f'has {len(value):,} entries; at most '
+                                            f'{self.max_size:,} are accepted')
+        for index, entry in enumerate(value):
+            if not isinstance(entry, str):
+                raise ParameterError(self.name, f'entry {index} is not a name: {entry!r:.64}')
+            if not _NAME.fullmatch(entry) or len(entry) > limits.MAX_NAME_LENGTH:
+                raise ParameterError(self.name, f'entry {index} {entry[:64]!r} is not an entity '
+                                                'name (a letter, then letters, digits or '
+                                                'underscores)')
+        return list(value)
 
     def _check_array(self, value):
         if isinstance(value, (str, bytes)) or not hasattr(value, '__len__'):
@@ -264,6 +287,37 @@ PARAMETERS = (
     Parameter('physics.mode', STRING, 'seed', "How collisions are found: 'seed' (the seed's "
               "rule: after the balls moved, touching and approaching) or 'exact' (every "
               'collision at its true time of impact; needs numba).', choices=('seed', 'exact')),
+    Parameter('agents', STRING_ARRAY, [], 'Entity names of the balls that are agents (robots '
+              'driven by <name>/cmd_vel), e.g. [ball_0].', max_size=MAX_AGENTS),
+    Parameter('frame_prefix', STRING, '', "Prefix of the agents' frames (<p><name>/odom, "
+              '<p><name>/base_link), so two worlds on one graph do not clash.', AT_START,
+              max_length=limits.MAX_NAME_LENGTH),
+    Parameter('agent.max_speed', DOUBLE, 2.0, 'Agents: the largest commanded speed followed, '
+              'm/s.', ON_RESET, 0.0, 1000.0),
+    Parameter('agent.max_accel', DOUBLE, 4.0, 'Agents: how fast the velocity follows the '
+              'command, m/s^2.', ON_RESET, 0.0, 1e6),
+    Parameter('agent.max_yaw_rate', DOUBLE, 3.0, 'Agents: the largest yaw rate followed, '
+              'rad/s.', ON_RESET, 0.0, 1000.0),
+    Parameter('agent.cmd_timeout', DOUBLE, 0.5, 'Agents: simulated s without a command before '
+              'an agent brakes to rest; 0 holds the last command.', ON_RESET, 0.0, 3600.0),
+    Parameter('agent.cmd_vel_stamped', BOOL, False, 'Agents: take geometry_msgs/msg/'
+              'TwistStamped on cmd_vel instead of Twist.', AT_START),
+    Parameter('agent.scan.samples', INTEGER, 360, "Agents' lidar: beams per scan; 0: no "
+              'scanner.', ON_RESET, 0, 100_000),
+    Parameter('agent.scan.angle_min', DOUBLE, -math.pi, "Agents' lidar: first beam, rad, body "
+              'frame.', ON_RESET, -2.0 * math.pi, 2.0 * math.pi),
+    Parameter('agent.scan.angle_max', DOUBLE, math.pi - 2.0 * math.pi / 360, "Agents' lidar: "
+              'last beam, rad, body frame (default pi - 2 pi / 360: one beam per degree).',
+              ON_RESET, -2.0 * math.pi, 2.0 * math.pi),
+    Parameter('agent.scan.range_min', DOUBLE, 0.0, "Agents' lidar: nearest range, m from the "
+              "agent's centre; 0: 0.05 m beyond the agent's radius.", ON_RESET, 0.0,
+              limits.COORDINATE_LIMIT),
+    Parameter('agent.scan.range_max', DOUBLE, 12.0, "Agents' lidar: farthest range, m from the "
+              "agent's centre.", ON_RESET, 0.0, limits.COORDINATE_LIMIT),
+    Parameter('agent.scan.rate_hz', DOUBLE, 10.0, "Agents' lidar: scans per second of "
+              'simulated time.', ON_RESET, 1e-3, 1e6),
+    Parameter('agent.scan.noise_stddev', DOUBLE, 0.01, "Agents' lidar: Gaussian range noise, "
+              'm, seeded by random.seed, the agent and the step.', ON_RESET, 0.0, 1000.0),
     Parameter('publish_clock', BOOL, False, 'Publish /clock after each step.', AT_ONCE),
     Parameter('markers.rate_hz', DOUBLE, 10.0, 'Wall-clock rate of the RViz markers; 0 turns '
               'them off. The node lowers it when markers would take over 5% of its time.',

@@ -247,6 +247,12 @@ class _Reader:
         start = self._take(8 * count, 8)
         return np.frombuffer(self.data, dtype='<f8', count=count, offset=start).copy()
 
+    def f32(self, count: int) -> np.ndarray:
+        if count == 0:
+            return np.empty(0, dtype=np.float32)
+        start = self._take(4 * count, 4)
+        return np.frombuffer(self.data, dtype='<f4', count=count, offset=start).copy()
+
     def count(self, element_size: int) -> int:
         """A sequence length, checked against the bytes left so a bad length cannot OOM."""
         n = self.u32()

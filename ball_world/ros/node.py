@@ -36,6 +36,7 @@ from ball_world.core.stepping import SubstepLimitExceeded
 from ball_world.msgs.cdr import decode_vector3_stamped, encode_clock
 from ball_world.msgs.markers import MarkerBuilder
 from ball_world.recording.writer_thread import BackgroundSink
+from ball_world.ros.agents import AgentTopics
 from ball_world.ros.parameters import converted, current_values, declare_all, ParameterError
 from ball_world.ros.sim_interfaces import ACTION, SimulationInterfaces
 from ball_world.simulation import build, Simulation
@@ -180,6 +181,7 @@ class BallWorld(Node):
         self.create_service(SetBool, '~/pause', self._on_pause)
         self.create_service(Trigger, '~/step', self._on_step)
         self.interfaces = SimulationInterfaces(self)
+        self.agent_topics = AgentTopics(self, values['agent.cmd_vel_stamped'])
         self.add_pre_set_parameters_callback(converted)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
@@ -250,6 +252,7 @@ class BallWorld(Node):
     def _on_timer(self):
         if not self.paused and not self.finished and self._due():
             self._drain_impulses()
+            self.agent_topics.drain()
             self.step_once()
 
     def _drain_impulses(self):
@@ -304,6 +307,7 @@ class BallWorld(Node):
         self.balls_pub.publish(record.balls_cdr)
         self.state_pub.publish(record.state_cdr)
         self.stats_pub.publish(record.stats_cdr)
+        self.agent_topics.publish(record)
         if self.get_parameter('publish_clock').value:
             self.clock_pub.publish(encode_clock(record.stamp_ns))
 
@@ -420,6 +424,7 @@ class BallWorld(Node):
     def _world_edited(self):
         """Balls appeared or went (or a reset): names and markers follow."""
         self.entities_pub.publish(String(data='\n'.join(self.simulation.names)))
+        self.agent_topics.sync()
         self._rebuild_markers()
         if self._markers_timer is not None:
             self._markers_next = 0.0
@@ -481,6 +486,7 @@ class BallWorld(Node):
             response.message = 'the run has finished (max_steps or the end of ROS time)'
             return response
         self._drain_impulses()
+        self.agent_topics.drain()
         record = self.step_once()
         response.success = True
         response.message = f'step {record.step} at t = {record.stamp_ns / 1e9:.9g} s'

@@ -17,6 +17,7 @@ _ROS_TYPES = {
     table.STRING: Parameter.Type.STRING,
     table.BOOL: Parameter.Type.BOOL,
     table.DOUBLE_ARRAY: Parameter.Type.DOUBLE_ARRAY,
+    table.STRING_ARRAY: Parameter.Type.STRING_ARRAY,
 }
 _WHEN = {table.ON_RESET: 'Takes effect on ~/reset.', table.AT_ONCE: 'Takes effect at once.',
          table.AT_START: 'Read-only: set it at start.'}
@@ -60,6 +61,10 @@ def as_ros_value(parameter, value):
         if hasattr(value, '__len__') and not isinstance(value, (str, bytes)) and all(
                 isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
             return [float(v) for v in value]
+    if parameter.kind == table.STRING_ARRAY and (value is None or (
+            hasattr(value, '__len__') and not isinstance(value, (str, bytes))
+            and not len(value))):
+        return []
     return value
 
 
@@ -101,7 +106,7 @@ def declare_all(node, overrides):
         except (TypeError, ValueError):
             raise ParameterError(f"parameter '{parameter.name}': expected {parameter.kind}, "
                                  f'got {value!r}') from None
-        if parameter.kind == table.DOUBLE_ARRAY and not ros_value:
+        if parameter.kind in (table.DOUBLE_ARRAY, table.STRING_ARRAY) and not ros_value:
             # rclpy infers an empty list's type as a byte array: declare the type, then set
             # the empty double array, so `ros2 param get` and `dump` show it rather than
             # "not set" (and GetParameters for all names does not come back empty).
@@ -123,5 +128,7 @@ def current_values(node):
         value = node.get_parameter(parameter.name).value
         if parameter.kind == table.DOUBLE_ARRAY:
             value = [float(v) for v in value]
+        elif parameter.kind == table.STRING_ARRAY:
+            value = list(value)
         values[parameter.name] = value
     return values

@@ -75,6 +75,9 @@ UNSUPPORTED = (
      'a ball is always a DYNAMIC_OBJECT described by its radius and mass'),
 )
 CATEGORY = EntityCategory.CATEGORY_DYNAMIC_OBJECT
+#: |q| of a heading quaternion may differ from 1 by this much (float rounding of clients).
+UNIT_QUATERNION_TOLERANCE = 1e-6
+
 #: Longest name filter accepted, characters.
 MAX_FILTER_LENGTH = 256
 #: The node-private name of the standard's action (its services are listed in __init__).
@@ -93,6 +96,16 @@ _SPAWN_CODES = {
     edits.TOO_MANY: Result.RESULT_OPERATION_FAILED,
     edits.NOT_FOUND: Result.RESULT_NOT_FOUND,
 }
+
+
+def category(agent):
+    """An entity's EntityCategory: a robot for an agent, a dynamic object for a ball."""
+    return EntityCategory.CATEGORY_ROBOT if agent else CATEGORY
+
+
+def planar_yaw(z, w):
+    """The yaw of the quaternion (0, 0, z, w), rad in [-pi, pi]."""
+    return math.remainder(2.0 * math.atan2(z, w), 2.0 * math.pi)
 
 
 def _result(code=Result.RESULT_OK, message=''):
@@ -138,6 +151,22 @@ def planar_position(pose, frame_id, world_frame):
     return p.x, p.y
 
 
+def planar_pose(pose, frame_id, world_frame):
+    """(x, y, yaw) of a Pose in the z = 0 plane, rotated about z only (an agent's heading)."""
+    q = pose.orientation
+    if all(math.isfinite(v) for v in (q.x, q.y, q.z, q.w)) and (q.x, q.y) == (0.0, 0.0) \
+            and abs(math.hypot(q.z, q.w) - 1.0) <= UNIT_QUATERNION_TOLERANCE:
+        turned = type(pose)()
+        turned.position = pose.position
+        turned.orientation.w = 1.0
+        x, y = planar_position(turned, frame_id, world_frame)
+        return x, y, planar_yaw(q.z, q.w)
+    if all(math.isfinite(v) for v in (q.x, q.y, q.z, q.w)) and (q.x, q.y) == (0.0, 0.0):
+        raise edits.EditRefused(edits.INVALID_POSE, 'the orientation is not a unit quaternion')
+    x, y = planar_position(pose, frame_id, world_frame)
+    return x, y, 0.0
+
+
 def planar_velocity(twist):
     """(vx, vy) of a Twist, which must be linear and in the z = 0 plane."""
     linear, angular = twist.linear, twist.angular
@@ -163,10 +192,10 @@ def spawn_request(name, allow_renaming, uri, resource_string, namespace, initial
     if namespace:
         raise edits.EditRefused(edits.NAMESPACE_INVALID, 'balls have no ROS interfaces to '
                                                          'put in a namespace; leave it empty')
-    radius, mass, (vx, vy) = edits.parse_resource(resource_string)
+    radius, mass, (vx, vy), agent = edits.parse_spawn(resource_string)
     x, y = planar_position(initial_pose.pose, initial_pose.header.frame_id, world_frame)
     ball = edits.Ball(x=x, y=y, vx=vx, vy=vy, radius=radius, mass=mass)
-    return SpawnRequest(name=name, allow_renaming=allow_renaming, ball=ball)
+    return SpawnRequest(name=name, allow_renaming=allow_renaming, ball=ball, agent=agent)
 
 
 def _nested_repeat(tree, inside=False):
@@ -358,8 +387,12 @@ class SimulationInterfaces:
         indices = range(len(world))
         if filters.tags.tags:
             return _result(Result.RESULT_FEATURE_UNSUPPORTED, 'balls have no tags')
-        if filters.categories and CATEGORY not in [c.category for c in filters.categories]:
-            return []
+        if filters.categories:
+            wanted = {c.category for c in filters.categories}
+            agents = simulation.agents
+            names = simulation.names
+            indices = [i for i in indices
+                       if category(names[i] in agents) in wanted]
         if filters.filter:
             try:
                 pattern = name_filter(filters.filter)
@@ -422,11 +455,11 @@ class SimulationInterfaces:
     def set_entity_state(self, request, response):
         state = request.state
         try:
-            x, y = planar_position(state.pose, state.header.frame_id,
-                                   self.simulation.frame_id)
+            x, y, yaw = planar_pose(state.pose, state.header.frame_id,
+                                    self.simulation.frame_id)
             vx, vy = planar_velocity(state.twist)
             self.node.edit(lambda: (None, self.simulation.set_state(request.entity, x, y,
-                                                                    vx, vy)))
+                                                                    vx, vy, yaw=yaw)))
             response.result = _result()
         except edits.EditRefused as refusal:
             code = SetEntityState.Response.INVALID_POSE if refusal.kind == edits.INVALID_POSE \
@@ -442,9 +475,11 @@ class SimulationInterfaces:
             response.result = _result(Result.RESULT_NOT_FOUND, str(refusal))
             return response
         world = simulation.world
-        response.info.category.category = CATEGORY
+        agent = request.entity in simulation.agents
+        response.info.category.category = category(agent)
         radius = number_text(world.radii[index])
-        response.info.description = (f'ball, radius {radius} m, mass '
+        kind = 'agent' if agent else 'ball'
+        response.info.description = (f'{kind}, radius {radius} m, mass '
                                      f'{number_text(world.masses[index])} kg')
         response.result = _result()
         return response

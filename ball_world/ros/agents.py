@@ -1,0 +1,136 @@
+"""The agents' ROS topics: <name>/cmd_vel in, <name>/odom, /tf and /tf_static out.
+
+The node creates one AgentTopics and calls it at four points: sync() when the set of balls
+changes, drain() before each step, publish() after it, and report() for the progress line.
+Nothing here decides anything: commands go to Simulation.command (core.agents checks them),
+and the odom and /tf bytes are the StepRecord's, made once for the publishers and the
+recording alike (raw CDR, like `balls`).
+
+Names are relative (`<name>/cmd_vel` resolves under the node's namespace, so `-r __ns:=/sim2`
+gives /sim2/ball_0/cmd_vel); /tf and /tf_static are absolute, as tf2 listens on them, and
+frames carry frame_prefix so two worlds on one graph do not clash.
+
+A flood of commands (thousands a second, NaN, 1e308) costs one decode and one check per
+message: a refusal is counted, and a warning is logged at most once per WARN_PERIOD without
+formatting anything in between.
+"""
+import time
+
+from geometry_msgs.msg import Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from tf2_msgs.msg import TFMessage
+
+from ball_world.core.agents import CommandRejected
+from ball_world.msgs.twist_cdr import decode_twist, decode_twist_stamped
+
+#: cmd_vel messages a subscription holds between two steps (the node drains them all).
+CMD_VEL_DEPTH = 100
+#: Seconds between two warnings about refused commands.
+WARN_PERIOD = 5.0
+
+CMD_VEL_QOS = QoSProfile(depth=CMD_VEL_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+ODOM_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+#: tf2's own profiles: /tf as tf2_ros.TransformBroadcaster, /tf_static latched.
+TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+TF_STATIC_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class AgentTopics:
+    """Subscriptions and publishers of every agent of the node's Simulation."""
+
+    def __init__(self, node, stamped):
+        self.node = node
+        self.stamped = stamped
+        self._message_type = TwistStamped if stamped else Twist
+        self._decode = self._decode_stamped if stamped else decode_twist
+        self._topics = {}  # agent name -> (subscription, odom publisher)
+        self._tf = None
+        self._tf_static = None
+        self._warned_at = -WARN_PERIOD
+        self.sync()
+
+    @property
+    def simulation(self):
+        return self.node.simulation
+
+    @staticmethod
+    def _decode_stamped(data):
+        return decode_twist_stamped(data)[2]
+
+    def sync(self):
+        """Topics for the agents the world has now: new agents get theirs, gone ones lose them.
+
+        A world without agents creates nothing, not even /tf: it speaks as before.
+        """
+        node = self.node
+        names = self.simulation.agents.names
+        for name in [name for name in self._topics if name not in names]:
+            subscription, publisher = self._topics.pop(name)
+            node.destroy_subscription(subscription)
+            node.destroy_publisher(publisher)
+        for name in names:
+            if name in self._topics:
+                continue
+            subscription = node.create_subscription(
+                self._message_type, f'{name}/cmd_vel',
+                lambda data, name=name: self.take(name, data), CMD_VEL_QOS, raw=True)
+            publisher = node.create_publisher(Odometry, f'{name}/odom', ODOM_QOS)
+            self._topics[name] = (subscription, publisher)
+        if names and self._tf is None:
+            self._tf = node.create_publisher(TFMessage, '/tf', TF_QOS)
+            self._tf_static = node.create_publisher(TFMessage, '/tf_static', TF_STATIC_QOS)
+
+    def names(self):
+        """The resolved topic names, for the node's start-up line."""
+        node = self.node
+        return [node.resolve_topic_name(f'{name}/{topic}') for name in self._topics
+                for topic in ('cmd_vel', 'odom')]
+
+    def take(self, name, data):
+        """One cmd_vel message for agent `name`: decoded, checked, given to the Simulation."""
+        try:
+            try:
+                linear_x, linear_y, _, _, _, angular_z = self._decode(data)
+            except ValueError as error:
+                self.simulation.count_rejection('cmd_vel_malformed_message')
+                raise CommandRejected('malformed_message', f'undecodable cmd_vel: {error}')
+            self.simulation.command(name, linear_x, linear_y, angular_z, bytes(data))
+        except CommandRejected as rejection:
+            now = time.monotonic()
+            if now - self._warned_at >= WARN_PERIOD:
+                self._warned_at = now
+                counts = self.simulation.rejected
+                total = sum(v for k, v in counts.items() if k.startswith('cmd_vel_'))
+                self.node.get_logger().warning(
+                    f'refused cmd_vel for {name} ({rejection.reason}; {total} refused so far):'
+                    f' {rejection}')
+
+    def drain(self):
+        """Take every waiting command, in arrival order per agent, before a step.
+
+        As the node does for impulses: the executor hands over one message per wait, too
+        few for a flood; take_message is what it calls itself (rclpy Jazzy).
+        """
+        for name, (subscription, _) in list(self._topics.items()):
+            with subscription.handle:
+                while True:
+                    taken = subscription.handle.take_message(subscription.msg_type, True)
+                    if taken is None:
+                        break
+                    self.take(name, taken[0])
+
+    def publish(self, record):
+        """Publish a step's odom of every agent, its /tf, and /tf_static when it changed."""
+        frame = record.agents
+        if frame is None:
+            return
+        if self._tf is None or any(name not in self._topics for name in frame.names):
+            self.sync()
+        topics = self._topics
+        for name, data in zip(frame.names, frame.odom_cdr):
+            topics[name][1].publish(data)
+        self._tf.publish(frame.tf_cdr)
+        if frame.tf_static_cdr is not None:
+            self._tf_static.publish(frame.tf_static_cdr)

@@ -1,0 +1,209 @@
+"""Agents through real processes: the node in a process of its own, cmd_vel from a Probe.
+
+The Probe is a separate rclpy context (its own DDS participant), as teleop_twist_keyboard or
+a Nav2 controller would be. Speeds are checked against closed forms in steps of simulated
+time (odom's stamps), never against the wall clock.
+"""
+import math
+
+from ball_world_testing.harness import finish, node_command, RECEIVE_QOS
+from geometry_msgs.msg import PoseArray, Twist, TwistStamped
+from nav_msgs.msg import Odometry
+import pytest
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64MultiArray
+from tf2_msgs.msg import TFMessage
+
+STATIC_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: Two agents in a 100 m box, far from everything: nothing but the drive moves them.
+WORLD = ('rate_hz:=50.0', 'markers.rate_hz:=0.0', 'random.count:=0', 'arena:=[0, 0, 100, 100]',
+         'balls.x:=[10.0, 10.0, 50.0]', 'balls.y:=[50.0, 20.0, 80.0]',
+         'balls.vx:=[0.0, 0.0, 0.0]', 'balls.vy:=[0.0, 0.0, 0.0]',
+         'balls.radius:=[0.5, 0.5, 0.5]', 'balls.mass:=[2.0, 1.0, 1.0]',
+         'agents:=[ball_0, ball_1]', 'agent.max_accel:=4.0', 'agent.cmd_timeout:=0.5')
+DT_NS = 20_000_000
+
+
+def twist(x=0.0, y=0.0, z=0.0, wz=0.0):
+    message = Twist()
+    message.linear.x, message.linear.y, message.linear.z = x, y, z
+    message.angular.z = wz
+    return message
+
+
+def stamp_ns(message):
+    return message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
+
+
+def step_of(message):
+    return stamp_ns(message) // DT_NS
+
+
+def forward(odom):
+    return odom.twist.twist.linear.x
+
+
+def test_cmd_vel_reaches_the_speed_in_max_accel_time_holds_it_then_stops(probe, processes):
+    process = processes.start(node_command(*WORLD))
+    odom = probe.listen(Odometry, 'ball_0/odom')
+    other = probe.listen(Odometry, 'ball_1/odom')
+    command = probe.node.create_publisher(Twist, 'ball_0/cmd_vel', 10)
+    probe.spin_until(lambda: len(odom) > 5 and command.get_subscription_count() > 0,
+                     'odom and a reader of cmd_vel', process=process)
+    # 1 m/s forward, repeated (as a controller does) for a while, then silence.
+    sent = 0
+    while sent < 40:
+        command.publish(twist(x=1.0))
+        sent += 1
+        probe.spin_for(0.02)
+    moving = [m for m in odom if forward(m) > 0.0]
+    assert moving, 'the agent never moved'
+    start = step_of(moving[0])  # the first step the command acted on
+    # 1 m/s at 4 m/s^2: 0.25 s = 12.5 steps of 20 ms: full speed from the 13th step on.
+    for message in odom:
+        k = step_of(message) - start + 1
+        if 1 <= k <= 12:
+            assert forward(message) == pytest.approx(4.0 * k * 0.02, abs=1e-9)
+    probe.spin_until(lambda: any(forward(m) == 0.0 and step_of(m) > start + 40 for m in odom),
+                     'the agent to stop after the timeout', process=process)
+    held = [forward(m) for m in odom if start + 13 <= step_of(m) <= start + 30]
+    assert held and all(v == pytest.approx(1.0, abs=1e-12) for v in held)
+    stopped = next(m for m in odom if forward(m) == 0.0 and step_of(m) > start)
+    last_heard = max(step_of(m) for m in odom if forward(m) == pytest.approx(1.0, abs=1e-12))
+    # Braking from 1 m/s at 4 m/s^2 takes 0.25 s: about 13 steps after the last full speed.
+    assert step_of(stopped) - last_heard <= 14
+    assert all(forward(m) == 0.0 for m in other)  # ball_1 heard nothing
+    process.send_signal(2)
+    code, _, err = finish(process)
+    assert code == 0 and 'Traceback' not in err
+
+
+def test_odom_is_the_state_row_and_tf_composes_world_to_base_link(probe, processes):
+    process = processes.start(node_command(*WORLD, 'frame_prefix:=w/'))
+    odom = probe.listen(Odometry, 'ball_1/odom')
+    tf = probe.listen(TFMessage, '/tf')
+    static = probe.listen(TFMessage, '/tf_static', qos=STATIC_QOS)
+    balls = probe.listen(PoseArray, 'balls')
+    state = probe.listen(Float64MultiArray, 'state')
+    command = probe.node.create_publisher(Twist, 'ball_1/cmd_vel', 10)
+    probe.spin_until(lambda: command.get_subscription_count() > 0 and static,
+                     'a reader of cmd_vel and /tf_static', process=process)
+    for _ in range(30):
+        command.publish(twist(x=0.8, y=0.3, wz=1.0))
+        probe.spin_for(0.02)
+    probe.spin_until(lambda: len(odom) > 40, 'odom', process=process)
+    [transforms] = [m.transforms for m in static[-1:]]
+    assert [(t.header.frame_id, t.child_frame_id) for t in transforms] == [
+        ('world', 'w/ball_0/odom'), ('world', 'w/ball_1/odom')]
+    for t in transforms:
+        assert (t.transform.translation.x, t.transform.translation.y,
+                t.transform.rotation.z, t.transform.rotation.w) == (0.0, 0.0, 0.0, 1.0)
+    poses = {stamp_ns(m): m.poses[1].position for m in balls}
+    rows = {}
+    for message in state:
+        x, y, vx, vy = message.data[4:8]
+        rows[(x, y)] = (vx, vy)
+    compared = 0
+    for message in odom:
+        pose = message.pose.pose
+        assert message.header.frame_id == 'w/ball_1/odom'
+        assert message.child_frame_id == 'w/ball_1/base_link'
+        position = poses.get(stamp_ns(message))
+        if position is None:
+            continue
+        assert (pose.position.x, pose.position.y) == (position.x, position.y)  # bit for bit
+        vx, vy = rows[(pose.position.x, pose.position.y)]
+        yaw = 2.0 * math.atan2(pose.orientation.z, pose.orientation.w)
+        body = message.twist.twist.linear
+        assert body.x == pytest.approx(math.cos(yaw) * vx + math.sin(yaw) * vy, abs=1e-12)
+        assert body.y == pytest.approx(math.cos(yaw) * vy - math.sin(yaw) * vx, abs=1e-12)
+        compared += 1
+    assert compared > 20
+    composed = 0
+    for message in tf:
+        [mine] = [t for t in message.transforms if t.child_frame_id == 'w/ball_1/base_link']
+        assert mine.header.frame_id == 'w/ball_1/odom'
+        position = poses.get(stamp_ns(mine))
+        if position is None:
+            continue
+        # world -> odom is the identity: world -> base_link is odom -> base_link.
+        assert (mine.transform.translation.x, mine.transform.translation.y) == (
+            position.x, position.y)
+        composed += 1
+    assert composed > 20
+    process.send_signal(2)
+    assert finish(process)[0] == 0
+
+
+def test_teleop_twist_keyboard_protocol_one_twist_per_key_and_z_ignored(probe, processes):
+    """teleop_twist_keyboard sends one Twist per key press; t and b set linear.z only."""
+    process = processes.start(node_command(*WORLD))
+    odom = probe.listen(Odometry, 'ball_0/odom')
+    command = probe.node.create_publisher(Twist, 'ball_0/cmd_vel', 10)
+    probe.spin_until(lambda: command.get_subscription_count() > 0 and odom,
+                     'a reader of cmd_vel', process=process)
+    command.publish(twist(z=0.5))  # key t: up, which a planar drive ignores
+    probe.spin_for(0.5)
+    assert all(forward(m) == 0.0 and m.pose.pose.position.z == 0.0 for m in odom)
+    seen = len(odom)
+    command.publish(twist(x=0.5, wz=1.0))  # key u: forward and left, once
+    probe.spin_until(lambda: any(forward(m) > 0.4 for m in odom[seen:]), 'the agent to drive',
+                     process=process)
+    probe.spin_until(lambda: forward(odom[-1]) == 0.0 and odom[-1].twist.twist.angular.z == 0.0,
+                     'the agent to stop after cmd_timeout', process=process)
+    turned = [m.twist.twist.angular.z for m in odom[seen:]]
+    assert max(turned) == 1.0
+    process.send_signal(2)
+    assert finish(process)[0] == 0
+
+
+def test_twist_stamped_when_asked_and_names_under_a_namespace(probe, processes):
+    process = processes.start(node_command(*WORLD, 'agent.cmd_vel_stamped:=true',
+                                           ros_args=('-r', '__ns:=/sim2')))
+    odom = probe.listen(Odometry, '/sim2/ball_1/odom')
+    command = probe.node.create_publisher(TwistStamped, '/sim2/ball_1/cmd_vel', 10)
+    probe.spin_until(lambda: command.get_subscription_count() > 0 and odom,
+                     'a reader of /sim2/ball_1/cmd_vel', process=process)
+    message = TwistStamped()
+    message.header.frame_id = 'ball_1/base_link'
+    message.twist.linear.y = 0.5
+    for _ in range(10):
+        command.publish(message)
+        probe.spin_for(0.02)
+    probe.spin_until(lambda: odom[-1].twist.twist.linear.y == pytest.approx(0.5, abs=1e-12),
+                     'the agent to move left', process=process)
+    process.send_signal(2)
+    assert finish(process)[0] == 0
+
+
+def test_hostile_cmd_vel_leaves_the_node_stepping_and_listening(probe, processes):
+    process = processes.start(node_command(*WORLD))
+    balls = probe.listen(PoseArray, 'balls', keep=stamp_ns)
+    odom = probe.listen(Odometry, 'ball_0/odom')
+    publishers = [probe.node.create_publisher(Twist, 'ball_0/cmd_vel', RECEIVE_QOS)
+                  for _ in range(3)]
+    probe.spin_until(lambda: all(p.get_subscription_count() for p in publishers),
+                     'readers of cmd_vel', process=process)
+    bad = [twist(x=math.nan), twist(x=1e308), twist(wz=-math.inf), twist(y=1e300)]
+    before = len(balls)
+    for round_ in range(300):  # 3,600 bad messages from three publishers
+        for publisher in publishers:
+            for message in bad:
+                publisher.publish(message)
+        if round_ % 20 == 0:
+            probe.spin_for(0.01)
+    probe.spin_until(lambda: len(balls) > before + 50, 'fifty more steps', process=process)
+    assert all(forward(m) == 0.0 for m in odom)  # nothing bad moved it
+    stamps = list(balls)
+    assert all(b - a == DT_NS for a, b in zip(stamps, stamps[1:]))  # no step skipped
+    for _ in range(20):
+        publishers[0].publish(twist(x=1.0))
+        probe.spin_for(0.02)
+    probe.spin_until(lambda: forward(odom[-1]) == pytest.approx(1.0, abs=1e-12),
+                     'a good command to be followed', process=process)
+    process.send_signal(2)
+    code, _, err = finish(process)
+    assert code == 0 and 'Traceback' not in err
+    assert 'refused cmd_vel for ball_0' in err
+    assert err.count('refused cmd_vel') <= 3  # at most one warning per 5 s
