@@ -23,6 +23,7 @@ from ball_world.core.scenario import build_world, step_duration_ns
 from ball_world.msgs.agent_cdr import encode_odometry, encode_tf_message
 from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
                                  encode_vector3_stamped)
+from ball_world.scans import AgentScans, check as check_scans
 from ball_world.step_record import (AgentFrame, AppliedCommand, AppliedEdit, AppliedImpulse,
                                     RunInfo, STATS_FIELDS, StepRecord, WorldSnapshot)
 
@@ -54,6 +55,7 @@ def build(parameters):
     parameters = checked(parameters)
     world = build_world(parameters)
     agent_names(parameters, len(world))
+    check_scans(parameters)
     return BuiltWorld(parameters=parameters, world=world, dt_ns=step_duration_ns(parameters))
 
 
@@ -113,6 +115,7 @@ class Simulation:
         self._drive = None  # the agents' impulses for the next step, once prepared
         self._agent_frames = None  # (names, odom frames, body frames) last recorded
         self._commands = []  # commands taken since the last step
+        self._scans = AgentScans(parameters)
         self._world_changed = False
         self._applied = []  # impulses applied since the last step
         self._edits = []  # edits applied since the last step
@@ -482,7 +485,9 @@ class Simulation:
             odom_cdr=tuple(encode_odometry(stamp_ns, odom_frames, base_frames, located, yaws,
                                            twists)),
             tf_cdr=encode_tf_message(stamp_ns, odom_frames, base_frames, located, yaws),
-            tf_static_cdr=static)
+            tf_static_cdr=static,
+            scans=self._scans.take(self.world, names, indices, yaws, base_frames,
+                                   self.step_index, stamp_ns, self.dt_ns))
 
     def _each_sink(self, action):
         """Run action on every sink; a sink that raises is dropped and reported once."""

@@ -63,9 +63,9 @@ class Fan(NamedTuple):
             raise ValueError(f'scanner values must be finite: {self}')
         if self.samples < 1:
             raise ValueError(f'a scanner needs at least one beam, not {self.samples}')
-        if not 0.0 <= self.range_min < self.range_max:
-            raise ValueError(f'scanner range_min {self.range_min:g} m must be >= 0 and below '
-                             f'range_max {self.range_max:g} m')
+        if not 0.0 <= self.range_min <= self.range_max or self.range_max <= 0.0:
+            raise ValueError(f'scanner range_min {self.range_min:g} m must be >= 0 and at '
+                             f'most range_max {self.range_max:g} m, which must be > 0')
         if self.noise_stddev < 0.0:
             raise ValueError(f'scanner noise_stddev {self.noise_stddev:g} m is negative')
         return self

@@ -1,0 +1,118 @@
+"""Agents' scans in a Simulation (ball_world.scans): when they are taken, what the LaserScan
+bytes say (REP 117, the step's stamp, the agent's frame), and that a run repeats them bit for
+bit. The ranges are checked against the box's closed form, not against core.lidar."""
+import math
+
+import numpy as np
+import pytest
+
+from ball_world.core.parameters import ParameterError
+from ball_world.msgs.agent_cdr import decode_laser_scan
+from ball_world.simulation import build, Simulation
+
+
+class Records:
+    """A sink that keeps every StepRecord."""
+
+    def __init__(self):
+        self.records = []
+
+    def start_segment(self, world, info):
+        pass
+
+    def write_step(self, record):
+        self.records.append(record)
+
+    def flush(self):
+        pass
+
+    def close(self):
+        pass
+
+
+def agent_in_a_box(**overrides):
+    """ball_0 (r 0.3), an agent at rest at (3, 4) in the box [0, 10] x [0, 8], alone."""
+    parameters = {'rate_hz': 60.0, 'arena': [0.0, 0.0, 10.0, 8.0], 'random.count': 0,
+                  'balls.x': [3.0], 'balls.y': [4.0], 'balls.vx': [0.0], 'balls.vy': [0.0],
+                  'balls.radius': [0.3], 'balls.mass': [1.0], 'agents': ['ball_0'],
+                  'physics.backend': 'numpy', 'agent.scan.noise_stddev': 0.0}
+    parameters.update(overrides)
+    sink = Records()
+    simulation = Simulation(parameters, sinks=[sink])
+    return simulation, sink.records
+
+
+def box_range(angle):
+    """From (3, 4) in [0, 10] x [0, 8] along `angle`: the nearest wall."""
+    c, s = math.cos(angle), math.sin(angle)
+    return min(d for d in ((7.0 / c if c > 0 else math.inf), (-3.0 / c if c < 0 else math.inf),
+                           (4.0 / s if s > 0 else math.inf), (-4.0 / s if s < 0 else math.inf)))
+
+
+def test_scans_at_the_scan_rate_of_simulated_time_stamped_and_framed():
+    simulation, records = agent_in_a_box(frame_prefix='w1/')
+    for _ in range(30):
+        simulation.step()
+    scanned = [record.step for record in records if record.agents.scans]
+    # dt = 1/60 s, 10 Hz: step 0, then every sixth step (the end of step 6 is 0.1 s).
+    assert scanned == [0, 6, 12, 18, 24, 30]
+    record = records[12]
+    (scan,) = record.agents.scans
+    message = decode_laser_scan(scan.cdr)
+    assert message.stamp_ns == record.stamp_ns == 12 * simulation.dt_ns
+    assert message.frame_id == 'w1/ball_0/base_link'
+    assert message.angle_min == pytest.approx(-math.pi)
+    assert message.angle_increment == pytest.approx(2.0 * math.pi / 360)
+    assert message.angle_max == pytest.approx(math.pi - 2.0 * math.pi / 360)
+    assert len(message.ranges) == 360
+    # range_min 0: 0.05 beyond the agent's radius; range_max the default 12 m.
+    assert message.range_min == pytest.approx(0.35)
+    assert message.range_max == pytest.approx(12.0)
+    assert message.scan_time == pytest.approx(0.1)
+    assert message.time_increment == 0.0
+    # The box's closed form, to float32 (the message's type) and to 1e-9 m before it.
+    angles = -math.pi + np.arange(360) * (2.0 * math.pi / 360)
+    expected = np.array([box_range(a) for a in angles])
+    assert np.max(np.abs(scan.ranges - expected)) < 1e-9
+    assert np.array_equal(message.ranges, expected.astype(np.float32))
+
+
+def test_the_heading_turns_the_scan():
+    simulation, records = agent_in_a_box()
+    simulation.command('ball_0', 0.0, 0.0, 1.0)
+    for _ in range(6):
+        simulation.step()
+    yaw = float(records[6].agents.yaws[0])
+    assert yaw != 0.0
+    (scan,) = records[6].agents.scans
+    position = records[6].positions[0]
+    assert position == pytest.approx([3.0, 4.0], abs=1e-12)
+    angles = yaw - math.pi + np.arange(360) * (2.0 * math.pi / 360)
+    expected = np.array([box_range(a) for a in angles])
+    assert np.max(np.abs(scan.ranges - expected)) < 1e-9
+
+
+def test_noisy_scans_repeat_bit_for_bit_in_a_second_run():
+    def run():
+        simulation, records = agent_in_a_box(**{'agent.scan.noise_stddev': 0.01,
+                                                'random.seed': 5})
+        simulation.command('ball_0', 0.5, 0.0, 0.3)
+        for _ in range(20):
+            simulation.step()
+        return [scan.cdr for record in records for scan in record.agents.scans]
+    first = run()
+    assert len(first) == 4
+    assert first == run()
+    assert len(set(first)) == 4  # every scan draws its own noise
+
+
+def test_no_scanner_with_zero_samples():
+    simulation, records = agent_in_a_box(**{'agent.scan.samples': 0})
+    simulation.step()
+    assert all(record.agents.scans == () for record in records)
+
+
+def test_a_range_min_beyond_range_max_is_refused_by_name():
+    parameters = {'random.count': 2, 'agents': ['ball_0'], 'agent.scan.range_min': 20.0}
+    with pytest.raises(ParameterError, match='agent.scan.range_min'):
+        build(parameters)
