@@ -81,7 +81,14 @@ VIEW_TOPICS = {
     'markers': 'visualization_msgs/msg/MarkerArray',
     'clock': 'rosgraph_msgs/msg/Clock',
 }
-TOPIC_TYPES = {**STEP_TOPICS, **VIEW_TOPICS}
+#: Topics of each agent, `<namespace>/<name>/<role>`, declared at their first message.
+AGENT_TOPICS = {
+    'scan': 'sensor_msgs/msg/LaserScan',
+}
+#: Absolute topics of a world with agents (as tf2 names them), declared at their first message.
+TF_TOPICS = {'tf': '/tf', 'tf_static': '/tf_static'}
+TOPIC_TYPES = {**STEP_TOPICS, **VIEW_TOPICS, **AGENT_TOPICS,
+               **{role: 'tf2_msgs/msg/TFMessage' for role in TF_TOPICS}}
 #: The clock topic is absolute, whatever the node's namespace (as the node publishes it).
 CLOCK_TOPIC = '/clock'
 
@@ -132,6 +139,9 @@ ROLE_QOS = {
     'edits': offered_qos_profiles(1000),
     'markers': offered_qos_profiles(1, durability='transient_local'),
     'clock': offered_qos_profiles(1, reliability='best_effort'),
+    'scan': offered_qos_profiles(10),
+    'tf': offered_qos_profiles(100),
+    'tf_static': offered_qos_profiles(1, durability='transient_local'),
 }
 
 _SEQUENCE_MODULO = 2 ** 32  # MCAP message sequence numbers are uint32
@@ -384,6 +394,14 @@ class McapSink:
         channel = self._roles.get(role)
         if channel is None:  # a LAZY_ROLES topic's first message
             channel = self._roles[role] = self._channel(self._topics[role], role)
+        self._add_to(channel, log_time_ns, data)
+
+    def _add_agent(self, role, name, log_time_ns, data):
+        """A message of agent `name`'s topic `role`, beside `balls` (as the node names it)."""
+        topic = f"{self._topics['balls'].rpartition('/')[0]}/{name}/{role}"
+        self._add_to(self._channel(topic, role), log_time_ns, data)
+
+    def _add_to(self, channel, log_time_ns, data):
         sequence = (self._sequences.get(channel, 0) + 1) % _SEQUENCE_MODULO
         self._sequences[channel] = sequence
         self._writer.add_message(channel, log_time=log_time_ns, data=data,
@@ -411,6 +429,14 @@ class McapSink:
         self._add('stats', log_time_ns, record.stats_cdr)
         if self._clock:
             self._add('clock', log_time_ns, encode_clock(record.stamp_ns))
+        agents = record.agents
+        if agents is not None:
+            if agents.tf_static_cdr is not None:
+                self._add_to(self._channel(TF_TOPICS['tf_static'], 'tf_static'), log_time_ns,
+                             agents.tf_static_cdr)
+            self._add_to(self._channel(TF_TOPICS['tf'], 'tf'), log_time_ns, agents.tf_cdr)
+            for scan in agents.scans:
+                self._add_agent('scan', scan.name, log_time_ns, scan.cdr)
         if self._markers is not None and self._markers.due(record.stamp_ns):
             self._add('markers', log_time_ns, self._markers.build(record))
         self._last_log_ns = log_time_ns
