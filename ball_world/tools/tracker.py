@@ -399,6 +399,10 @@ class ParameterError(ValueError):
     """A parameter value the tracker cannot work with; the message names it."""
 
 
+#: Scans kept while their transform has not arrived (the oldest is dropped past this).
+WAITING_SCANS = 10
+
+
 def _node_class():
     """The ROS node, made on first use so that the algorithm above imports without ROS."""
     from geometry_msgs.msg import Pose, PoseArray
@@ -432,6 +436,7 @@ def _node_class():
                                    int(numbers['confirm']), int(numbers['max_misses']))
             self.tracker = Tracker(self.options)
             self.poses = Poses()
+            self.waiting = []  # scans waiting for the transform at their stamp
             self.scan_frame = f'{prefix}{agent}/base_link'
             # Relative names: under -r __ns:=/sim2 these are the world's in /sim2.
             self.create_subscription(LaserScan, f'{agent}/scan', self.on_scan, 10)
@@ -454,21 +459,35 @@ def _node_class():
                                t.translation.x, t.translation.y,
                                yaw_of((t.rotation.x, t.rotation.y, t.rotation.z,
                                        t.rotation.w)), static)
+            self.track_waiting()
 
         def on_scan(self, msg):
-            stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
-            pose = self.poses.lookup(self.world_frame, msg.header.frame_id, stamp)
-            if pose is None:
-                self.get_logger().warning(
-                    f'no transform {self.world_frame} -> {msg.header.frame_id} at the '
-                    "scan's stamp yet; scan skipped", throttle_duration_sec=5.0)
-                return
-            scan = ScanGeometry(msg.angle_min, msg.angle_increment, msg.range_min,
-                                msg.range_max)
-            centres = to_world(detect(np.array(msg.ranges, dtype=np.float64), scan,
-                                      self.options), *pose)
-            tracks = self.tracker.update(stamp[0] + 1e-9 * stamp[1], centres)
-            self.publish(msg.header.stamp, tracks)
+            # A scan and the /tf of its step come on two topics, in either order: a scan
+            # waits (a few at most) for the transform at its stamp.
+            self.waiting.append(msg)
+            del self.waiting[:-WAITING_SCANS]
+            self.track_waiting()
+
+        def track_waiting(self):
+            while self.waiting:
+                msg = self.waiting[0]
+                stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+                pose = self.poses.lookup(self.world_frame, msg.header.frame_id, stamp)
+                if pose is None:
+                    if len(self.waiting) == WAITING_SCANS:
+                        self.waiting.pop(0)
+                        self.get_logger().warning(
+                            f'no transform {self.world_frame} -> {msg.header.frame_id} at '
+                            "a scan's stamp; scan dropped", throttle_duration_sec=5.0)
+                        continue
+                    return
+                self.waiting.pop(0)
+                scan = ScanGeometry(msg.angle_min, msg.angle_increment, msg.range_min,
+                                    msg.range_max)
+                centres = to_world(detect(np.array(msg.ranges, dtype=np.float64), scan,
+                                          self.options), *pose)
+                tracks = self.tracker.update(stamp[0] + 1e-9 * stamp[1], centres)
+                self.publish(msg.header.stamp, tracks)
 
         def publish(self, stamp, tracks):
             markers = self.MarkerArray()
