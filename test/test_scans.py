@@ -116,3 +116,52 @@ def test_a_range_min_beyond_range_max_is_refused_by_name():
     parameters = {'random.count': 2, 'agents': ['ball_0'], 'agent.scan.range_min': 20.0}
     with pytest.raises(ParameterError, match='agent.scan.range_min'):
         build(parameters)
+
+
+def test_rviz_draws_ball_0s_scan_with_the_publishers_qos():
+    from pathlib import Path
+
+    import yaml
+
+    from ball_world.ros.agents import ODOM_QOS  # the QoS <name>/scan is published with
+    rviz = yaml.safe_load((Path(__file__).parent.parent / 'rviz' / 'ball_world.rviz')
+                          .read_text())
+    (display,) = [d for d in rviz['Visualization Manager']['Displays']
+                  if d['Class'] == 'rviz_default_plugins/LaserScan']
+    assert display['Enabled'] is True and display['Topic']['Value'] == '/ball_0/scan'
+    assert display['Topic']['Reliability Policy'].lower() == ODOM_QOS.reliability.name.lower()
+    assert display['Topic']['Durability Policy'].lower() == ODOM_QOS.durability.name.lower()
+
+
+def test_rerun_draws_each_scans_hit_points_in_the_arena(tmp_path):
+    from ball_world_testing.harness import open_rrd
+
+    from ball_world.recording.rerun_log import RerunSink, SCANS
+    path = tmp_path / 'run.rrd'
+    sink = RerunSink(path)
+    records = Records()
+    simulation = Simulation({'rate_hz': 60.0, 'arena': [0.0, 0.0, 10.0, 8.0],
+                             'random.count': 0, 'balls.x': [3.0], 'balls.y': [4.0],
+                             'balls.vx': [0.0], 'balls.vy': [0.0], 'balls.radius': [0.3],
+                             'balls.mass': [1.0], 'agents': ['ball_0'],
+                             'physics.backend': 'numpy', 'agent.scan.noise_stddev': 0.0},
+                            sinks=[sink, records])
+    for _ in range(12):
+        simulation.step()
+    simulation.close()
+    reader = open_rrd(path)
+    (store,) = reader.recordings()
+    logged = {}
+    for chunk in reader.stream(store=store):
+        if chunk.entity_path == f'/{SCANS}/ball_0':
+            batch = chunk.to_record_batch()
+            for step, points in zip(batch.column('step').to_pylist(),
+                                    batch.column('Points2D:positions').to_pylist()):
+                logged[step] = np.array(points, dtype=np.float64).reshape(-1, 2)
+    assert sorted(logged) == [0, 6, 12]
+    # Every hit point of the lone agent's scan lies on the box's walls (float32 positions).
+    points = logged[6]
+    assert len(points) == 360
+    on_wall = np.minimum(np.minimum(points[:, 0], 10.0 - points[:, 0]),
+                         np.minimum(points[:, 1], 8.0 - points[:, 1]))
+    assert np.all(np.abs(on_wall) < 1e-5)
