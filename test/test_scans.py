@@ -165,3 +165,30 @@ def test_rerun_draws_each_scans_hit_points_in_the_arena(tmp_path):
     on_wall = np.minimum(np.minimum(points[:, 0], 10.0 - points[:, 0]),
                          np.minimum(points[:, 1], 8.0 - points[:, 1]))
     assert np.all(np.abs(on_wall) < 1e-5)
+
+
+def test_resim_checks_every_recorded_scan_bit_for_bit(tmp_path, monkeypatch):
+    # The agent stays at rest (no command, so its drive pushes nothing); ball_1 moves, so
+    # every scan differs from the last. Noise on: re-simulation must draw it again.
+    from ball_world.core import lidar
+    from ball_world.recording.mcap_reader import Recording
+    from ball_world.recording.mcap_writer import McapSink
+    from ball_world.tools.resim import resimulate
+    path = tmp_path / 'run.mcap'
+    parameters = {'rate_hz': 60.0, 'random.count': 0, 'balls.x': [3.0, 6.0],
+                  'balls.y': [4.0, 4.0], 'balls.vx': [0.0, 1.0], 'balls.vy': [0.0, 0.5],
+                  'balls.radius': [0.3, 0.3], 'balls.mass': [1.0, 1.0], 'agents': ['ball_0'],
+                  'physics.backend': 'numpy', 'random.seed': 9}
+    simulation = Simulation(parameters, sinks=[McapSink(path)])
+    for _ in range(30):
+        simulation.step()
+    simulation.close()
+    comparison = resimulate(Recording(path))
+    assert comparison.identical
+    # A re-simulation whose noise is drawn for another name differs at every scan, and says
+    # which agent's scan at which step.
+    monkeypatch.setattr(lidar, 'name_key', lambda name: 12345)
+    comparison = resimulate(Recording(path))
+    assert not comparison.identical
+    assert 'scan ball_0' in comparison.first.what and comparison.first.step == 0
+    assert comparison.count == 6  # steps 0, 6, 12, 18, 24, 30
