@@ -167,7 +167,9 @@ def test_rerun_draws_each_scans_hit_points_in_the_arena(tmp_path):
     assert np.all(np.abs(on_wall) < 1e-5)
 
 
-def test_resim_checks_every_recorded_scan_bit_for_bit(tmp_path, monkeypatch):
+@pytest.mark.parametrize('backend, mode', [('numpy', 'seed'), ('numba', 'seed'),
+                                           ('numba', 'exact')])
+def test_resim_checks_every_recorded_scan_bit_for_bit(tmp_path, monkeypatch, backend, mode):
     # The agent stays at rest (no command, so its drive pushes nothing); ball_1 moves, so
     # every scan differs from the last. Noise on: re-simulation must draw it again.
     from ball_world.core import lidar
@@ -178,7 +180,7 @@ def test_resim_checks_every_recorded_scan_bit_for_bit(tmp_path, monkeypatch):
     parameters = {'rate_hz': 60.0, 'random.count': 0, 'balls.x': [3.0, 6.0],
                   'balls.y': [4.0, 4.0], 'balls.vx': [0.0, 1.0], 'balls.vy': [0.0, 0.5],
                   'balls.radius': [0.3, 0.3], 'balls.mass': [1.0, 1.0], 'agents': ['ball_0'],
-                  'physics.backend': 'numpy', 'random.seed': 9}
+                  'physics.backend': backend, 'physics.mode': mode, 'random.seed': 9}
     simulation = Simulation(parameters, sinks=[McapSink(path)])
     for _ in range(30):
         simulation.step()
