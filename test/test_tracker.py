@@ -160,3 +160,14 @@ def test_broken_trackers_fail_the_bounds():
     assert forgetful.mota < 0.3
     shifted = clear_mot(tracked_run(0, Shifted()), gate=0.5)
     assert shifted.motp > 0.08
+
+
+def test_tracker_command_line_help_and_bad_parameters():
+    from ball_world_testing.harness import run_tool
+    code, out, err = run_tool('ball_world_tracker', '--help')
+    assert code == 0 and 'max_misses' in out and 'ball_world_score' in out
+    code, out, err = run_tool('ball_world_tracker', '--ros-args', '-p', 'gate:=-1.0')
+    assert code == 2 and err.strip().splitlines() == [
+        "ball_world_tracker: parameter 'gate': expected a number > 0, got -1.0"]
+    code, out, err = run_tool('ball_world_tracker', '--ros-args', '-p', 'radius:=[0.3, 0.1]')
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "'radius'" in err

@@ -429,8 +429,8 @@ def _node_class():
                 raise ParameterError(f"parameter 'radius': expected [min, max] with "
                                      f'0 < min <= max, got {radius!r}')
             numbers = {name: self.number(name, default) for name, default in (
-                ('gate', 0.6), ('meas_stddev', 0.03), ('accel_stddev', 8.0),
-                ('confirm', 1), ('max_misses', 2))}
+                ('gate', 0.6), ('meas_stddev', 0.03), ('accel_stddev', 8.0), ('confirm', 1))}
+            numbers['max_misses'] = self.number('max_misses', 2, zero=True)
             self.options = Options(float(radius[0]), float(radius[1]), numbers['gate'],
                                    numbers['meas_stddev'], numbers['accel_stddev'],
                                    int(numbers['confirm']), int(numbers['max_misses']))
@@ -522,13 +522,13 @@ def _node_class():
                 raise ParameterError(f"parameter '{name}': expected a name, got {value!r}")
             return value
 
-        def number(self, name, default):
+        def number(self, name, default, zero=False):
             value = self.declare_parameter(
                 name, default, ParameterDescriptor(dynamic_typing=True)).value
             if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                    or not math.isfinite(value) or value <= 0:
-                raise ParameterError(f"parameter '{name}': expected a number > 0, got "
-                                     f'{value!r}')
+                    or not math.isfinite(value) or value < 0 or (value == 0 and not zero):
+                raise ParameterError(f"parameter '{name}': expected a number "
+                                     f"{'>=' if zero else '>'} 0, got {value!r}")
             return value
 
     return TrackerNode
