@@ -111,7 +111,7 @@ class Simulation:
         self.agents = Agents(agent_names(parameters, len(world)),
                              Limits.from_parameters(parameters))
         self._drive = None  # the agents' impulses for the next step, once applied
-        self._agent_frames = None  # (names, odom frames, body frames) last recorded
+        self._agent_frames = None  # ((names, frame_id), odom frames, body frames) last used
         self._commands = []  # commands taken since the last step
         self._world_changed = False
         self._applied = []  # impulses applied since the last step
@@ -468,10 +468,11 @@ class Simulation:
         twists[:, 1] = cos * moving[:, 1] - sin * moving[:, 0]
         twists[:, 2] = [agents.yaw_rate(name, stamp_ns) for name in names]
         static = None
-        if self._agent_frames is None or self._agent_frames[0] != names:
+        key = (names, self.frame_id)  # the node may change frame_id between steps
+        if self._agent_frames is None or self._agent_frames[0] != key:
             prefix = str(self.parameters['frame_prefix'])
             pairs = [frames(prefix, name) for name in names]
-            self._agent_frames = (names, tuple(p[0] for p in pairs),
+            self._agent_frames = (key, tuple(p[0] for p in pairs),
                                   tuple(p[1] for p in pairs))
             count = len(names)
             static = encode_tf_message(stamp_ns, (self.frame_id,) * count,
