@@ -112,8 +112,8 @@ class Simulation:
         self._names = tuple(self.entities.names)
         self.agents = Agents(agent_names(parameters, len(world)),
                              Limits.from_parameters(parameters))
-        self._drive = None  # the agents' impulses for the next step, once prepared
-        self._agent_frames = None  # (names, odom frames, body frames) last recorded
+        self._drive = None  # the agents' impulses for the next step, once applied
+        self._agent_frames = None  # ((names, frame_id), odom frames, body frames) last used
         self._commands = []  # commands taken since the last step
         self._scans = AgentScans(parameters)
         self._world_changed = False
@@ -238,20 +238,24 @@ class Simulation:
             raise
         self._commands.append(AppliedCommand(name, float(vx), float(vy), float(wz), cdr))
 
-    def prepare_drive(self):
-        """Compute the agents' impulses for the next step from the velocities now.
+    def apply_drive(self):
+        """Apply the agents' impulses for the next step now, once: (applied, rejected).
 
-        step() does it itself; re-simulation calls it first to learn how many of a step's
-        recorded impulses are the drive's (they come before the impulses still queued).
-        Returns how many there are.
+        They are computed from the velocities at this moment and applied before the
+        impulses still queued. step() does it itself; re-simulation calls it first to learn
+        how many of a step's recorded impulses are the drive's (they follow those applied
+        by the step's edits and precede the rest).
         """
-        if self._drive is None:
-            end_ns = (self.step_index + 1) * self.dt_ns
-            world = self.world
-            self._drive = deque(self.agents.impulses(world.velocities, world.masses,
-                                                     self.index_of, self.dt_ns, end_ns)
-                                if len(self.agents) else ())
-        return len(self._drive)
+        if self._drive is not None:  # already applied for this step
+            return 0, []
+        end_ns = (self.step_index + 1) * self.dt_ns
+        world = self.world
+        self._drive = deque(self.agents.impulses(world.velocities, world.masses,
+                                                 self.index_of, self.dt_ns, end_ns)
+                            if len(self.agents) else ())
+        before = len(self._applied)
+        rejected = self._apply(self._drive)
+        return len(self._applied) - before, rejected
 
     # Edits ------------------------------------------------------------------------------
 
@@ -403,10 +407,9 @@ class Simulation:
 
         Returns (record, rejected impulses).
         """
-        self.prepare_drive()
-        rejected = self._apply(self._drive)
-        self._drive = None
+        _, rejected = self.apply_drive()
         rejected += self.apply_queued()
+        self._drive = None
         stats = self.world.step(self.dt_ns * 1e-9)
         if len(self.agents):
             self.agents.turn(self.dt_ns, (self.step_index + 1) * self.dt_ns)
@@ -468,10 +471,11 @@ class Simulation:
         twists[:, 1] = cos * moving[:, 1] - sin * moving[:, 0]
         twists[:, 2] = [agents.yaw_rate(name, stamp_ns) for name in names]
         static = None
-        if self._agent_frames is None or self._agent_frames[0] != names:
+        key = (names, self.frame_id)  # the node may change frame_id between steps
+        if self._agent_frames is None or self._agent_frames[0] != key:
             prefix = str(self.parameters['frame_prefix'])
             pairs = [frames(prefix, name) for name in names]
-            self._agent_frames = (names, tuple(p[0] for p in pairs),
+            self._agent_frames = (key, tuple(p[0] for p in pairs),
                                   tuple(p[1] for p in pairs))
             count = len(names)
             static = encode_tf_message(stamp_ns, (self.frame_id,) * count,

@@ -252,10 +252,10 @@ def test_commands_replayed_at_their_steps_give_the_same_run_bit_for_bit():
     for record in recorded:
         for command in record.commands:
             again.command(command.name, command.vx, command.vy, command.wz)
-        count = again.prepare_drive()
+        count, _ = again.apply_drive()
         replayed, _ = again.step()
         assert [i.cdr for i in replayed.impulses] == [i.cdr for i in record.impulses]
-        assert count <= len(record.impulses)
+        assert count == len(record.impulses)
         assert replayed.balls_cdr == record.balls_cdr
         assert replayed.state_cdr == record.state_cdr
         assert replayed.agents.yaws.tobytes() == record.agents.yaws.tobytes()
@@ -334,3 +334,14 @@ def test_odom_and_tf_bytes_carry_the_step_bit_for_bit_and_the_body_twist():
     tf = decode_tf_message(record.agents.tf_cdr)
     assert tf.child_frame_ids == ['w1/ball_0/base_link']
     assert tf.transforms[0, :2].tobytes() == record.positions[0].tobytes()
+
+
+def test_tf_static_follows_a_new_frame_id():
+    from ball_world.msgs.agent_cdr import decode_tf_message
+    simulation = one_agent()
+    simulation.step()
+    simulation.frame_id = 'map'
+    record, _ = simulation.step()
+    assert decode_tf_message(record.agents.tf_static_cdr).frame_ids == ['map']
+    record, _ = simulation.step()
+    assert record.agents.tf_static_cdr is None

@@ -3,8 +3,10 @@ recorded to MCAP by the node's own sink, scored by ball_world_score with the exa
 tracker (figures a working tracker reaches), and with a user's tracks read from another MCAP
 (the ground truth itself: a perfect score, computed independently of the example tracker).
 """
+from geometry_msgs.msg import Twist
 from mcap_ros2.writer import Writer as Ros2Writer
 import pytest
+from rclpy.serialization import serialize_message
 
 from ball_world.msgs.definitions import message_definition
 from ball_world.recording.mcap_writer import McapSink
@@ -20,8 +22,11 @@ def recording(tmp_path_factory):
     """Eight simulated seconds: ball_0 drives forward at 0.5 m/s turning at 0.4 rad/s."""
     path = tmp_path_factory.mktemp('score') / 'run.mcap'
     simulation = Simulation(PARAMETERS, sinks=[McapSink(path)])
+    twist = Twist()
+    twist.linear.x, twist.angular.z = 0.5, 0.4
+    command = serialize_message(twist)  # recorded as received on cmd_vel
     for _ in range(8 * 60):
-        simulation.command('ball_0', 0.5, 0.0, 0.4)
+        simulation.command('ball_0', 0.5, 0.0, 0.4, command)
         simulation.step()
     simulation.close()
     return path

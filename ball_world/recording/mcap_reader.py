@@ -51,6 +51,7 @@ from ball_world.core.parameters import checked, ParameterError
 from ball_world.core.scenario import build_world, step_duration_ns
 from ball_world.msgs.cdr import (decode_pose_array, decode_state, decode_state_layout,
                                  decode_string, decode_vector3_stamped)
+from ball_world.recording import agent_topics
 from ball_world.recording.files import open_regular
 from ball_world.recording.mcap_writer import (EVENT_ROLES, flatten_parameters, METADATA_NAME,
                                               NODE_NAME, STEP_TOPICS)
@@ -82,6 +83,8 @@ MAX_EDIT_TEXT = 4096
 EDIT_KINDS = ('spawn', 'delete', 'set_state')
 _EDIT_NUMBERS = ('x', 'y', 'vx', 'vy', 'radius', 'mass')
 _EDIT_FIELDS = frozenset(('kind', 'name', *_EDIT_NUMBERS, 'impulses_before'))
+#: Keys only edits of agents carry: a spawn's 'agent': true, a set_state's 'yaw'.
+_AGENT_EDIT_FIELDS = {'spawn': 'agent', 'set_state': 'yaw'}
 #: Roles a segment's topics may lack: recordings made before edits were recorded.
 _OPTIONAL_ROLES = ('edits',)
 _WHOLE_NUMBER = re.compile(r'-?[0-9]{1,19}')
@@ -408,6 +411,15 @@ def parse_edit(data, impulse_count):
     except ValueError as error:
         raise RecordingError(f'not a std_msgs/String: {error}') from None
     fields = load_untrusted(text, 'the text', MAX_EDIT_TEXT)
+    kind = fields.get('kind') if isinstance(fields, dict) else None
+    extra = _AGENT_EDIT_FIELDS.get(kind) if isinstance(kind, str) else None
+    agent = {}
+    if extra is not None and extra in fields:
+        fields = dict(fields)
+        value = fields.pop(extra)
+        if extra == 'agent' and value is not True:
+            raise RecordingError(f'agent is {_text(value)}, not true')
+        agent[extra] = value if extra == 'agent' else _edit_number({extra: value}, extra)
     if not isinstance(fields, dict) or set(fields) != _EDIT_FIELDS:
         shown = sorted(map(str, fields)) if isinstance(fields, dict) else fields
         raise RecordingError(f'not an edit with the fields {", ".join(sorted(_EDIT_FIELDS))}: '
@@ -430,7 +442,8 @@ def parse_edit(data, impulse_count):
             or not 0 <= before <= impulse_count:
         raise RecordingError(f'impulses_before is {_text(before)}, not a count from 0 to the '
                              f'{impulse_count} impulses of its step')
-    return AppliedEdit(kind=kind, name=name, impulses_before=before, text=text, **numbers)
+    return AppliedEdit(kind=kind, name=name, impulses_before=before, text=text, **numbers,
+                       **agent)
 
 
 def parse_edits(messages, impulse_count):
@@ -570,6 +583,11 @@ class RecordedStep:
     stats_cdr: Optional[bytes]
     balls_stamp_ns: Optional[int]  # header.stamp of the balls message
     edits: tuple = ()  # AppliedEdit applied before this step, in order (checked)
+    # Agents (recording.agent_topics): commands taken before this step, in order, as
+    # (agent name, vx, vy, wz, bytes); each agent's odom bytes {name: bytes}; /tf's bytes.
+    commands: tuple = ()
+    odom: Optional[dict] = None
+    tf_cdr: Optional[bytes] = None
 
     @property
     def complete(self):
@@ -647,6 +665,14 @@ class Recording:
             for role, topic in segment.topics.items():
                 if role in STEP_TOPICS:
                     self.roles.setdefault(topic, role)
+        # The agents' topics: (kind, agent name) of each, and their types.
+        namespaces = {agent_topics.namespace_of(segment.topics) for segment in self.segments
+                      if 'balls' in segment.topics}
+        self.agent_roles = {}
+        for topic, info in self.topics.items():
+            role = agent_topics.agent_role(topic, namespaces)
+            if role is not None:
+                self.agent_roles[topic] = (*role, info.type)
 
     def _read_indexed(self, stream, summary):
         self.header = _read_record(stream, len(MAGIC), self.size, Opcode.HEADER)[0]
@@ -821,13 +847,17 @@ class Recording:
     def steps(self):
         """RecordedSteps in order: every log time of the ball_world topics, decoded."""
         builder = None
-        for message in self.messages(self.roles):
+        agents = self.agent_roles
+        for message in self.messages({**self.roles, **agents}):
             if builder is None or message.log_time_ns != builder.log_time_ns:
                 if builder is not None:
                     yield builder.build()
                 position = self.segment_at(message.log_time_ns)
                 builder = _StepBuilder(position, self.segments[position], message.log_time_ns)
-            builder.add(self.roles[message.topic], message.data)
+            if message.topic in agents:
+                builder.add_agent(agents[message.topic], message.data)
+            else:
+                builder.add(self.roles[message.topic], message.data)
         if builder is not None:
             yield builder.build()
 
@@ -839,6 +869,20 @@ class _StepBuilder:
         self.log_time_ns = log_time_ns
         self.data = {}
         self.events = {role: [] for role in EVENT_ROLES}
+        self.commands = []
+        self.odom = None
+        self.tf = None
+
+    def add_agent(self, role, data):
+        """A message of an agent topic: role is (kind, agent name, type name)."""
+        kind, name, type_name = role
+        if kind == agent_topics.COMMAND:
+            self.commands.append((name, type_name, data))
+        elif kind == agent_topics.ODOM:
+            self.odom = self.odom or {}
+            self.odom[name] = data
+        else:
+            self.tf = data
 
     def add(self, role, data):
         if role in self.events:
@@ -877,6 +921,8 @@ class _StepBuilder:
                 stats = decode_stats(self.data['stats'])
             impulses = tuple(RecordedImpulse(*decode_vector3_stamped(cdr), cdr=cdr)
                              for cdr in self.events['impulse'])
+            commands = tuple((name, *agent_topics.decode_command(data, type_name), data)
+                             for name, type_name, data in self.commands)
         except ValueError as error:
             raise RecordingError(f'undecodable message at log time {self.log_time_ns} ns: '
                                  f'{error}') from None
@@ -888,7 +934,8 @@ class _StepBuilder:
             log_time_ns=self.log_time_ns, positions=positions, state=state, stats=stats,
             impulses=impulses, balls_cdr=self.data.get('balls'),
             state_cdr=self.data.get('state'), stats_cdr=self.data.get('stats'),
-            balls_stamp_ns=balls_stamp, edits=self._edits(len(impulses)))
+            balls_stamp_ns=balls_stamp, edits=self._edits(len(impulses)), commands=commands,
+            odom=self.odom, tf_cdr=self.tf)
 
 
 # Feeding sinks -------------------------------------------------------------------------

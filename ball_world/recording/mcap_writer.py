@@ -41,6 +41,7 @@ import yaml
 from ball_world import __version__
 from ball_world.msgs.cdr import encode_clock, encode_string
 from ball_world.msgs.definitions import message_definition, type_hash
+from ball_world.recording import agent_topics
 from ball_world.recording.files import claim_output, OutputClaim
 from ball_world.step_record import PACKAGE_NAME
 
@@ -81,14 +82,7 @@ VIEW_TOPICS = {
     'markers': 'visualization_msgs/msg/MarkerArray',
     'clock': 'rosgraph_msgs/msg/Clock',
 }
-#: Topics of each agent, `<namespace>/<name>/<role>`, declared at their first message.
-AGENT_TOPICS = {
-    'scan': 'sensor_msgs/msg/LaserScan',
-}
-#: Absolute topics of a world with agents (as tf2 names them), declared at their first message.
-TF_TOPICS = {'tf': '/tf', 'tf_static': '/tf_static'}
-TOPIC_TYPES = {**STEP_TOPICS, **VIEW_TOPICS, **AGENT_TOPICS,
-               **{role: 'tf2_msgs/msg/TFMessage' for role in TF_TOPICS}}
+TOPIC_TYPES = {**STEP_TOPICS, **VIEW_TOPICS}
 #: The clock topic is absolute, whatever the node's namespace (as the node publishes it).
 CLOCK_TOPIC = '/clock'
 
@@ -139,9 +133,12 @@ ROLE_QOS = {
     'edits': offered_qos_profiles(1000),
     'markers': offered_qos_profiles(1, durability='transient_local'),
     'clock': offered_qos_profiles(1, reliability='best_effort'),
-    'scan': offered_qos_profiles(10),
-    'tf': offered_qos_profiles(100),
-    'tf_static': offered_qos_profiles(1, durability='transient_local'),
+    # The agents' topics (recording.agent_topics), as ros/agents.py offers them.
+    agent_topics.COMMAND: offered_qos_profiles(100),
+    agent_topics.ODOM: offered_qos_profiles(10),
+    agent_topics.TF: offered_qos_profiles(100),
+    agent_topics.TF_STATIC: offered_qos_profiles(1, durability='transient_local'),
+    agent_topics.SCAN: offered_qos_profiles(10),
 }
 
 _SEQUENCE_MODULO = 2 ** 32  # MCAP message sequence numbers are uint32
@@ -300,6 +297,7 @@ class McapSink:
         self._pending = 0  # uncompressed bytes in the open chunk
         self._last_log_ns = None
         self._clock = False  # whether this segment records /clock
+        self._agent_parameters = {}  # the segment's parameters (agent.cmd_vel_stamped)
         self._world = None  # the segment's WorldSnapshot: its walls and frame for markers
         self._markers = None if markers_period_ns is None else _Markers(markers_period_ns)
         self._file = claim.writer()
@@ -353,6 +351,7 @@ class McapSink:
     def _start_segment(self, world, info):
         self._world = world
         self._clock = bool(info.parameters.get('publish_clock'))
+        self._agent_parameters = info.parameters
         topics = segment_topics(info, self._clock)
         self._topics = topics
         self._roles = {role: self._channel(topic, role) for role, topic in topics.items()
@@ -375,8 +374,8 @@ class McapSink:
             self._markers.reset(world)
             self._add('markers', log_time_ns, self._markers.delete_all)
 
-    def _channel(self, topic, role):
-        type_name = TOPIC_TYPES[role]
+    def _channel(self, topic, role, type_name=None):
+        type_name = type_name or TOPIC_TYPES[role]
         channel = self._channels.get(topic)
         if channel is None:
             schema = self._schemas.get(type_name)
@@ -394,14 +393,16 @@ class McapSink:
         channel = self._roles.get(role)
         if channel is None:  # a LAZY_ROLES topic's first message
             channel = self._roles[role] = self._channel(self._topics[role], role)
-        self._add_to(channel, log_time_ns, data)
+        self._put(channel, log_time_ns, data)
 
-    def _add_agent(self, role, name, log_time_ns, data):
-        """A message of agent `name`'s topic `role`, beside `balls` (as the node names it)."""
-        topic = f"{self._topics['balls'].rpartition('/')[0]}/{name}/{role}"
-        self._add_to(self._channel(topic, role), log_time_ns, data)
+    def _add_agent(self, log_time_ns, topic, type_name, role, data):
+        """An agent message (recording.agent_topics): its channel is made at its first one."""
+        channel = self._channels.get(topic)
+        if channel is None:
+            channel = self._channel(topic, role, type_name)
+        self._put(channel, log_time_ns, data)
 
-    def _add_to(self, channel, log_time_ns, data):
+    def _put(self, channel, log_time_ns, data):
         sequence = (self._sequences.get(channel, 0) + 1) % _SEQUENCE_MODULO
         self._sequences[channel] = sequence
         self._writer.add_message(channel, log_time=log_time_ns, data=data,
@@ -421,22 +422,19 @@ class McapSink:
             self._add('edits', log_time_ns, encode_string(edit.text))
         for impulse in impulses[done:]:
             self._add('impulse', log_time_ns, impulse.cdr)
+        namespace = agent_topics.namespace_of(self._topics)
+        for message in agent_topics.before_step(record, namespace, self._agent_parameters):
+            self._add_agent(log_time_ns, *message)
         if record.world_changed:
             self._restart_markers(dataclasses.replace(self._world, radii=record.radii),
                                   log_time_ns)
         self._add('balls', log_time_ns, record.balls_cdr)
         self._add('state', log_time_ns, record.state_cdr)
         self._add('stats', log_time_ns, record.stats_cdr)
+        for message in agent_topics.after_step(record, namespace):
+            self._add_agent(log_time_ns, *message)
         if self._clock:
             self._add('clock', log_time_ns, encode_clock(record.stamp_ns))
-        agents = record.agents
-        if agents is not None:
-            if agents.tf_static_cdr is not None:
-                self._add_to(self._channel(TF_TOPICS['tf_static'], 'tf_static'), log_time_ns,
-                             agents.tf_static_cdr)
-            self._add_to(self._channel(TF_TOPICS['tf'], 'tf'), log_time_ns, agents.tf_cdr)
-            for scan in agents.scans:
-                self._add_agent('scan', scan.name, log_time_ns, scan.cdr)
         if self._markers is not None and self._markers.due(record.stamp_ns):
             self._add('markers', log_time_ns, self._markers.build(record))
         self._last_log_ns = log_time_ns

@@ -18,6 +18,7 @@ Layout of the recording (application id 'ball_world'):
   (a huge one stays on screen) set by the size of the scene.
 - `arena/velocities` (Arrows2D, optional): each ball's velocity times VELOCITY_SECONDS.
 - `arena/trails` (LineStrips2D, optional): each ball's path over the last trail seconds.
+- `arena/agents` (Arrows2D): each agent's heading, labelled with its name (rerun_agents).
 - `plots/energy_change` (Scalars): kinetic energy relative to step 0 of the segment, in
   percent, rounded to ENERGY_RESOLUTION: an exact simulation conserves energy to ~1e-15, and
   an autoscaled plot would blow that rounding noise up to full-height steps. Real changes
@@ -62,6 +63,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from ball_world.recording.rerun_agents import AGENTS, heading_arrows
 from ball_world.recording.rerun_outlet import new_stream, Outlet, OutletFailed, parse_view
 from ball_world.scans import hit_points
 from ball_world.step_record import PACKAGE_NAME
@@ -467,6 +469,10 @@ class RerunSink:
             pending.rtf_times_ns.append(record.log_time_ns)
             pending.rtf.append(rtf)
         self._log_impulses(record, names, step)
+        arrows = heading_arrows(record)
+        if arrows is not None:
+            self._set_time(step, record.log_time_ns)
+            self._emit('log', AGENTS, arrows)
         if self.trail_seconds:
             self._log_trails(record, names, step)
         if (len(pending) >= MAX_PENDING_STEPS

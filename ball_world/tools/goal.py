@@ -36,7 +36,12 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64MultiArray
 
+from ball_world.tools import goal_drive
+from ball_world.tools.goal_drive import AgentGoal
+
 PROG = 'ball_world_goal'
+#: Drive an agent through cmd_vel and odom instead (tools/goal_drive.py).
+AGENT_FLAG = '--agent'
 PARAMETERS = """\
 ROS parameters (after --ros-args; integers are taken for numbers):
   ball         name of the ball to hold (default ball_0)
@@ -148,7 +153,8 @@ def main(args=None):
     node = None
     try:
         rclpy.init(args=argv)
-        node = GoalController()
+        agent = AGENT_FLAG in remove_ros_args(argv)[1:]
+        node = AgentGoal(GoalController.parameter) if agent else GoalController()
         # Short waits, as the world node does: a shut-down context ends the loop within
         # 0.1 s even if the wake-up of a signal that shut it down was missed.
         while rclpy.ok():
@@ -175,8 +181,11 @@ def command_line_ok(argv):
     except Exception as error:  # noqa: B902 - rcl reports bad arguments as generic errors
         fail(f'bad ROS arguments: {error}')
     if own in (['-h'], ['--help']):
-        print(f'usage: {PROG} [--ros-args -p NAME:=VALUE ...]\n\n{__doc__}\n{PARAMETERS}')
+        print(f'usage: {PROG} [--ros-args -p NAME:=VALUE ...]\n\n{__doc__}\n{PARAMETERS}\n\n'
+              f'usage: {PROG} {AGENT_FLAG} [--ros-args -p NAME:=VALUE ...]\n\n'
+              f'{goal_drive.__doc__}\n{goal_drive.PARAMETERS}')
         return False
+    own = [arg for arg in own if arg != AGENT_FLAG]
     if own:
         fail(f"unrecognized arguments: {' '.join(own)} (see --help)")
     return True

@@ -8,6 +8,7 @@ import argparse
 import sys
 
 from ball_world.msgs.cdr import decode_pose_array, decode_vector3_stamped
+from ball_world.recording import agent_topics
 from ball_world.recording.mcap_reader import decode_stats, EDIT_KINDS, Recording, RecordingError
 from ball_world.step_record import STATS_FIELDS
 from ball_world.tools import print_report
@@ -87,6 +88,7 @@ def describe(recording):
         lines.append(f'  {_shown(info.topic)}  {_shown(info.type)}  {info.message_count}')
     lines.extend(_impulse_lines(recording))
     lines.extend(_edit_lines(recording))
+    lines.extend(_agent_lines(recording))
     lines.extend(_energy_lines(recording))
     return lines
 
@@ -154,6 +156,20 @@ def _edit_lines(recording, shown=10):
     if total > len(listed):
         lines.append(f'  ... and {total - len(listed)} more')
     return lines
+
+
+def _agent_lines(recording):
+    """The agents (each with an odom topic) and how many commands they took, if any."""
+    names, commands = [], 0
+    for topic, (kind, name, _) in recording.agent_roles.items():
+        if kind == agent_topics.ODOM:
+            names.append(name)
+        elif kind == agent_topics.COMMAND:
+            commands += recording.topics[topic].message_count
+    if not names:
+        return []
+    return [f'agents:      {len(names)} ({", ".join(_shown(n) for n in sorted(names))}), '
+            f'{commands} commands']
 
 
 def main(argv=None):

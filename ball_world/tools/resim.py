@@ -24,9 +24,10 @@ from typing import Optional
 
 import numpy as np
 
+from ball_world.core.agents import CommandRejected
 from ball_world.core.edits import Ball, EditRefused
 from ball_world.core.scenario import ScenarioError
-from ball_world.msgs.agent_cdr import decode_laser_scan
+from ball_world.msgs.agent_cdr import decode_laser_scan, decode_odometry
 from ball_world.msgs.cdr import decode_state_layout, decode_vector3_stamped
 from ball_world.recording.mcap_reader import Recording, RecordingError
 from ball_world.simulation import Simulation, SpawnRequest
@@ -144,7 +145,15 @@ def _advance(simulation, step, comparison, segment_index):
             simulation.queue_impulse(impulse.frame_id, impulse.x, impulse.y)
         queued = max(queued, edit.impulses_before)
         _edit(simulation, edit, step.step, comparison, segment_index)
-    for impulse in impulses[queued:]:
+    for name, vx, vy, wz, cdr in step.commands:
+        try:
+            simulation.command(name, vx, vy, wz, cdr)
+        except CommandRejected:
+            pass  # an agent deleted after its command, as the node dropped it with the agent
+    # The agents' drive comes right after the impulses the edits applied (see Simulation).
+    driven, rejected = simulation.apply_drive()
+    _report_rejected(rejected, step.step, comparison, segment_index)
+    for impulse in impulses[queued + driven:]:
         simulation.queue_impulse(impulse.frame_id, impulse.x, impulse.y)
     result, rejected = simulation.step()
     _report_rejected(rejected, step.step, comparison, segment_index)
@@ -159,7 +168,8 @@ def _edit(simulation, edit, k, comparison, segment_index):
             ball = Ball(x=edit.x, y=edit.y, vx=edit.vx, vy=edit.vy, radius=edit.radius,
                         mass=edit.mass)
             # Renaming allowed: a name taken in the re-simulation shows as another name.
-            [got], rejected = simulation.spawn([SpawnRequest(edit.name, True, ball)])
+            [got], rejected = simulation.spawn([SpawnRequest(edit.name, True, ball,
+                                                             agent=edit.agent)])
             if isinstance(got, EditRefused):
                 raise got
             if got != edit.name:
@@ -168,7 +178,8 @@ def _edit(simulation, edit, k, comparison, segment_index):
         elif edit.kind == 'delete':
             rejected = simulation.delete(edit.name)
         else:
-            rejected = simulation.set_state(edit.name, edit.x, edit.y, edit.vx, edit.vy)
+            rejected = simulation.set_state(edit.name, edit.x, edit.y, edit.vx, edit.vy,
+                                            yaw=edit.yaw)
     except EditRefused as refusal:
         comparison.add(Difference(segment_index, k, f'{edit.kind} refused', None, edit.name,
                                   str(refusal), math.inf))
@@ -217,7 +228,35 @@ def _compare_step(step, record, comparison, segment_index):
         count = len(_COMPARED_STATS)
         comparison.arrays(segment_index, k, 'stats', _COMPARED_STATS, step.stats[:count],
                           resimulated[:count])
+    _compare_agents(step, record, comparison, segment_index)
     return comparison.count == before
+
+
+def _compare_agents(step, record, comparison, segment_index):
+    """Each agent's odom (pose, heading, twist) and /tf must be the recorded bytes."""
+    frame = record.agents
+    resimulated = {} if frame is None else dict(zip(frame.names, frame.odom_cdr))
+    recorded = step.odom or {}
+    for name in sorted(set(recorded) | set(resimulated)):
+        if recorded.get(name) != resimulated.get(name):
+            shown = [_odom_text(odom.get(name)) for odom in (recorded, resimulated)]
+            comparison.add(Difference(segment_index, step.step, f'odom of {name}', None,
+                                      *shown, math.inf))
+    if step.tf_cdr is not None and (frame is None or step.tf_cdr != frame.tf_cdr):
+        comparison.add(Difference(segment_index, step.step, '/tf message', None,
+                                  len(step.tf_cdr), None if frame is None else
+                                  len(frame.tf_cdr), math.inf))
+
+
+def _odom_text(data):
+    """An odom message as a difference shows it: pose and twist numbers, or 'none'."""
+    if data is None:
+        return 'none'
+    try:
+        odom = decode_odometry(data)
+    except ValueError as error:
+        return f'undecodable ({error})'
+    return f'pose {odom.pose.tolist()} twist {odom.twist.tolist()}'
 
 
 def resimulate(recording, progress=None):

@@ -26,6 +26,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from ball_world.msgs.cdr import decode_pose_array
 from ball_world.tools.keyboard import KeyDecoder, Quit, RawKeys, Screen
+from ball_world.tools.teleop_drive import Drive
 
 PROG = 'ball_world_teleop'
 #: Impulse per key press at start, N s, and the range +/- may move it in (x2 and /2 steps).
@@ -42,6 +43,7 @@ KEYS = """\
 Push a ball of ball_world with the arrow keys.
 ---------------------------
 arrow keys    push the selected ball along +y, -y, -x, +x
+              (an agent: up/down drive forward/back, left/right turn, via cmd_vel)
 0-9           select the 1st to 10th ball;  Tab / Shift-Tab: next / previous ball
 + / -         double / halve the impulse
 space         pause / resume;  s or .: one step while paused
@@ -123,6 +125,7 @@ class Teleop(Node):
                                'impulse per key press, N s (+/- double and halve it)',
                                *IMPULSE_RANGE)
         self.selection = Selection(ball)
+        self.drive = Drive(self)
         self.positions = None
         self.stamp_ns = None
         self.paused = False
@@ -164,7 +167,7 @@ class Teleop(Node):
 
     def on_key(self, key):
         if key in ARROWS:
-            self.push(*ARROWS[key])
+            self.push(*ARROWS[key], key)
         elif len(key) == 1 and key.isdigit():
             if not self.selection.pick(int(key)):
                 self.status = (f'no ball number {int(key) + 1}: the world has '
@@ -173,8 +176,10 @@ class Teleop(Node):
             self.selection.cycle(1 if key == '\t' else -1)
         elif key in ('+', '='):
             self.impulse = min(self.impulse * 2.0, IMPULSE_RANGE[1])
+            self.drive.scale(2.0)
         elif key in ('-', '_'):
             self.impulse = max(self.impulse / 2.0, IMPULSE_RANGE[0])
+            self.drive.scale(0.5)
         elif key == ' ':
             self.toggle_pause(not self.paused)
         elif key in ('s', '.'):
@@ -184,11 +189,14 @@ class Teleop(Node):
         elif key in ('q', 'Q', '\x03', '\x04'):  # q, Ctrl-C, Ctrl-D
             self.done = True
 
-    def push(self, x, y):
+    def push(self, x, y, key=None):
         name = self.selection.name
         if self.selection.position() is None:
             self.status = (f'no ball {name!r} in the world; Tab selects one' if name else
                            f'no balls yet: waiting for {self.balls_topic}')
+            return
+        if key is not None and self.drive.is_agent(name):
+            self.status = self.drive.send(name, key)
             return
         if self.impulses.get_subscription_count() == 0:
             self.status = f'not sent: nobody subscribes to {self.impulses.topic_name}'
@@ -252,10 +260,12 @@ class Teleop(Node):
         if position is None:
             return f'ball     {name}: not in the world'
         x, y = self.positions[position]
+        agent = ', an agent: arrows drive it' if self.drive.ready(name) else ''
         return (f'ball     {name} ({position + 1} of {len(self.selection.names)}) '
-                f'at ({x:.2f}, {y:.2f})')
+                f'at ({x:.2f}, {y:.2f}){agent}')
 
     def lines(self):
+        self.drive.watch(self.selection.name)
         return [self.world_line(), self.ball_line(),
                 f'impulse  {self.impulse:.4g} N s per key', f'status   {self.status}']
 

@@ -1,0 +1,81 @@
+"""What a recording holds of the agents (core.agents): which topics, types and bytes.
+
+Why a module of its own: the writer and the reader must agree on these names, and neither
+should grow agent knowledge inline. A world without agents records none of this, so its
+files are what they were before agents existed.
+
+Per step, with `<ns>` the node's namespace (that of `balls`):
+- before the step's `balls`: every command an agent took, as received, on
+  `<ns>/<name>/cmd_vel` (Twist, or TwistStamped with agent.cmd_vel_stamped), at the log time
+  of the first step it acted on;
+- after it: `<ns>/<name>/odom` of every agent, `/tf`, and `/tf_static` when the set of agents
+  changed (a segment's first step included), as the node publishes them; at a scan step,
+  `<ns>/<name>/scan` of every agent with a scanner (ball_world.scans).
+"""
+import re
+
+from ball_world.msgs.twist_cdr import decode_twist, decode_twist_stamped
+
+COMMAND = 'cmd_vel'
+ODOM = 'odom'
+TF = 'tf'
+TF_STATIC = 'tf_static'
+SCAN = 'scan'
+TF_TOPIC = '/tf'
+TF_STATIC_TOPIC = '/tf_static'
+TYPES = {COMMAND: 'geometry_msgs/msg/Twist', ODOM: 'nav_msgs/msg/Odometry',
+         TF: 'tf2_msgs/msg/TFMessage', TF_STATIC: 'tf2_msgs/msg/TFMessage',
+         SCAN: 'sensor_msgs/msg/LaserScan'}
+STAMPED_COMMAND = 'geometry_msgs/msg/TwistStamped'
+_AGENT_TOPIC = re.compile(r'(?P<namespace>.*)/(?P<name>[A-Za-z][A-Za-z0-9_]*)/'
+                          r'(?P<kind>cmd_vel|odom)')
+
+
+def namespace_of(topics):
+    """The node's namespace in a segment's topics ('' at the root)."""
+    return topics['balls'].rpartition('/')[0]
+
+
+def command_type(parameters):
+    return STAMPED_COMMAND if parameters.get('agent.cmd_vel_stamped') else TYPES[COMMAND]
+
+
+def before_step(record, namespace, parameters):
+    """(topic, type, role, bytes) of the commands taken before this step, in order."""
+    kind = command_type(parameters)
+    return [(f'{namespace}/{command.name}/{COMMAND}', kind, COMMAND, command.cdr)
+            for command in record.commands]
+
+
+def after_step(record, namespace):
+    """(topic, type, role, bytes) of the agents' odom, /tf and /tf_static of this step."""
+    frame = record.agents
+    if frame is None:
+        return []
+    messages = [(f'{namespace}/{name}/{ODOM}', TYPES[ODOM], ODOM, data)
+                for name, data in zip(frame.names, frame.odom_cdr)]
+    messages.append((TF_TOPIC, TYPES[TF], TF, frame.tf_cdr))
+    if frame.tf_static_cdr is not None:
+        messages.append((TF_STATIC_TOPIC, TYPES[TF_STATIC], TF_STATIC, frame.tf_static_cdr))
+    messages += [(f'{namespace}/{scan.name}/{SCAN}', TYPES[SCAN], SCAN, scan.cdr)
+                 for scan in frame.scans]
+    return messages
+
+
+def agent_role(topic, namespaces):
+    """(kind, agent name) of a recorded agent topic under one of `namespaces`, or None."""
+    if topic == TF_TOPIC:
+        return (TF, '')
+    match = _AGENT_TOPIC.fullmatch(topic)
+    if match is None or match['namespace'] not in namespaces:
+        return None
+    return (match['kind'], match['name'])
+
+
+def decode_command(data, type_name):
+    """(vx, vy, wz) of a recorded cmd_vel message of type `type_name` (ValueError if bad)."""
+    if type_name == STAMPED_COMMAND:
+        values = decode_twist_stamped(data)[2]
+    else:
+        values = decode_twist(data)
+    return values[0], values[1], values[5]
