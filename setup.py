@@ -38,6 +38,8 @@ setup(
             'ball_world_teleop = ball_world.tools.teleop:main',
             'ball_world_goal = ball_world.tools.goal:main',
             'ball_world_cli = ball_world.tools.cli:main',
+            'ball_world_tracker = ball_world.tools.tracker:main',
+            'ball_world_score = ball_world.tools.score:main',
         ],
     },
 )

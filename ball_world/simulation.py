@@ -24,6 +24,7 @@ from ball_world.core.world import World
 from ball_world.msgs.agent_cdr import encode_odometry, encode_tf_message
 from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
                                  encode_vector3_stamped)
+from ball_world.scans import AgentScans, check as check_scans
 from ball_world.step_record import (AgentFrame, AppliedCommand, AppliedEdit, AppliedImpulse,
                                     PendingEvents, RunInfo, STATS_FIELDS, StepRecord,
                                     WorldSnapshot)
@@ -56,6 +57,7 @@ def build(parameters):
     parameters = checked(parameters)
     world = build_world(parameters)
     agent_names(parameters, len(world))
+    check_scans(parameters)
     return BuiltWorld(parameters=parameters, world=world, dt_ns=step_duration_ns(parameters))
 
 
@@ -118,8 +120,9 @@ class Simulation:
         self.agents = Agents(agent_names(parameters, len(world)),
                              Limits.from_parameters(parameters))
         self._drive = None  # the agents' impulses for the next step, once applied
-        self._agent_frames = None  # (names, odom frames, body frames) last recorded
+        self._agent_frames = None  # ((names, frame_id), odom frames, body frames) last used
         self._commands = []  # commands taken since the last step
+        self._scans = AgentScans(parameters)
         self._world_changed = False
         self._applied = []  # impulses applied since the last step
         self._edits = []  # edits applied since the last step
@@ -523,10 +526,11 @@ class Simulation:
         twists[:, 1] = cos * moving[:, 1] - sin * moving[:, 0]
         twists[:, 2] = [agents.yaw_rate(name, stamp_ns) for name in names]
         static = None
-        if self._agent_frames is None or self._agent_frames[0] != names:
+        key = (names, self.frame_id)  # the node may change frame_id between steps
+        if self._agent_frames is None or self._agent_frames[0] != key:
             prefix = str(self.parameters['frame_prefix'])
             pairs = [frames(prefix, name) for name in names]
-            self._agent_frames = (names, tuple(p[0] for p in pairs),
+            self._agent_frames = (key, tuple(p[0] for p in pairs),
                                   tuple(p[1] for p in pairs))
             count = len(names)
             static = encode_tf_message(stamp_ns, (self.frame_id,) * count,
@@ -540,7 +544,9 @@ class Simulation:
             odom_cdr=tuple(encode_odometry(stamp_ns, odom_frames, base_frames, located, yaws,
                                            twists)),
             tf_cdr=encode_tf_message(stamp_ns, odom_frames, base_frames, located, yaws),
-            tf_static_cdr=static)
+            tf_static_cdr=static,
+            scans=self._scans.take(self.world, names, indices, yaws, base_frames,
+                                   self.step_index, stamp_ns, self.dt_ns))
 
     def _each_sink(self, action):
         """Run action on every sink; a sink that raises is dropped and reported once."""

@@ -80,6 +80,8 @@ class AgentFrame:
     # /tf_static (frame_id -> each odom frame, identity) when the set of agents changed with
     # this record (a segment's first record included), else None.
     tf_static_cdr: Optional[bytes] = None
+    # The agents' lidar scans (ball_world.scans.AgentScan) when this step is a scan step.
+    scans: tuple = ()
 
 
 @dataclass(frozen=True)

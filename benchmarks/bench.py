@@ -27,7 +27,7 @@ import sys
 import tempfile
 import time
 
-from benchmarks import exact_speed
+from benchmarks import exact_speed, lidar_speed
 import numpy as np
 
 from ball_world.core import limits
@@ -568,6 +568,9 @@ def markdown(results, args, pymunk, allocator, command):
                   f'{exact_warm_up(args)} untimed steps. Equal disks of r = '
                   f'{exact_speed.RADIUS} m on a jittered lattice, all at one speed; targets '
                   'from issue 14.']
+    if results.get('scan'):
+        lines += ['', '## Lidar: one 360-beam scan beside one physics step (median)', '',
+                  lidar_speed.HEADER, *results['scan'], '', lidar_speed.NOTE]
     if results['energy']:
         lines += ['', '## Kinetic energy', '',
                   '| engine | N | steps | relative change | balls outside the box |',
@@ -701,6 +704,9 @@ def parse_args(argv):
     parser.add_argument('--exact-n', type=int, nargs='*', default=[1000, 10000],
                         help='N of the dilute and dense scenes of exact mode beside seed mode '
                              '(default 1000 10000; none to skip them)')
+    parser.add_argument('--scan-n', type=int, nargs='*', default=[1000, 10000, 100000],
+                        help='N of the lidar scan beside a step (default 1000 10000 100000; '
+                             'none to skip)')
     parser.add_argument('--no-exact', action='store_true',
                         help='do not time exact mode beside seed mode')
     parser.add_argument('--no-extras', action='store_true',
@@ -732,7 +738,7 @@ def parse_args(argv):
     if args.quick:
         args.n, args.repeats, args.seconds, args.warmup_steps = [100, 300], 2, 0.05, 20
         args.energy_n, args.energy_steps, args.cdr_poses, args.budget_n = 300, 500, 1000, [300]
-        args.exact_n = [300]
+        args.exact_n, args.scan_n = [300], [300]
     if (any(n < 1 for n in args.n) or args.repeats < 1 or args.seconds <= 0.0
             or args.warmup_steps < 0):
         parser.error('--n values and --repeats must be >= 1, --seconds > 0 and '
@@ -802,6 +808,7 @@ def main(argv=None):
                                      exact_warm_up(args)):
             print(f'exact beside seed: {line}', flush=True)
             results['exact'].append(line)
+    results['scan'] = lidar_speed.rows(args.scan_n, args.repeats, args.seed)
     if not args.no_extras:
         results['cdr'] = bench_cdr(args.cdr_poses, args.repeats)
         with tempfile.TemporaryDirectory() as directory:

@@ -14,7 +14,7 @@ from launch_ros.actions import Node
 
 #: Topics the RViz configuration names in the root namespace. RViz is started in the world's
 #: namespace and these are remapped to relative names, so namespace:=sim2 shows /sim2's balls.
-RVIZ_TOPICS = ('/markers', '/balls', '/ball_0/odom')
+RVIZ_TOPICS = ('/markers', '/balls', '/ball_0/odom', '/ball_0/scan')
 
 
 def generate_launch_description():

@@ -334,3 +334,14 @@ def test_odom_and_tf_bytes_carry_the_step_bit_for_bit_and_the_body_twist():
     tf = decode_tf_message(record.agents.tf_cdr)
     assert tf.child_frame_ids == ['w1/ball_0/base_link']
     assert tf.transforms[0, :2].tobytes() == record.positions[0].tobytes()
+
+
+def test_tf_static_follows_a_new_frame_id():
+    from ball_world.msgs.agent_cdr import decode_tf_message
+    simulation = one_agent()
+    simulation.step()
+    simulation.frame_id = 'map'
+    record, _ = simulation.step()
+    assert decode_tf_message(record.agents.tf_static_cdr).frame_ids == ['map']
+    record, _ = simulation.step()
+    assert record.agents.tf_static_cdr is None

@@ -234,3 +234,50 @@ def test_a_recorded_run_with_agents_resimulates_bit_for_bit(probe, processes, tm
     code, out, _ = run_tool('ball_world_info', str(path))
     commands = re.search(r'agents: +2 \(ball_0, ball_1\), ([0-9]+) commands', out)
     assert commands and int(commands.group(1)) >= 1, out
+
+
+def test_spawned_agent_is_a_robot_driven_and_turned_through_the_services(probe, processes):
+    from simulation_interfaces.msg import EntityCategory, Result
+    from simulation_interfaces.srv import GetEntityInfo, SetEntityState, SpawnEntity
+    process = processes.start(node_command(*WORLD))
+    probe.spin_until(lambda: probe.node.count_publishers('/balls') > 0, 'the world',
+                     process=process)
+    request = SpawnEntity.Request(name='rover', uri='ball',
+                                  resource_string='{radius: 0.3, agent: true}')
+    request.initial_pose.pose.position.x, request.initial_pose.pose.position.y = 50.0, 50.0
+    spawned = probe.call(SpawnEntity, '/ball_world/spawn_entity', request)
+    assert spawned.result.result == Result.RESULT_OK, spawned.result.error_message
+    info = probe.call(GetEntityInfo, '/ball_world/get_entity_info',
+                      GetEntityInfo.Request(entity='rover'))
+    assert info.info.category.category == EntityCategory.CATEGORY_ROBOT
+    plain = probe.call(GetEntityInfo, '/ball_world/get_entity_info',
+                       GetEntityInfo.Request(entity='ball_2'))
+    assert plain.info.category.category == EntityCategory.CATEGORY_DYNAMIC_OBJECT
+    odom = probe.listen(Odometry, 'rover/odom')
+    probe.spin_until(lambda: odom, 'the new agent odom', process=process)
+    turn = SetEntityState.Request(entity='rover')
+    turn.state.pose.position.x, turn.state.pose.position.y = 50.0, 50.0
+    turn.state.pose.orientation.z = math.sin(0.6)
+    turn.state.pose.orientation.w = math.cos(0.6)
+    answer = probe.call(SetEntityState, '/ball_world/set_entity_state', turn)
+    assert answer.result.result == Result.RESULT_OK, answer.result.error_message
+    probe.spin_until(lambda: abs(2 * math.atan2(odom[-1].pose.pose.orientation.z,
+                                                odom[-1].pose.pose.orientation.w) - 1.2)
+                     < 1e-12, 'the heading set to 1.2 rad', process=process)
+    tilted = SetEntityState.Request(entity='rover')
+    tilted.state.pose.position.x, tilted.state.pose.position.y = 50.0, 50.0
+    tilted.state.pose.orientation.x, tilted.state.pose.orientation.w = 0.6, 0.8
+    refused = probe.call(SetEntityState, '/ball_world/set_entity_state', tilted)
+    assert refused.result.result == SetEntityState.Response.INVALID_POSE
+    command = probe.node.create_publisher(Twist, 'rover/cmd_vel', 10)
+    probe.spin_until(lambda: command.get_subscription_count() > 0, 'rover/cmd_vel',
+                     process=process)
+    for _ in range(20):
+        command.publish(twist(x=1.0))
+        probe.spin_for(0.02)
+    probe.spin_until(lambda: forward(odom[-1]) == pytest.approx(1.0, abs=1e-12),
+                     'the spawned agent to drive', process=process)
+    velocity = odom[-1].twist.twist.linear
+    assert velocity.y == pytest.approx(0.0, abs=1e-12)  # forward along its heading
+    process.send_signal(2)
+    assert finish(process)[0] == 0

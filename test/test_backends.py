@@ -273,4 +273,4 @@ def test_warm_entry_point_compiles_the_kernels():
     done = subprocess.run([sys.executable, '-m', 'ball_world.core.warm'],
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
-    assert 'numba kernels (seed and exact mode) ready' in done.stdout
+    assert 'numba kernels (seed mode, exact mode and the lidar) ready' in done.stdout

@@ -64,6 +64,10 @@ def test_quick_benchmark_writes_table_and_plot(tmp_path, capsys):
         assert seed_rate > 0.0 and exact_rate > 0.0
         assert abs(ratio - exact_rate / seed_rate) <= 0.01 * ratio + 0.01  # rounding only
 
+    scans = [_cells(line) for line in _section(text, 'Lidar: one 360-beam scan')
+             if line.startswith('| ')]
+    assert [row[0] for row in scans[1:]] == ['300']
+
     printed = capsys.readouterr().out
     energy = [_cells(line) for line in _section(printed, 'Kinetic energy')
               if line.startswith('| ball_world (')]

@@ -11,6 +11,7 @@ import argparse
 import sys
 import time
 
+from ball_world.core import lidar
 from ball_world.core.stepping import numba_installed
 from ball_world.core.world import World
 
@@ -30,6 +31,7 @@ def warm():
                       backend='numba', mode=mode)
         for _ in range(3):
             world.step(0.1)
+    lidar.warm()
     return time.perf_counter() - began
 
 
@@ -41,7 +43,7 @@ def main(argv=None):
     if not numba_installed():
         print('numba is not installed: nothing to compile (the numpy backend needs nothing)')
         return 0
-    print(f'numba kernels (seed and exact mode) ready in {warm():.1f} s')
+    print(f'numba kernels (seed mode, exact mode and the lidar) ready in {warm():.1f} s')
     return 0
 
 

@@ -9,7 +9,8 @@ Per step, with `<ns>` the node's namespace (that of `balls`):
   `<ns>/<name>/cmd_vel` (Twist, or TwistStamped with agent.cmd_vel_stamped), at the log time
   of the first step it acted on;
 - after it: `<ns>/<name>/odom` of every agent, `/tf`, and `/tf_static` when the set of agents
-  changed (a segment's first step included), as the node publishes them.
+  changed (a segment's first step included), as the node publishes them; at a scan step,
+  `<ns>/<name>/scan` of every agent with a scanner (ball_world.scans).
 """
 import re
 
@@ -19,10 +20,12 @@ COMMAND = 'cmd_vel'
 ODOM = 'odom'
 TF = 'tf'
 TF_STATIC = 'tf_static'
+SCAN = 'scan'
 TF_TOPIC = '/tf'
 TF_STATIC_TOPIC = '/tf_static'
 TYPES = {COMMAND: 'geometry_msgs/msg/Twist', ODOM: 'nav_msgs/msg/Odometry',
-         TF: 'tf2_msgs/msg/TFMessage', TF_STATIC: 'tf2_msgs/msg/TFMessage'}
+         TF: 'tf2_msgs/msg/TFMessage', TF_STATIC: 'tf2_msgs/msg/TFMessage',
+         SCAN: 'sensor_msgs/msg/LaserScan'}
 STAMPED_COMMAND = 'geometry_msgs/msg/TwistStamped'
 _AGENT_TOPIC = re.compile(r'(?P<namespace>.*)/(?P<name>[A-Za-z][A-Za-z0-9_]*)/'
                           r'(?P<kind>cmd_vel|odom)')
@@ -54,6 +57,8 @@ def after_step(record, namespace):
     messages.append((TF_TOPIC, TYPES[TF], TF, frame.tf_cdr))
     if frame.tf_static_cdr is not None:
         messages.append((TF_STATIC_TOPIC, TYPES[TF_STATIC], TF_STATIC, frame.tf_static_cdr))
+    messages += [(f'{namespace}/{scan.name}/{SCAN}', TYPES[SCAN], SCAN, scan.cdr)
+                 for scan in frame.scans]
     return messages
 
 

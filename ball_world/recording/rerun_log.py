@@ -67,6 +67,7 @@ from ball_world.core.parameters import BY_NAME
 from ball_world.recording.rerun_agents import AGENTS, heading_arrows
 from ball_world.recording.rerun_outlet import new_stream, Outlet, OutletFailed, parse_view
 from ball_world.recording.rerun_scale import padded, ruler
+from ball_world.scans import hit_points
 from ball_world.step_record import PACKAGE_NAME
 
 APPLICATION_ID = PACKAGE_NAME
@@ -79,6 +80,9 @@ VELOCITIES = 'arena/velocities'
 TRAILS = 'arena/trails'
 SCALE = 'arena/scale'
 SCALE_LABELS = 'arena/scale/labels'
+#: Each agent's latest scan, as its hit points in the arena: arena/scans/<name>.
+SCANS = 'arena/scans'
+SCAN_COLOR = (0, 200, 255)
 ENERGY = 'plots/energy_change'
 COLLISIONS = 'plots/collisions'
 MOMENTUM = 'plots/momentum'
@@ -407,6 +411,9 @@ class RerunSink:
             self._log(record, rtf)
         else:
             self._unlogged = (record, rtf)
+        agents = getattr(record, 'agents', None)
+        if agents is not None and agents.scans:
+            self._log_scans(record, agents, self._segment_base + record.step)
 
     def flush(self):
         """Send the buffered steps and have each destination write them (bounded waits)."""
@@ -559,6 +566,18 @@ class RerunSink:
             origins=[i[1] for i in shown], vectors=[i[2] for i in shown],
             labels=[i[3] for i in shown], show_labels=True, colors=IMPULSE_COLOR,
             radii=rr.Radius.ui_points(3.0), draw_order=40.0))
+
+    def _log_scans(self, record, agents, step):
+        """Each scan's hit points (finite ranges, noise included) where they fall in the arena."""
+        self._set_time(step, record.log_time_ns)
+        rows = dict(zip(agents.names, zip(agents.indices, agents.yaws)))
+        for scan in agents.scans:
+            index, yaw = rows[scan.name]
+            x, y = record.positions[index]
+            points = hit_points(scan, float(x), float(y), float(yaw))
+            self._emit('log', f'{SCANS}/{scan.name}', rr.Points2D(
+                points.astype(np.float32), radii=rr.Radius.ui_points(2.0), colors=SCAN_COLOR,
+                draw_order=35.0))
 
     def _arrow(self, dvx, dvy):
         """The velocity change times ARROW_SECONDS, its length clamped to the scene's size."""

@@ -1,4 +1,4 @@
-"""The agents' ROS topics: <name>/cmd_vel in, <name>/odom, /tf and /tf_static out.
+"""The agents' ROS topics: <name>/cmd_vel in, <name>/odom, <name>/scan, /tf, /tf_static out.
 
 The node creates one AgentTopics and calls it at four points: sync() when the set of balls
 changes, drain() before each step, publish() after it, and report() for the progress line.
@@ -19,6 +19,7 @@ import time
 from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import LaserScan
 from tf2_msgs.msg import TFMessage
 
 from ball_world.core.agents import CommandRejected
@@ -46,6 +47,7 @@ class AgentTopics:
         self._message_type = TwistStamped if stamped else Twist
         self._decode = self._decode_stamped if stamped else decode_twist
         self._topics = {}  # agent name -> (subscription, odom publisher)
+        self._scans = {}  # agent name -> <name>/scan publisher (when agents have scanners)
         self._tf = None
         self._tf_static = None
         self._warned_at = -WARN_PERIOD
@@ -70,6 +72,8 @@ class AgentTopics:
             subscription, publisher = self._topics.pop(name)
             node.destroy_subscription(subscription)
             node.destroy_publisher(publisher)
+            if name in self._scans:
+                node.destroy_publisher(self._scans.pop(name))
         for name in names:
             if name in self._topics:
                 continue
@@ -78,6 +82,8 @@ class AgentTopics:
                 lambda data, name=name: self.take(name, data), CMD_VEL_QOS, raw=True)
             publisher = node.create_publisher(Odometry, f'{name}/odom', ODOM_QOS)
             self._topics[name] = (subscription, publisher)
+            if self.simulation.parameters['agent.scan.samples'] > 0:
+                self._scans[name] = node.create_publisher(LaserScan, f'{name}/scan', ODOM_QOS)
         if names and self._tf is None:
             self._tf = node.create_publisher(TFMessage, '/tf', TF_QOS)
             self._tf_static = node.create_publisher(TFMessage, '/tf_static', TF_STATIC_QOS)
@@ -132,5 +138,11 @@ class AgentTopics:
         for name, data in zip(frame.names, frame.odom_cdr):
             topics[name][1].publish(data)
         self._tf.publish(frame.tf_cdr)
+        for scan in frame.scans:
+            publisher = self._scans.get(scan.name)
+            if publisher is None:  # scanners turned on by a reset
+                publisher = self._scans[scan.name] = self.node.create_publisher(
+                    LaserScan, f'{scan.name}/scan', ODOM_QOS)
+            publisher.publish(scan.cdr)
         if frame.tf_static_cdr is not None:
             self._tf_static.publish(frame.tf_static_cdr)

@@ -6,9 +6,10 @@ edits (spawn, delete, set_state) are applied in the order the node applied them 
 impulses_before says how many of the step's impulses came before it), through the same
 Simulation calls the node makes; and every recorded pose, state row and stats entry (except
 the real-time factor, which depends on the wall clock), every impulse and every edit
-message must be bit-identical to the re-simulated one. A segment's closing record (edits,
-and the impulses they applied, made after its last step: mcap_reader.RecordedStep.closing)
-is made the same way, without a step, and checked the same way. An edit the re-simulation refuses,
+message, and every agent's recorded scan (<name>/scan, its seeded noise included), must be
+bit-identical to the re-simulated one. A segment's closing record (edits, and the impulses
+they applied, made after its last step: mcap_reader.RecordedStep.closing) is made the same
+way, without a step, and checked the same way. An edit the re-simulation refuses,
 or a spawn that gets another name, is a difference too. Exit status: 0 all identical, 1 a
 difference, 2 an unreadable recording or parameters that no longer build a world (one line
 on stderr).
@@ -28,7 +29,7 @@ import numpy as np
 from ball_world.core.agents import CommandRejected
 from ball_world.core.edits import Ball, EditRefused
 from ball_world.core.scenario import ScenarioError
-from ball_world.msgs.agent_cdr import decode_odometry
+from ball_world.msgs.agent_cdr import decode_laser_scan, decode_odometry
 from ball_world.msgs.cdr import decode_state_layout, decode_vector3_stamped
 from ball_world.recording.mcap_reader import RecordingError
 from ball_world.recording.recording_set import open_recording
@@ -309,6 +310,7 @@ def resimulate(recording, progress=None):
     """
     comparison = Comparison()
     simulation = result = None
+    scans = RecordedScans(recording)
     for step in recording.steps():
         if progress is not None and not step.closing:
             progress.advance()
@@ -347,9 +349,60 @@ def resimulate(recording, progress=None):
         result.impulses += len(step.impulses)
         result.edits += len(step.edits)
         result.last_step = step.step
-        if not _compare_step(step, record, comparison, segment.index):
+        same = _compare_step(step, record, comparison, segment.index)
+        same = scans.compare(step, record, comparison, segment.index) and same
+        if not same:
             result.differing_steps += 1
     return comparison
+
+
+class RecordedScans:
+    """The agents' recorded scans (<name>/scan), read alongside the steps in log-time order.
+
+    Each must equal, byte for byte, the re-simulated agent's scan of the same step (ranges
+    with their seeded noise, stamp, frame); a scan recorded but not re-simulated, or the
+    reverse, is a difference too.
+    """
+
+    def __init__(self, recording):
+        topics = {channel.topic for channel in recording.channels.values()
+                  if channel.topic.endswith('/scan')}
+        self._messages = recording.messages(topics) if topics else iter(())
+        self._next = next(self._messages, None)
+
+    def take(self, log_time_ns):
+        """{agent name: LaserScan bytes} recorded at this log time."""
+        found = {}
+        while self._next is not None and self._next.log_time_ns <= log_time_ns:
+            if self._next.log_time_ns == log_time_ns:
+                found[self._next.topic.rsplit('/', 2)[-2]] = self._next.data
+            self._next = next(self._messages, None)
+        return found
+
+    def compare(self, step, record, comparison, segment_index):
+        recorded = self.take(step.log_time_ns)
+        agents = getattr(record, 'agents', None)
+        resimulated = {scan.name: scan.cdr for scan in agents.scans} if agents else {}
+        if recorded == resimulated:
+            return True
+        for name in sorted(set(recorded) | set(resimulated)):
+            ours, theirs = recorded.get(name), resimulated.get(name)
+            if ours != theirs:
+                comparison.add(Difference(segment_index, step.step, f'scan {name}', None,
+                                          _scan_text(ours), _scan_text(theirs), math.inf))
+        return False
+
+
+def _scan_text(data):
+    """A LaserScan's bytes as a short description (or 'none')."""
+    if data is None:
+        return 'none'
+    try:
+        scan = decode_laser_scan(data)
+    except ValueError as error:
+        return f'undecodable ({error})'
+    return (f'{scan.frame_id} at {scan.stamp_ns} ns, {len(scan.ranges)} ranges, first '
+            f'{scan.ranges[:3].tolist()}')
 
 
 def describe(comparison):

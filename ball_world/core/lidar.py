@@ -1,0 +1,239 @@
+"""An exact 2D laser scanner: the ranges a beam fan from a point sees among balls and walls.
+
+What it computes: for each beam, the true distance from the scanner to the first ball or
+wall the beam meets (ray-circle and ray-segment intersection in closed form,
+`core.lidar_kernel`), the scanner's own ball excluded. Then REP 117's conventions for a
+sensor_msgs/LaserScan: +inf when nothing lies within range_max, -inf when the first thing is
+closer than range_min. Then, if asked, Gaussian noise on the ranges that are neither.
+
+Two backends, one answer: `numpy` is the reference, every beam against every ball that can
+be within range_max (vectorised, in chunks); `numba` walks each beam through a grid
+(`lidar_kernel.scan_grid`). They evaluate the same closed forms and keep the smallest, so
+they agree bit for bit, as the step's backends do; `test/test_lidar.py` checks it.
+
+Noise is reproducible: its generator is seeded by the world's `random.seed`, a stable hash
+of the scanner's entity name (SHA-256, not Python's salted hash()) and the step number,
+so a re-simulation draws the same noise for the same scan, whatever else ran before it.
+No ROS and no I/O here; the node turns a scan into a LaserScan.
+"""
+import hashlib
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from ball_world.core import lidar_kernel
+from ball_world.core.lidar_kernel import circle_terms, rotate, segment_terms
+from ball_world.core.stepping import resolve_backend
+
+#: Most (beam, ball) pairs the numpy reference evaluates at once (memory, not speed).
+CHUNK_PAIRS = 1 << 20
+
+
+class Fan(NamedTuple):
+    """What a scanner is: its beams (body frame, rad), its limits (m) and its noise (m).
+
+    Beam k points at angle_min + k * angle_increment from the scanner's heading, as in
+    sensor_msgs/LaserScan.
+    """
+
+    angle_min: float
+    angle_increment: float
+    samples: int
+    range_min: float
+    range_max: float
+    noise_stddev: float = 0.0
+
+    @classmethod
+    def full_turn(cls, samples=360, range_min=0.1, range_max=12.0, noise_stddev=0.0):
+        """`samples` beams evenly over a whole turn from -pi (a common 2D lidar)."""
+        return cls(-math.pi, 2.0 * math.pi / samples, samples, range_min, range_max,
+                   noise_stddev)
+
+    @property
+    def angle_max(self):
+        """Angle of the last beam, as LaserScan's angle_max."""
+        return self.angle_min + (self.samples - 1) * self.angle_increment
+
+    def check(self):
+        """Raise ValueError naming the first value that cannot make a scanner."""
+        values = (self.angle_min, self.angle_increment, self.range_min, self.range_max,
+                  self.noise_stddev)
+        if not all(math.isfinite(value) for value in values):
+            raise ValueError(f'scanner values must be finite: {self}')
+        if self.samples < 1:
+            raise ValueError(f'a scanner needs at least one beam, not {self.samples}')
+        if not 0.0 <= self.range_min <= self.range_max or self.range_max <= 0.0:
+            raise ValueError(f'scanner range_min {self.range_min:g} m must be >= 0 and at '
+                             f'most range_max {self.range_max:g} m, which must be > 0')
+        if self.noise_stddev < 0.0:
+            raise ValueError(f'scanner noise_stddev {self.noise_stddev:g} m is negative')
+        return self
+
+
+def body_directions(fan):
+    """Unit directions (cos, sin) of the fan's beams in the scanner's frame."""
+    angles = fan.angle_min + np.arange(fan.samples) * fan.angle_increment
+    return np.cos(angles), np.sin(angles)
+
+
+def beam_directions(yaw, fan):
+    """Unit directions (dx, dy) of the beams in the world frame, for a heading `yaw`: the
+    body directions turned by yaw, with the kernel's own `rotate` (so the same bits)."""
+    bx, by = body_directions(fan)
+    return rotate(math.cos(yaw), math.sin(yaw), bx, by)
+
+
+def _nearest(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude, range_max):
+    """Each beam against every ball that can be within range_max and every wall: the
+    distance to the nearest hit (+inf for none) and the ball it is (-1: a wall, or none)."""
+    px, py = float(origin[0]), float(origin[1])
+    dx, dy = rotate(cos_yaw, sin_yaw, body[0], body[1])
+    near = (np.abs(positions[:, 0] - px) <= range_max + radii) & (
+        np.abs(positions[:, 1] - py) <= range_max + radii)
+    if 0 <= exclude < len(near):
+        near[exclude] = False
+    chosen = np.flatnonzero(near)
+    cx = np.take(positions[:, 0], chosen)
+    cy = np.take(positions[:, 1], chosen)
+    r = np.take(radii, chosen)
+    best = np.full(len(dx), np.inf)
+    ball = np.full(len(dx), -1)
+    rows = max(1, CHUNK_PAIRS // max(len(chosen), len(walls), 1))
+    for start in range(0, len(dx), rows):
+        part = slice(start, start + rows)
+        ux = dx[part, None]
+        uy = dy[part, None]
+        if len(chosen):
+            t_near, ahead, inside = circle_terms(px, py, ux, uy, cx, cy, r)
+            hits = np.where(inside, 0.0, np.where(ahead, t_near, np.inf))
+            first = hits.argmin(axis=1)
+            best[part] = np.take_along_axis(hits, first[:, None], axis=1)[:, 0]
+            ball[part] = np.where(np.isfinite(best[part]), np.take(chosen, first), -1)
+        if len(walls):
+            with np.errstate(divide='ignore', invalid='ignore'):
+                t, hit = segment_terms(px, py, ux, uy, walls[:, 0], walls[:, 1], walls[:, 2],
+                                       walls[:, 3])
+            wall = np.where(hit, t, np.inf).min(axis=1)
+            ball[part] = np.where(wall < best[part], -1, ball[part])
+            best[part] = np.minimum(best[part], wall)
+    return best, ball
+
+
+def distances_numpy(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude,
+                    range_min, range_max):
+    """The reference: each beam against every ball that can be within range_max (and every
+    wall), the nearest hit kept; REP 117's infinities."""
+    best, _ = _nearest(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude,
+                       range_max)
+    best[best < range_min] = -np.inf
+    best[best > range_max] = np.inf
+    return best
+
+
+def distances_numba(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude,
+                    range_min, range_max):
+    """The compiled walk through a grid: the same ranges as distances_numpy."""
+    out = np.empty(len(body[0]))
+    lidar_kernel.scan_grid(positions, radii, walls, float(origin[0]), float(origin[1]),
+                           cos_yaw, sin_yaw, body[0], body[1], int(exclude), range_min,
+                           range_max, out)
+    return out
+
+
+_DISTANCES = {'numpy': distances_numpy, 'numba': distances_numba}
+
+
+class Scanner:
+    """One scanner: its fan, its backend and its noise, ready to scan often.
+
+    What is fixed for a scanner (body directions, the backend) is worked out once, so a scan
+    costs the kernel and little else. `name` and `seed` choose the noise, with the step.
+    """
+
+    def __init__(self, fan, backend='auto', seed=0, name=''):
+        self.fan = fan.check()
+        self.backend = resolve_backend(backend)
+        self._distances = _DISTANCES[self.backend]
+        self.body = body_directions(fan)
+        self.seed = int(seed)
+        self.key = name_key(name)
+
+    def distances(self, positions, radii, walls, origin, yaw, exclude=-1):
+        """REP 117 ranges without noise: the closed forms. positions (N, 2) and radii (N,)
+        float64, walls a Walls or (M, 4) segments."""
+        fan = self.fan
+        return self._distances(_float_array(positions), _float_array(radii),
+                               _float_array(getattr(walls, 'segments', walls)).reshape(-1, 4),
+                               origin, math.cos(yaw), math.sin(yaw), self.body, exclude,
+                               fan.range_min, fan.range_max)
+
+    def scan(self, positions, radii, walls, origin, yaw, exclude=-1, step=0):
+        """One scan as LaserScan's `ranges`: the closed forms plus the noise of this step."""
+        ranges = self.distances(positions, radii, walls, origin, yaw, exclude)
+        if self.fan.noise_stddev > 0.0:
+            add_noise(ranges, self.fan.noise_stddev,
+                      np.random.default_rng([self.seed, self.key, int(step)]))
+        return ranges
+
+
+def _float_array(values):
+    """values as a C-contiguous float64 array (no copy when it already is one)."""
+    return np.ascontiguousarray(values, dtype=np.float64)
+
+
+def name_key(name):
+    """A stable 64-bit number for an entity name (the same in every process and run)."""
+    return int.from_bytes(hashlib.sha256(name.encode('utf-8')).digest()[:8], 'little')
+
+
+def add_noise(ranges, stddev, rng):
+    """Gaussian noise of `stddev` metres on every finite range, in place; returns ranges.
+
+    One draw per beam, hit or not, so a beam's noise does not depend on what the others
+    hit. A noisy range may leave [range_min, range_max] by a few stddev; it is kept (not
+    clipped, which would bias the mean), as real scanners report it.
+    """
+    if stddev > 0.0:
+        noise = rng.normal(0.0, stddev, len(ranges))
+        finite = np.isfinite(ranges)
+        ranges[finite] += noise[finite]
+    return ranges
+
+
+def scan(positions, radii, walls, origin, yaw, fan, exclude=-1, backend='auto', seed=0,
+         name='', step=0):
+    """One scan as LaserScan's `ranges`: exact distances, REP 117's infinities, seeded noise
+    (see Scanner, which keeps what a scanner scanning often can)."""
+    return Scanner(fan, backend, seed, name).scan(positions, radii, walls, origin, yaw,
+                                                  exclude, step)
+
+
+def distances(positions, radii, walls, origin, yaw, fan, exclude=-1, backend='auto'):
+    """scan() without noise: each range equals its closed form."""
+    return Scanner(fan, backend).distances(positions, radii, walls, origin, yaw, exclude)
+
+
+def seen_balls(positions, radii, walls, origin, yaw, fan, exclude=-1):
+    """Indices of the balls that at least one beam meets first, within [range_min,
+    range_max], without noise: the balls this scanner can see (ground truth for scoring)."""
+    walls = _float_array(getattr(walls, 'segments', walls)).reshape(-1, 4)
+    best, ball = _nearest(_float_array(positions).reshape(-1, 2), _float_array(radii), walls,
+                          origin, math.cos(yaw), math.sin(yaw), body_directions(fan),
+                          exclude, fan.range_max)
+    return np.unique(ball[(ball >= 0) & (best >= fan.range_min) & (best <= fan.range_max)])
+
+
+def hit_points(origin, yaw, fan, ranges):
+    """World coordinates (K, 2) of the finite ranges' end points (for drawing a scan)."""
+    dx, dy = beam_directions(yaw, fan)
+    finite = np.flatnonzero(np.isfinite(ranges))
+    r = np.take(ranges, finite)
+    return np.column_stack((origin[0] + r * np.take(dx, finite),
+                            origin[1] + r * np.take(dy, finite)))
+
+
+def warm():
+    """Compile (or load) the numba scan kernel, when numba is installed."""
+    if lidar_kernel.available():
+        lidar_kernel.warm()

@@ -1,0 +1,109 @@
+"""The agents' lidar scans of a step: when they are due, their ranges, their LaserScan bytes.
+
+The Simulation asks `AgentScans.take` once per recorded step. A scan is due at step 0 and
+at every step whose end crosses a multiple of the scan period (1 / agent.scan.rate_hz of
+simulated time, in integer nanoseconds), so the rate never depends on the wall clock. Each
+agent scans from its centre along its heading at the end of the step (core.lidar, its own
+ball excluded), stamped with that step's time in its `<p><name>/base_link` frame, as REP 117
+says: +inf for nothing within range_max, -inf for closer than range_min. The noise is
+seeded by (random.seed, the agent's name, the step), so a re-simulation draws it again.
+
+agent.scan.range_min 0 means 0.05 m beyond each agent's own radius (a scanner on a ball
+would otherwise see its own ball's surface, which the exclusion already hides, and a
+range_min below it means nothing). Bytes are made here once and shared by the publisher
+and the recording, like the other messages of a step.
+"""
+from typing import NamedTuple
+
+import numpy as np
+
+from ball_world.core import lidar
+from ball_world.core.parameters import ParameterError
+from ball_world.msgs.agent_cdr import encode_laser_scan
+
+#: range_min beyond the agent's radius when agent.scan.range_min is 0.
+CLEARANCE = 0.05
+
+
+class AgentScan(NamedTuple):
+    """One agent's scan of a step."""
+
+    name: str
+    frame_id: str  # <p><name>/base_link
+    ranges: np.ndarray  # float64, REP 117, noise added
+    fan: lidar.Fan
+    cdr: bytes  # sensor_msgs/msg/LaserScan, as published on <name>/scan
+
+
+def fan_from(parameters, radius):
+    """The Fan of an agent of `radius` under the agent.scan.* parameters (ParameterError
+    naming the parameter that cannot make one)."""
+    samples = int(parameters['agent.scan.samples'])
+    angle_min = float(parameters['agent.scan.angle_min'])
+    angle_max = float(parameters['agent.scan.angle_max'])
+    increment = (angle_max - angle_min) / (samples - 1) if samples > 1 else 0.0
+    range_max = float(parameters['agent.scan.range_max'])
+    range_min = float(parameters['agent.scan.range_min']) or radius + CLEARANCE
+    fan = lidar.Fan(angle_min, increment, samples, min(range_min, range_max), range_max,
+                    float(parameters['agent.scan.noise_stddev']))
+    if not range_max > 0.0:
+        raise ParameterError('agent.scan.range_max', f'must be > 0, got {range_max:g}')
+    if float(parameters['agent.scan.range_min']) > range_max:
+        raise ParameterError('agent.scan.range_min', f'{range_min:g} m is beyond '
+                                                     f'agent.scan.range_max {range_max:g} m')
+    return fan
+
+
+def check(parameters):
+    """Refuse agent.scan.* values that cannot make a scanner (ParameterError)."""
+    if int(parameters['agent.scan.samples']) > 0:
+        fan_from(parameters, 0.0).check()
+
+
+class AgentScans:
+    """The scanners of a Simulation's agents, made from its parameters."""
+
+    def __init__(self, parameters):
+        self.parameters = parameters
+        self.samples = int(parameters['agent.scan.samples'])
+        self.period_ns = max(1, round(1e9 / float(parameters['agent.scan.rate_hz'])))
+        self.seed = int(parameters['random.seed'])
+        self._scanners = {}  # (name, radius) -> lidar.Scanner
+
+    def due(self, step_index, dt_ns):
+        """Whether step `step_index` (ending at step_index * dt_ns) is a scan step."""
+        if self.samples == 0:
+            return False
+        end = step_index * dt_ns
+        return step_index == 0 or end // self.period_ns != (end - dt_ns) // self.period_ns
+
+    def scanner(self, name, radius):
+        key = (name, radius)
+        scanner = self._scanners.get(key)
+        if scanner is None:
+            scanner = lidar.Scanner(fan_from(self.parameters, radius), 'auto', self.seed, name)
+            self._scanners = {k: v for k, v in self._scanners.items() if k[0] != name}
+            self._scanners[key] = scanner
+        return scanner
+
+    def take(self, world, names, indices, yaws, base_frames, step_index, stamp_ns, dt_ns):
+        """The scans of this step (a tuple of AgentScan; empty when none is due)."""
+        if not self.due(step_index, dt_ns):
+            return ()
+        scans = []
+        period = self.period_ns * 1e-9
+        for name, index, yaw, frame_id in zip(names, indices, yaws, base_frames):
+            scanner = self.scanner(name, float(world.radii[index]))
+            ranges = scanner.scan(world.positions, world.radii, world.walls,
+                                  world.positions[index], float(yaw), int(index), step_index)
+            fan = scanner.fan
+            cdr = encode_laser_scan(stamp_ns, frame_id, fan.angle_min, fan.angle_max,
+                                    fan.angle_increment, 0.0, period, fan.range_min,
+                                    fan.range_max, ranges)
+            scans.append(AgentScan(name, frame_id, ranges, fan, cdr))
+        return tuple(scans)
+
+
+def hit_points(scan, x, y, yaw):
+    """World coordinates (K, 2) of a scan's finite ranges (for drawing it)."""
+    return lidar.hit_points((x, y), yaw, scan.fan, scan.ranges)

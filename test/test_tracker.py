@@ -1,0 +1,173 @@
+"""The example tracker (ball_world_tracker) on scans made by core.lidar, judged by CLEAR-MOT.
+
+The pieces are checked against what the scene makes them by construction (points on a
+known circle, a constant-velocity target, transforms composed by hand); the whole against
+ground truth: moving balls in a box, scanned at 10 Hz with the default noise, must be
+followed with a MOTA and MOTP that a tracker with a broken piece does not reach.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from ball_world.core import lidar
+from ball_world.core.scenario import arena_walls
+from ball_world.core.world import World
+from ball_world.tools import tracker
+from ball_world.tools.score import clear_mot
+
+FAN = lidar.Fan(-math.pi, 2.0 * math.pi / 360, 360, 0.35, 12.0, 0.01)
+GEOMETRY = tracker.ScanGeometry(FAN.angle_min, FAN.angle_increment, FAN.range_min,
+                                FAN.range_max)
+BOX = arena_walls({'arena': [0.0, 0.0, 10.0, 10.0]})[0]
+
+
+def test_clusters_split_at_jumps_and_join_across_the_wrap():
+    ranges = np.full(360, 5.0)
+    ranges[100:103] = 2.0  # something in front: its own run
+    ranges[200] = np.inf  # a gap
+    runs = tracker.clusters(ranges, GEOMETRY)
+    assert [100, 101, 102] in runs
+    # The rest is one run from 201 round the wrap to 99, then 103 to 199.
+    assert list(range(201, 360)) + list(range(0, 100)) in runs
+    assert list(range(103, 200)) in runs
+    assert len(runs) == 3
+
+
+def test_circle_fit_recovers_centre_and_radius():
+    angles = np.linspace(2.5, 3.8, 7)  # the side of the circle facing the origin
+    points = np.column_stack((4.0 + 0.25 * np.cos(angles), 1.0 + 0.25 * np.sin(angles)))
+    centre, radius, rms = tracker.fit_circle(points, 0.1, 0.3)
+    assert centre == pytest.approx([4.0, 1.0], abs=1e-6)
+    assert radius == pytest.approx(0.25, abs=1e-6)
+    assert rms < 1e-6
+    # One point: the radius cannot be told, the mean of the bounds is taken, behind it.
+    centre, radius, _ = tracker.fit_circle(np.array([[3.0, 4.0]]), 0.1, 0.3)
+    assert radius == pytest.approx(0.2)
+    assert centre == pytest.approx([3.0 * 5.2 / 5.0, 4.0 * 5.2 / 5.0], abs=1e-9)
+
+
+@pytest.mark.parametrize('scanner', [(5.0, 5.0), (0.4, 0.4), (9.5, 2.0)])
+def test_detect_finds_each_ball_and_no_wall(scanner):
+    # Three balls well apart in the box, scanned without noise from the centre and from
+    # near a corner and a side (walls at grazing angles): three detections, at the centres.
+    balls = np.array([[3.0, 7.0], [7.5, 7.5], [6.0, 3.0]])
+    radii = np.array([0.3, 0.2, 0.25])
+    ranges = lidar.scan(balls, radii, BOX, scanner, 0.0, FAN._replace(noise_stddev=0.0))
+    found = tracker.to_world(tracker.detect(ranges, GEOMETRY), *scanner, 0.0)
+    assert len(found) == 3
+    for centre in balls:
+        assert np.min(np.hypot(*(found - centre).T)) < 0.02
+
+
+def test_kalman_track_learns_a_constant_velocity():
+    options = tracker.Options()
+    track = tracker.Track(0, (0.0, 0.0), 0.0, options)
+    for k in range(1, 30):
+        t = 0.1 * k
+        track.predict(t, options.accel_stddev)
+        track.correct((1.5 * t, -0.5 * t), options.meas_stddev)
+    assert track.state == pytest.approx([1.5 * 2.9, -0.5 * 2.9, 1.5, -0.5], abs=1e-3)
+
+
+def test_association_is_nearest_first_within_the_gate():
+    predicted = [(0.0, 0.0), (1.0, 0.0), (5.0, 5.0)]
+    detections = np.array([[0.9, 0.0], [0.2, 0.0], [9.0, 9.0]])
+    # Track 1 takes detection 0 (0.1 apart) first; track 0 then gets detection 1; track 2
+    # and detection 2 are further apart than the gate.
+    assert sorted(tracker.associate(predicted, detections, 0.5)) == [(0, 1), (1, 0)]
+
+
+def test_poses_compose_the_transform_chain_at_the_scan_stamp():
+    poses = tracker.Poses()
+    poses.add('world', 'ball_0/odom', None, 0.0, 0.0, 0.0, static=True)
+    poses.add('ball_0/odom', 'ball_0/base_link', (1, 0), 2.0, 3.0, math.pi / 2)
+    poses.add('ball_0/odom', 'ball_0/base_link', (2, 0), 4.0, 3.0, 0.0)
+    assert poses.lookup('world', 'ball_0/base_link', (1, 0)) == pytest.approx(
+        (2.0, 3.0, math.pi / 2))
+    assert poses.lookup('world', 'ball_0/base_link', (3, 0)) is None
+    # A point 1 m ahead of the scanner at (2, 3) facing +y is (2, 4).
+    assert tracker.to_world([[1.0, 0.0]], 2.0, 3.0, math.pi / 2)[0] == pytest.approx([2.0, 4.0])
+    q = (0.0, 0.0, math.sin(0.35), math.cos(0.35))
+    assert tracker.yaw_of(q) == pytest.approx(0.7)
+
+
+def gas(seed, n=20):
+    """Balls of radius 0.1-0.3 at up to 2 m/s in the 10 m box, none overlapping."""
+    rng = np.random.default_rng(seed)
+    positions, radii = [], []
+    while len(positions) < n:
+        r = rng.uniform(0.1, 0.3)
+        p = rng.uniform(r + 0.01, 10.0 - r - 0.01, 2)
+        if all(math.dist(p, q) > r + s + 0.01 for q, s in zip(positions, radii)):
+            positions.append(p)
+            radii.append(r)
+    heading = rng.uniform(0.0, 2.0 * math.pi, n)
+    speed = rng.uniform(0.0, 2.0, n)
+    velocities = np.column_stack((speed * np.cos(heading), speed * np.sin(heading)))
+    return World(positions, velocities, radii, math.pi * np.square(radii), walls=BOX,
+                 backend='numpy')
+
+
+def tracked_run(seed, track=None, scans=40, steps_per_scan=10, dt=0.01):
+    """Frames (truth, tracks) of a scanner riding on ball 0 and turning at 0.3 rad/s."""
+    world = gas(seed)
+    scanner = lidar.Scanner(FAN, 'numpy', seed=seed, name='ball_0')
+    track = track or tracker.Tracker()
+    frames = []
+    for scan in range(scans):
+        step = scan * steps_per_scan
+        t = step * dt
+        yaw = 0.3 * t
+        origin = world.positions[0].copy()
+        ranges = scanner.scan(world.positions, world.radii, world.walls, origin, yaw, 0, step)
+        found = tracker.to_world(tracker.detect(ranges, GEOMETRY), *origin, yaw)
+        tracks = track.update(t, found)
+        seen = lidar.seen_balls(world.positions, world.radii, world.walls, origin, yaw, FAN, 0)
+        frames.append(({int(i): tuple(world.positions[i]) for i in seen},
+                       {row[0]: (row[1], row[2]) for row in tracks}))
+        for _ in range(steps_per_scan):
+            world.step(dt)
+    return frames
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_tracks_follow_the_moving_balls(seed):
+    score = clear_mot(tracked_run(seed), gate=0.5)
+    assert score.truth > 300
+    assert score.mota > 0.7, score.lines()
+    assert score.motp < 0.06, score.lines()
+
+
+class Forgetful(tracker.Tracker):
+    """A broken tracker: it drops every track after each scan (new ids every time)."""
+
+    def update(self, time, detections):
+        tracks = super().update(time, detections)
+        self.tracks = []
+        return tracks
+
+
+class Shifted(tracker.Tracker):
+    """A broken tracker: its detections are off by 0.1 m (a wrong frame offset)."""
+
+    def update(self, time, detections):
+        return super().update(time, np.asarray(detections) + [0.1, 0.0])
+
+
+def test_broken_trackers_fail_the_bounds():
+    forgetful = clear_mot(tracked_run(0, Forgetful()), gate=0.5)
+    assert forgetful.mota < 0.3
+    shifted = clear_mot(tracked_run(0, Shifted()), gate=0.5)
+    assert shifted.motp > 0.08
+
+
+def test_tracker_command_line_help_and_bad_parameters():
+    from ball_world_testing.harness import run_tool
+    code, out, err = run_tool('ball_world_tracker', '--help')
+    assert code == 0 and 'max_misses' in out and 'ball_world_score' in out
+    code, out, err = run_tool('ball_world_tracker', '--ros-args', '-p', 'gate:=-1.0')
+    assert code == 2 and err.strip().splitlines() == [
+        "ball_world_tracker: parameter 'gate': expected a number > 0, got -1.0"]
+    code, out, err = run_tool('ball_world_tracker', '--ros-args', '-p', 'radius:=[0.3, 0.1]')
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "'radius'" in err
