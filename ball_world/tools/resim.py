@@ -365,8 +365,7 @@ class RecordedScans:
     """
 
     def __init__(self, recording):
-        topics = {channel.topic for channel in recording.channels.values()
-                  if channel.topic.endswith('/scan')}
+        topics = {topic for topic in recording.topics if topic.endswith('/scan')}
         self._messages = recording.messages(topics) if topics else iter(())
         self._next = next(self._messages, None)
 

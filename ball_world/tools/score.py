@@ -126,11 +126,12 @@ def recorded_frames(path, agent, tracks_path=None, tracks_topic=None, options=No
     """
     from ball_world.core import lidar
     from ball_world.msgs.agent_cdr import decode_laser_scan, decode_tf_message
-    from ball_world.recording.mcap_reader import BallRoster, Recording, snapshot_and_info
+    from ball_world.recording.mcap_reader import BallRoster, snapshot_and_info
+    from ball_world.recording.recording_set import open_recording
     from ball_world.scans import fan_from
     from ball_world.tools import tracker as example
 
-    recording = Recording(path)
+    recording = open_recording(path)
     scan_topic = next((topic for topic in _topics(recording) if topic.endswith(f'/{agent}/scan')),
                       None)
     if scan_topic is None:
@@ -185,7 +186,7 @@ def recorded_frames(path, agent, tracks_path=None, tracks_topic=None, options=No
 
 
 def _topics(recording):
-    return sorted({channel.topic for channel in recording.channels.values()})
+    return sorted(recording.topics)
 
 
 def _supplied_tracks(path, topic):
