@@ -223,14 +223,18 @@ def contrast(color, background):
     return (high + 0.05) / (low + 0.05)
 
 
-def test_push_arrows_and_walls_are_seen_on_light_and_dark_themes():
+def test_balls_pushes_and_walls_are_seen_on_light_and_dark_themes():
     # The web viewer's light theme is white, the dark one near black (the white arrow of
     # old was invisible on the light one).
     for background in ((255, 255, 255), (0, 0, 0)):
         assert contrast(IMPULSE_COLOR, background) >= 4.5
         assert contrast(WALL_COLOR, background) >= 3.0
-    # ...and no ball shares the arrow's colour.
-    assert IMPULSE_COLOR not in {ball_color(f'ball_{i}') for i in range(10_000)}
+    # ...and no ball shares the arrow's colour; balls and their labels are seen on both.
+    colours = {ball_color(f'ball_{i}') for i in range(10_000)} | {ball_color('red')}
+    assert IMPULSE_COLOR not in colours
+    assert all(contrast(colour, (255, 255, 255)) >= 4.0 and contrast(colour, (0, 0, 0)) >= 4.0
+               for colour in colours)
+    assert len({ball_color(f'ball_{i}') for i in range(20)}) == 20  # neighbours differ
 
 
 @pytest.mark.parametrize('origin, vector, expected', [

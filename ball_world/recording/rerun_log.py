@@ -54,7 +54,6 @@ carries, in pose order, so balls may appear and disappear between steps; a recor
 carry `radii` and `masses` for names its segment did not start with.
 """
 from collections import deque
-import colorsys
 import json
 import math
 import os
@@ -100,7 +99,7 @@ MAX_PENDING_POSITIONS = 500_000
 VIEW_FPS = 25.0
 #: A view's SDK stream sends what it gathered this often: one chunk per entity holding
 #: several frames. The web viewer's cost is per message more than per byte.
-VIEW_FLUSH_SECONDS = 0.2
+VIEW_FLUSH_SECONDS = 0.25
 #: A view's plots show this much simulated time up to now...
 VIEW_PLOT_SECONDS = 30.0
 #: ...and are sent every this many seconds of wall time, as columns.
@@ -141,21 +140,49 @@ RTF_WINDOW = 1.0
 WALL_COLOR = (128, 128, 128)
 ENERGY_COLOR = (200, 130, 0)
 GOLDEN_RATIO_CONJUGATE = (math.sqrt(5.0) - 1.0) / 2.0
+#: Perceived lightness (OKLCH L) and the most chroma of the balls' colours (ball_color).
+BALL_LIGHTNESS = 0.565
+BALL_CHROMA = 0.14
 
 
 def ball_color(name):
     """A stable colour per ball name, kept when other balls come and go.
 
     `ball_<i>` gets hue i times the golden ratio (neighbouring indices stay distinct for any
-    N); any other name a hue from its CRC-32.
+    N); any other name a hue from its CRC-32. Every hue has the same perceived lightness
+    (OKLCH, BALL_LIGHTNESS), a mid tone that keeps a contrast of about 4 to 1 against white
+    and against black: a ball and its label are seen on the viewer's light theme and on its
+    dark one alike (light pastels vanished on the light one).
     """
     prefix, _, index = name.rpartition('_')
     if prefix == 'ball' and index.isdigit() and len(index) < 10:
         hue = (int(index) * GOLDEN_RATIO_CONJUGATE) % 1.0
     else:
         hue = zlib.crc32(name.encode()) / 2**32
-    red, green, blue = colorsys.hsv_to_rgb(hue, 0.65, 0.95)
-    return round(red * 255), round(green * 255), round(blue * 255)
+    chroma = BALL_CHROMA
+    while True:  # the most colourful of this lightness and hue that sRGB can show
+        linear = _oklch_to_linear_srgb(BALL_LIGHTNESS, chroma, hue)
+        if all(-1e-9 <= c <= 1.0 + 1e-9 for c in linear) or chroma <= 0.0:
+            break
+        chroma -= 0.005
+    return tuple(round(_srgb_encode(min(max(c, 0.0), 1.0)) * 255) for c in linear)
+
+
+def _oklch_to_linear_srgb(lightness, chroma, hue):
+    """Björn Ottosson's OKLab (here in polar form, hue in turns) to linear sRGB."""
+    a = chroma * math.cos(2.0 * math.pi * hue)
+    b = chroma * math.sin(2.0 * math.pi * hue)
+    long_ = (lightness + 0.3963377774 * a + 0.2158037573 * b) ** 3
+    medium = (lightness - 0.1055613458 * a - 0.0638541728 * b) ** 3
+    short = (lightness - 0.0894841775 * a - 1.2914855480 * b) ** 3
+    return (4.0767416621 * long_ - 3.3077115913 * medium + 0.2309699292 * short,
+            -1.2684380046 * long_ + 2.6097574011 * medium - 0.3413193965 * short,
+            -0.0041960863 * long_ - 0.7034186147 * medium + 1.7076147010 * short)
+
+
+def _srgb_encode(value):
+    """Linear light to the sRGB transfer curve, both in [0, 1]."""
+    return 12.92 * value if value <= 0.0031308 else 1.055 * value ** (1.0 / 2.4) - 0.055
 
 
 def default_names(count):
