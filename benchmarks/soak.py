@@ -655,6 +655,11 @@ def rtf_parameters(args, path):
     return parameters, side
 
 
+#: The node's (throttled) warning that it fell more than pacing.MAX_LAG behind: its total.
+DROPPED_LINE = re.compile(r'behind the [^ ]+ Hz schedule: dropped \d+ steps of wall time '
+                          r'\((\d+) so far\)')
+
+
 def run_rtf(args, workdir):
     import psutil
     ns = namespace()
@@ -684,6 +689,8 @@ def run_rtf(args, workdir):
         listener.close()
     parts = cpu_by_part(node.pid, threads_before, threads_after, elapsed)
     windows = node.real_time_factors()
+    dropped = DROPPED_LINE.findall(node.log())
+    load = os.getloadavg()[0]
     size = _size_mb(path)
     if path.exists() and not args.keep:
         path.unlink()
@@ -695,7 +702,9 @@ def run_rtf(args, workdir):
             + f'; {steps:,} steps in {elapsed:.1f} s; node exit {code}; CPU (share of one '
             'core): ' + ', '.join(f'{part} {share:.2f}' for part, share in sorted(parts.items()))
             + f', this probe {(mine_after - mine_before) / elapsed:.2f}; node RSS '
-            f'{rss_start:.0f} -> {rss_end:.0f} MB')
+            f'{rss_start:.0f} -> {rss_end:.0f} MB; load average {load:.1f} at the end; '
+            + (f'the node dropped lag {len(dropped)}x ({dropped[-1]} steps by its last '
+               'warning)' if dropped else 'the node dropped no lag (it made up every hiccup)'))
     figure = (f'real-time factor {overall:.3f} over {elapsed:.0f} s (probe: steps heard x dt / '
               'wall time); node log, every 10 s window: '
               + (', '.join(f'{rtf:.3f}' for rtf in windows) if windows else 'none')
