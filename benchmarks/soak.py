@@ -725,6 +725,11 @@ def rtf_parameters(args, path):
     return parameters, side
 
 
+#: The node's (throttled) warning that it fell more than pacing.MAX_LAG behind: its total.
+DROPPED_LINE = re.compile(r'behind the [^ ]+ Hz schedule: dropped \d+ steps of wall time '
+                          r'\((\d+) so far\)')
+
+
 def run_rtf(args, workdir):
     import psutil
     ns = namespace()
@@ -754,6 +759,8 @@ def run_rtf(args, workdir):
         listener.close()
     parts = cpu_by_part(node.pid, threads_before, threads_after, elapsed)
     windows = node.real_time_factors()
+    dropped = DROPPED_LINE.findall(node.log())
+    load = os.getloadavg()[0]
     size = _size_mb(path)
     if path.exists() and not args.keep:
         path.unlink()
@@ -765,7 +772,9 @@ def run_rtf(args, workdir):
             + f'; {steps:,} steps in {elapsed:.1f} s; node exit {code}; CPU (share of one '
             'core): ' + ', '.join(f'{part} {share:.2f}' for part, share in sorted(parts.items()))
             + f', this probe {(mine_after - mine_before) / elapsed:.2f}; node RSS '
-            f'{rss_start:.0f} -> {rss_end:.0f} MB')
+            f'{rss_start:.0f} -> {rss_end:.0f} MB; load average {load:.1f} at the end; '
+            + (f'the node dropped lag {len(dropped)}x ({dropped[-1]} steps by its last '
+               'warning)' if dropped else 'the node dropped no lag (it made up every hiccup)'))
     figure = (f'real-time factor {overall:.3f} over {elapsed:.0f} s (probe: steps heard x dt / '
               'wall time); node log, every 10 s window: '
               + (', '.join(f'{rtf:.3f}' for rtf in windows) if windows else 'none')
@@ -1054,7 +1063,129 @@ def run_viewer(args, workdir):
     return 0 if fine else 1
 
 
+# liveview -------------------------------------------------------------------------------------
+
+#: The node's start line and progress lines, with their ROS log stamps (s since the epoch).
+START_LINE = re.compile(r'\[(\d+\.\d+)\] \[ball_world\]: world: .*?, dt ([0-9.e+-]+) s,')
+STEP_LINE = re.compile(r'\[(\d+\.\d+)\] \[ball_world\]: step (\d+): ')
+#: A screenshot line of scripts/screenshot_web.js: its file and when it was taken.
+SHOT_LINE = re.compile(r'^(\S+\.png) (\d+\.\d+)$', re.MULTILINE)
+
+
+def node_sim_time(log, when):
+    """The node's simulated time at `when` (s since the epoch), from its log lines: the
+    steps of the progress lines around it, interpolated (the start line is step 0)."""
+    start = START_LINE.search(log)
+    if start is None:
+        raise SoakError('the node never logged its start line')
+    dt = float(start.group(2))
+    points = [(float(start.group(1)), 0)] + [(float(t), int(k)) for t, k in STEP_LINE.findall(log)]
+    stamps, steps = zip(*points)
+    if when > stamps[-1]:
+        raise SoakError('a screenshot was taken after the last progress line of the node')
+    return float(np.interp(when, stamps, steps)) * dt
+
+
+def screenshot_tools():
+    """(node, chromium, NODE_PATH) for scripts/screenshot_web.js, or SoakError saying what
+    to install."""
+    chromium = os.environ.get('CHROMIUM', '/usr/bin/chromium')
+    node_path = os.environ.get('NODE_PATH', str(Path.home() / 'tools/puppeteer/node_modules'))
+    node = shutil.which('node')
+    if node is None or not Path(chromium).exists() or \
+            not (Path(node_path) / 'puppeteer-core').is_dir():
+        raise SoakError('liveview needs node, chromium (apt-get install chromium) and '
+                        'puppeteer-core (npm install --prefix ~/tools/puppeteer puppeteer-core, '
+                        'or NODE_PATH=...); see scripts/screenshot_web.js')
+    return node, chromium, node_path
+
+
+def run_liveview(args, workdir):
+    """`make view` (scripts/view.sh) with pages in headless Chromium: one opened at the start,
+    shot at args.early seconds after it loaded, and one opened args.late s into the run, shot
+    at args.late_shots. Reports the node's simulated time at each shot, to set beside the time
+    each page shows (read on the screenshots, kept in --dir)."""
+    import socket
+    import subprocess
+    node, chromium, node_path = screenshot_tools()
+    root = Path(__file__).resolve().parent.parent
+    ports = []
+    for _ in range(2):
+        with socket.socket() as probe:
+            probe.bind(('127.0.0.1', 0))
+            ports.append(probe.getsockname()[1])
+    environment = {**os.environ, 'VIEW_GRPC_PORT': str(ports[0]), 'VIEW_WEB_PORT': str(ports[1]),
+                   'STEPS': '0', 'CHROMIUM': chromium, 'NODE_PATH': node_path}
+    log_path = Path(workdir) / 'view.log'
+    with open(log_path, 'w') as log_file:
+        view = subprocess.Popen([str(root / 'scripts/view.sh')], cwd=root, env=environment,
+                                stdout=log_file, stderr=subprocess.STDOUT,
+                                start_new_session=True)
+    url = (f'http://127.0.0.1:{ports[1]}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{ports[0]}'
+           '%2Fproxy')
+    pages = []
+    try:
+        deadline = time.monotonic() + DEADLINE
+        while not START_LINE.search(log_path.read_text(errors='replace')):
+            if view.poll() is not None or time.monotonic() > deadline:
+                raise SoakError(f'make view did not start; see {log_path}')
+            time.sleep(0.5)
+        began = time.monotonic()
+
+        def page(name, shots):
+            output = open(Path(workdir) / f'{name}.out', 'w')
+            process = subprocess.Popen(
+                [node, str(root / 'scripts/screenshot_web.js'), url, str(Path(workdir) / name),
+                 ','.join(f'{s:g}' for s in shots)],
+                env=environment, stdout=output, stderr=subprocess.STDOUT)
+            pages.append((name, process, output))
+            progress(f'liveview: page {name} opened {time.monotonic() - began:.0f} s into the run')
+
+        page('early', args.early)
+        while time.monotonic() < began + args.late:
+            if view.poll() is not None:
+                raise SoakError(f'make view stopped; see {log_path}')
+            time.sleep(1.0)
+        page('late', args.late_shots)
+        for _, process, output in pages:
+            process.wait(timeout=max(args.early + args.late_shots) + DEADLINE)
+            output.close()
+        time.sleep(11.0)  # one more progress line of the node after the last shot
+    finally:
+        for _, process, _ in pages:
+            if process.poll() is None:
+                process.kill()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(view.pid, signal.SIGINT)
+        try:
+            view.wait(timeout=DEADLINE)
+        except subprocess.TimeoutExpired:
+            os.killpg(view.pid, signal.SIGKILL)
+    log = log_path.read_text(errors='replace')
+    findings = []
+    for name, _, _ in pages:
+        text = (Path(workdir) / f'{name}.out').read_text(errors='replace')
+        loaded = re.search(r'^loaded (\d+\.\d+)$', text, re.MULTILINE)
+        shots = SHOT_LINE.findall(text)
+        if loaded is None or not shots:
+            raise SoakError(f'page {name}: no screenshot ({text.strip()[-300:]})')
+        opened = node_sim_time(log, float(loaded.group(1)))
+        findings.append(f'{name} page (loaded at node t = {opened:.1f} s): ' + ', '.join(
+            f'{Path(path).name} node t = {node_sim_time(log, float(when)):.1f} s'
+            for path, when in shots))
+    what = (f'`make view` (the default world, trails 1 s) on ports {ports[0]}/{ports[1]}, '
+            f'pages in headless Chromium (SwiftShader), load average '
+            f'{os.getloadavg()[0]:.1f} at the end; screenshots in {workdir}')
+    row('liveview', what, '; '.join(findings) + ' (compare with the sim_time each page shows)')
+    return 0
+
+
 # Command line ---------------------------------------------------------------------------------
+
+def _seconds(text):
+    """'10,40,70': a list of seconds."""
+    return [float(part) for part in text.split(',')]
+
 
 def main(argv=None):
     parser = argparse.ArgumentParser(
@@ -1131,6 +1262,16 @@ def main(argv=None):
                              'of the node)')
     viewer.add_argument('--target', type=float, default=0.99,
                         help='least real-time factor of every phase that passes (default 0.99)')
+    liveview = cases.add_parser('liveview', help='make view in headless Chromium: the node '
+                                                 'simulated time when a page opened at the '
+                                                 'start and one opened late are shot')
+    liveview.add_argument('--early', type=_seconds, default=[10.0, 40.0, 70.0, 100.0],
+                          help='shots of the first page, s after it loaded (default '
+                               '10,40,70,100)')
+    liveview.add_argument('--late', type=float, default=300.0,
+                          help='s into the run when the second page opens (default 300)')
+    liveview.add_argument('--late-shots', type=_seconds, default=[10.0, 40.0],
+                          help='shots of the late page, s after it loaded (default 10,40)')
     for case in (kill, flood, steps, memory, sinkmemory, rtf, fulldisk, viewer):
         case.add_argument('--backend', choices=('auto', 'numpy', 'numba'), default='auto',
                           help='physics.backend of the world (default auto, as the node)')
@@ -1146,8 +1287,7 @@ def main(argv=None):
             parser.error(f'--{name} must be at least 1')
     runs = {'kill': run_kill, 'flood': run_flood, 'steps': run_steps, 'memory': run_memory,
             'sinkmemory': run_sink_memory, 'rtf': run_rtf, 'startup': run_startup,
-            'fulldisk': run_fulldisk,
-            'viewer': run_viewer}
+            'fulldisk': run_fulldisk, 'viewer': run_viewer, 'liveview': run_liveview}
     workdir = args.dir or tempfile.mkdtemp(prefix='ball_world_soak_')
     os.makedirs(workdir, exist_ok=True)
     try:

@@ -1,4 +1,4 @@
-// Screenshot of the Rerun web viewer in headless Chromium: the browser check of `make view`.
+// Screenshots of the Rerun web viewer in headless Chromium: the browser check of `make view`.
 //
 // Not part of `make test` (CI has no browser). For developers, with Debian's chromium and
 // puppeteer-core installed outside the repository:
@@ -7,17 +7,21 @@
 //   npm install --prefix ~/tools/puppeteer puppeteer-core
 //   make view &                       # or VIEW_GRPC_PORT=... VIEW_WEB_PORT=... make view
 //   NODE_PATH=~/tools/puppeteer/node_modules node scripts/screenshot_web.js \
-//     'http://127.0.0.1:9090/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A9876%2Fproxy' view.png
+//     'http://127.0.0.1:9090/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A9876%2Fproxy' view 10,25,40
 //
-// Chromium renders WebGPU/WebGL in software (SwiftShader); the viewer's wasm takes about
-// 20 s to load that way, hence the wait (third argument, seconds; default 25).
+// writes view-10s.png, view-25s.png and view-40s.png: the page 10, 25 and 40 s after it
+// loaded (default 25: Chromium renders WebGPU/WebGL in software, SwiftShader, and the
+// viewer's wasm takes about 20 s to load that way). For each it prints one line with the
+// wall-clock time of the shot (seconds since the epoch), to compare the simulated time the
+// page shows with the node's at that moment (benchmarks/live_view.py does).
 'use strict';
 const puppeteer = require('puppeteer-core');
 
 async function main() {
-  const [url, output, waitSeconds = '25'] = process.argv.slice(2);
-  if (!url || !output) {
-    console.error('usage: screenshot_web.js URL OUTPUT.png [WAIT_SECONDS]');
+  const [url, prefix, times = '25'] = process.argv.slice(2);
+  const seconds = times.split(',').map(Number);
+  if (!url || !prefix || seconds.some((s) => !(s >= 0))) {
+    console.error('usage: screenshot_web.js URL OUTPUT_PREFIX [SECONDS,SECONDS,...]');
     process.exit(2);
   }
   const browser = await puppeteer.launch({
@@ -31,9 +35,18 @@ async function main() {
     await page.setViewport({width: 1600, height: 900});
     page.on('pageerror', (error) => console.error(`page error: ${error.message}`));
     await page.goto(url, {waitUntil: 'load', timeout: 60000});
-    await new Promise((resolve) => setTimeout(resolve, Number(waitSeconds) * 1000));
-    await page.screenshot({path: output});
-    console.log(`wrote ${output}`);
+    const loaded = Date.now();
+    console.log(`loaded ${loaded / 1000}`);
+    for (const after of [...seconds].sort((a, b) => a - b)) {
+      const wait = loaded + after * 1000 - Date.now();
+      if (wait > 0) {
+        await new Promise((resolve) => setTimeout(resolve, wait));
+      }
+      const output = `${prefix}-${after}s.png`;
+      const taken = Date.now();
+      await page.screenshot({path: output});
+      console.log(`${output} ${taken / 1000}`);
+    }
   } finally {
     await browser.close();
   }

@@ -23,7 +23,11 @@ for port in "$grpc_port" "$web_port"; do
 done
 
 mkdir -p runs
+# The server keeps what it relays for pages opened later, up to VIEW_SERVER_MEMORY; past it
+# the oldest frames go (the walls, the balls' looks and the layout are kept: the node logs
+# them static). A page opened an hour in gets the last seconds, newest first, not the hour.
 "$rerun_bin" --serve-web --bind 127.0.0.1 --port "$grpc_port" --web-viewer-port "$web_port" \
+  --server-memory-limit "${VIEW_SERVER_MEMORY:-4MiB}" --newest-first \
   --hide-welcome-screen > runs/rerun_server.log 2>&1 &
 server=$!
 stop_server() {

@@ -7,6 +7,7 @@ viewer shows at a step is the latest value logged at or before it (Rerun's lates
 """
 from dataclasses import replace
 import inspect
+import math
 import os
 import signal
 import socket
@@ -24,10 +25,12 @@ import rerun as rr
 from ball_world.recording import rerun_log, rerun_outlet
 from ball_world.recording.mcap_writer import McapSink
 from ball_world.recording.rerun_log import (ARENA, ARROW_MAX_FRACTION, ARROW_MIN_FRACTION,
-                                            ARROW_SECONDS, BALLS, COLLISIONS, ENERGY,
-                                            IMPULSE_COLOR, IMPULSES, MOMENTUM, REAL_TIME_FACTOR,
-                                            RealTimeFactor, RerunSink, scene_bounds, SIM_TIME,
-                                            STEP, TRAILS, VELOCITIES, VELOCITY_SECONDS, WALLS)
+                                            ARROW_SECONDS, ball_color, BALLS, clip_arrow,
+                                            COLLISIONS, ENERGY, IMPULSE_COLOR, IMPULSES,
+                                            MOMENTUM, REAL_TIME_FACTOR, RealTimeFactor,
+                                            RerunSink, scene_bounds, SIM_TIME, STEP, TRAILS,
+                                            VELOCITIES, VELOCITY_SECONDS, VIEW_FPS,
+                                            VIEW_TRAIL_SPACING, WALL_COLOR, WALLS)
 from ball_world.recording.rerun_outlet import Outlet, OutletFailed, parse_view
 from ball_world.simulation import Simulation
 from ball_world.tools import to_rrd
@@ -177,7 +180,7 @@ def test_collisions_are_integer_totals_per_segment(tmp_path):
     assert style == [rr.components.AggregationPolicy.Max.value]  # integers at any zoom
 
 
-def test_impulse_stays_half_a_second_in_white_with_the_ball_name(tmp_path):
+def test_impulse_stays_half_a_second_in_its_colour_with_the_ball_name(tmp_path):
     path = tmp_path / 'run.rrd'
     collected = run([RerunSink(path)], steps=60)
     records = collected.records
@@ -206,10 +209,62 @@ def test_impulse_stays_half_a_second_in_white_with_the_ball_name(tmp_path):
         if expected:
             assert shown_at(labels, step) == [
                 f'ball_{ball}: J = ({jx:.3g}, {jy:.3g}) N s' for _, ball, jx, jy in expected]
-    white = int.from_bytes(bytes((*IMPULSE_COLOR, 255)), 'big')
-    assert {tuple(color) for color in colors.values()} == {(white,), ()}  # () = cleared
+    packed = int.from_bytes(bytes((*IMPULSE_COLOR, 255)), 'big')
+    assert {tuple(color) for color in colors.values()} == {(packed,), ()}  # () = cleared
     # 0.1 N s on a ball of ~0.1 kg is a small push: its arrow is lifted to the floor.
     assert np.hypot(*arrow(*first)[0:2]) == pytest.approx(ARROW_MIN_FRACTION * span, rel=1e-6)
+
+
+def contrast(color, background):
+    """WCAG 2 contrast ratio of two sRGB colours (1 to 21)."""
+    def luminance(rgb):
+        linear = [c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4
+                  for c in (v / 255 for v in rgb)]
+        return 0.2126 * linear[0] + 0.7152 * linear[1] + 0.0722 * linear[2]
+    high, low = sorted((luminance(color), luminance(background)), reverse=True)
+    return (high + 0.05) / (low + 0.05)
+
+
+def test_balls_pushes_and_walls_are_seen_on_light_and_dark_themes():
+    # The web viewer's light theme is white, the dark one near black (the white arrow of
+    # old was invisible on the light one).
+    for background in ((255, 255, 255), (0, 0, 0)):
+        assert contrast(IMPULSE_COLOR, background) >= 4.5
+        assert contrast(WALL_COLOR, background) >= 3.0
+    # ...and no ball shares the arrow's colour; balls and their labels are seen on both.
+    colours = {ball_color(f'ball_{i}') for i in range(10_000)} | {ball_color('red')}
+    assert IMPULSE_COLOR not in colours
+    assert all(contrast(colour, (255, 255, 255)) >= 4.0 and contrast(colour, (0, 0, 0)) >= 4.0
+               for colour in colours)
+    assert len({ball_color(f'ball_{i}') for i in range(20)}) == 20  # neighbours differ
+
+
+@pytest.mark.parametrize('origin, vector, expected', [
+    ((5.0, 5.0), (2.0, 1.0), (2.0, 1.0)),        # inside: unchanged
+    ((9.0, 5.0), (2.0, 1.0), (1.0, 0.5)),        # past xmax = 10: halved, same direction
+    ((5.0, 1.0), (1.0, -4.0), (0.25, -1.0)),     # past ymin = 0
+    ((9.5, 9.0), (2.0, 4.0), (0.5, 1.0)),        # past both: the nearer edge wins
+    ((10.0, 5.0), (3.0, 0.0), (0.0, 0.0)),       # on the edge, pointing out: no length
+    ((0.5, 5.0), (-2.0, 0.0), (-0.5, 0.0)),      # past xmin = 0
+])
+def test_an_arrow_is_shortened_to_keep_its_head_in_the_scene(origin, vector, expected):
+    assert clip_arrow(origin, vector, (0.0, 0.0, 10.0, 10.0)) == pytest.approx(expected)
+
+
+def test_a_push_at_a_wall_keeps_its_arrow_head_in_view(tmp_path):
+    path = tmp_path / 'wall.rrd'
+    parameters = {'random.count': 0, 'balls.x': [9.5], 'balls.y': [5.0], 'balls.vx': [0.0],
+                  'balls.vy': [0.0], 'balls.radius': [0.2], 'balls.mass': [1.0]}
+    run([RerunSink(path)], steps=3, parameters=parameters, impulses={1: (0, 5.0, 0.0)})
+    _, content, _, _ = read(path)
+    (origin,) = content[(f'/{IMPULSES}', 'Arrows2D:origins')][1]
+    (vector,) = content[(f'/{IMPULSES}', 'Arrows2D:vectors')][1]
+    world_bounds = scene_bounds(SimpleNamespace(
+        walls=np.array([[0, 0, 10, 0], [10, 0, 10, 10], [10, 10, 0, 10], [0, 10, 0, 0]]),
+        radii=[0.2], positions=np.array([[9.5, 5.0]])))
+    tip = origin[0] + vector[0]
+    assert vector[0] > 0.0 and vector[1] == 0.0  # still pointing along the push
+    assert tip <= world_bounds[2]  # its head inside the view's bounds
 
 
 def test_optional_velocities_and_trails(tmp_path):
@@ -547,19 +602,74 @@ def stop_listener(process, saved=None):
     process.wait(timeout=LIVENESS_SECONDS)
 
 
-def test_live_view_receives_the_same_recording_as_the_file(tmp_path, listener):
+#: Wall seconds per step in the live view tests: 66 steps/s, no multiple of the frame period.
+WALL_STEP = 0.0151
+
+
+def test_live_view_gets_frames_at_its_rate_with_balls_trails_and_pushes_in_step(
+        tmp_path, listener):
+    """Steps come every WALL_STEP s of (fake) wall time; the view gets VIEW_FPS frames/s."""
     process, url, received = listener()
     path = tmp_path / 'run.rrd'
     reports = []
-    run([RerunSink(path, view=url, report=reports.append)], steps=90)
+    clock = FakeClock()
+
+    class Ticking(Truth):
+        def write_step(self, record):
+            clock.now = 100.0 + record.step * WALL_STEP
+
+    collector = Truth()
+    sink = RerunSink(path, view=url, report=reports.append, clock=clock, trail_seconds=0.1)
+    simulation = Simulation({}, sinks=[Ticking(), sink, collector])
+    for k in range(1, 91):
+        if k in IMPULSES_AT:
+            ball, jx, jy = IMPULSES_AT[k]
+            simulation.queue_impulse(f'ball_{ball}', jx, jy)
+        simulation.step()
+    simulation.close()
     stop_listener(process, received)
     assert reports == []
-    # Compared value by value: the two streams batch rows into chunks at different moments.
     store_file, content_file, _, _ = read(path)
     store_view, content_view, _, _ = read(received)
     assert store_view.recording_id == store_file.recording_id  # one recording
-    assert content_view == content_file
     assert open_rrd(received).blueprints(), 'the blueprint reached the viewer'
+    records = collector.records
+
+    # Frame n is the first step at or after n frame periods of wall time, plus the last.
+    period = 1.0 / VIEW_FPS
+    ratios = [n * period / WALL_STEP for n in range(1, 40)]
+    assert all(abs(r - round(r)) > 1e-6 for r in ratios)  # no step exactly on a frame
+    frames = {0, 90} | {math.ceil(r) for r in ratios if r <= 90}
+    positions = content_view[(f'/{BALLS}', 'Points2D:positions')]
+    assert set(positions) == frames
+    assert all(positions[k] == as_float32(records[k].positions) for k in frames)
+    # The file still has every step.
+    assert sorted(content_file[(f'/{BALLS}', 'Points2D:positions')]) == list(range(91))
+    # Trails and plots go with the balls: the same frames, nothing in between. The trails
+    # are in the balls' rows, so no viewer can draw one without the other.
+    trails = content_view[(f'/{BALLS}', 'LineStrips2D:strips')]
+    assert set(trails) == frames
+    for k in frames:
+        # A point per VIEW_TRAIL_SPACING s of simulated time at most, and where the ball is
+        # now; none older than the trail's 0.1 s.
+        kept = [j for j in frames if j < k and records[k].log_time_ns
+                - records[j].log_time_ns <= 100_000_000]
+        assert all(strip[-1] == point for strip, point in zip(trails[k], positions[k]))
+        assert 1 <= len(trails[k][0]) <= len(kept) + 1
+        assert len(trails[k][0]) - 1 <= 0.1 / VIEW_TRAIL_SPACING + 1
+    assert set(scalars(content_view, COLLISIONS)) == frames
+    assert scalars(content_view, COLLISIONS)[90] == scalars(content_file, COLLISIONS)[90]
+    # The push of step 10 (between frames) is drawn at the next frame, from where it was
+    # applied, and stays on screen half a second of simulated time.
+    origins = content_view[(f'/{IMPULSES}', 'Arrows2D:origins')]
+    after = min(k for k in frames if k >= 10)
+    assert as_float32(records[10].positions[3]) in shown_at(origins, after)
+    assert not shown_at(origins, 90)
+    # What a page opened late needs is static: it outlives the frames a server drops.
+    for key in ((f'/{WALLS}', 'LineStrips2D:strips'), (f'/{BALLS}', 'Points2D:radii'),
+                (f'/{BALLS}', 'Points2D:colors'), (f'/{BALLS}', 'Points2D:labels'),
+                (f'/{ARENA}', 'Transform3D:rotation_axis_angle')):
+        assert list(content_view[key]) == [None], key
 
 
 def test_absent_viewer_is_reported_once_and_the_file_goes_on(tmp_path):
@@ -618,7 +728,9 @@ def test_view_alone_without_a_file(listener):
     stop_listener(process, received)
     _, content, _, _ = read(received)
     positions = content[(f'/{BALLS}', 'Points2D:positions')]
-    assert positions == {r.step: as_float32(r.positions) for r in collected.records}
+    # Thirty steps in far less than a frame period: the first and the last are shown.
+    assert {0, 30} <= set(positions)
+    assert all(positions[k] == as_float32(collected.records[k].positions) for k in positions)
 
 
 # The node ------------------------------------------------------------------------------------
@@ -640,8 +752,15 @@ def test_node_streams_to_a_viewer_and_records_one_recording(tmp_path, listener):
     store_file, content_file, _, _ = read(path)
     store_view, content_view, _, _ = read(received)
     assert store_view.recording_id == store_file.recording_id
-    assert content_view == content_file
     assert sorted(content_file[(f'/{BALLS}', 'Points2D:positions')]) == list(range(121))
+    # The view got frames (at most VIEW_FPS a second, so fewer than the 120 steps of one
+    # second), each equal to the file's step, with the trail of the same step.
+    shown = content_view[(f'/{BALLS}', 'Points2D:positions')]
+    recorded = content_file[(f'/{BALLS}', 'Points2D:positions')]
+    assert {0, 120} <= set(shown) and len(shown) < 121
+    assert all(shown[k] == recorded[k] for k in shown)
+    assert set(content_view[(f'/{BALLS}', 'LineStrips2D:strips')]) == set(shown)
+    assert set(content_view[(f'/{BALLS}', 'Arrows2D:vectors')]) == set(shown)
     assert (f'/{VELOCITIES}', 'Arrows2D:vectors') in content_file
     assert (f'/{TRAILS}', 'LineStrips2D:strips') in content_file
     rtf = scalars(content_file, REAL_TIME_FACTOR)
@@ -722,7 +841,10 @@ def test_spawn_starts_the_viewer_beside_python_and_streams_to_it(tmp_path, monke
                                           wait=lambda timeout: _wait_gone(pid, timeout)),
                           saved)
     _, content, _, _ = read(saved)
-    assert sorted(content[(f'/{BALLS}', 'Points2D:positions')]) == list(range(31))
+    # A view is sent frames at VIEW_FPS of wall time, and the segment's first and last step:
+    # these 30 steps take less than a frame.
+    shown = sorted(content[(f'/{BALLS}', 'Points2D:positions')])
+    assert shown[0] == 0 and shown[-1] == 30
 
 
 def _wait_gone(pid, timeout):

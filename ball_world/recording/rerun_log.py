@@ -9,13 +9,14 @@ Layout of the recording (application id 'ball_world'):
 - `arena/balls` (Points2D): positions every logged step; radii, colours and name labels at
   the first step of a segment and again whenever the balls (their names, in pose order)
   change, so a step costs one float32 array.
-- `arena/walls` (LineStrips2D), once per segment at its first step: not static, because a
-  reset may change the walls and static data would rewrite the earlier segments.
+- `arena/walls` (LineStrips2D), once per segment at its first step: not static in a file,
+  because a reset may change the walls and static data would rewrite the earlier segments.
 - `arena/impulses` (Arrows2D): each applied impulse for IMPULSE_SECONDS of simulated time,
-  in white (no ball has that colour), at the point where it was applied, pointing along the
-  velocity change, labelled with the ball's name and J. Its length is the velocity change
-  times ARROW_SECONDS, kept between a floor (a tiny push is still seen) and a ceiling
-  (a huge one stays on screen) set by the size of the scene.
+  in IMPULSE_COLOR (no ball has it; readable on the viewer's light and dark themes), at the
+  point where it was applied, pointing along the velocity change, labelled with the ball's
+  name and J. Its length is the velocity change times ARROW_SECONDS, kept between a floor
+  (a tiny push is still seen) and a ceiling (a huge one stays on screen) set by the size of
+  the scene, and shortened where it would leave the scene, so its head is always seen.
 - `arena/velocities` (Arrows2D, optional): each ball's velocity times VELOCITY_SECONDS.
 - `arena/trails` (LineStrips2D, optional): each ball's path over the last trail seconds.
 - `arena/agents` (Arrows2D): each agent's heading, labelled with its name (rerun_agents).
@@ -41,21 +42,25 @@ record's step plus the number of steps of the earlier segments. The SDK's wall-c
 the run's parameters, so identical runs give identical recorded content.
 
 Destinations: the file and the viewer each get their own stream with the same recording id
-(see rerun_outlet), fed the same calls, so they show one recording; either can fail alone.
-Per-step data is buffered and sent as columns (one chunk per entity for many steps), which
-keeps logging cheap at thousands of balls; `flush()` sends what is buffered.
+(see rerun_outlet), so they show one recording; either can fail alone. They are fed
+differently (_Feed). The file gets every logged step, buffered and sent as columns (one
+chunk per entity for many steps), which keeps logging cheap at thousands of balls; `flush()`
+sends what is buffered. A live view gets frames: at most VIEW_FPS a second of wall time,
+each sent at once with the balls, trails, arrows and plots of one step, and the walls and
+the balls' looks logged static, so a page opened late, after a Rerun server dropped the
+oldest frames, still has them. It shows now, not every step.
 
 Balls are named: `ball_<i>` by default, or the `names` a record (and a WorldSnapshot)
 carries, in pose order, so balls may appear and disappear between steps; a record may also
 carry `radii` and `masses` for names its segment did not start with.
 """
 from collections import deque
-import colorsys
 import json
 import math
 import os
 from pathlib import Path
 import sys
+import time
 import uuid
 import zlib
 
@@ -94,9 +99,24 @@ STEP = 'step'
 #: Labels are drawn by default up to this many balls; beyond, they only clutter the view.
 LABEL_LIMIT = 30
 
-#: Buffered steps are sent once this many are pending, or this many positions.
+#: A file's buffered steps are sent once this many are pending, or this many positions.
 MAX_PENDING_STEPS = 64
 MAX_PENDING_POSITIONS = 500_000
+
+#: Frames per second of wall time sent to a live view. The web viewer, rendering in
+#: software on a 2-core machine, takes in about this many and stays live; a frame per step
+#: (60-100 a second, trails included) it could not take, and it fell minutes behind.
+VIEW_FPS = 25.0
+#: A view's SDK stream sends what it gathered this often: one chunk per entity holding
+#: several frames. The web viewer's cost is per message more than per byte.
+VIEW_FLUSH_SECONDS = 0.25
+#: A view's plots show this much simulated time up to now...
+VIEW_PLOT_SECONDS = 30.0
+#: ...and are sent every this many seconds of wall time, as columns.
+VIEW_PLOT_PERIOD = 2.0
+#: A view's trails keep a point per this much simulated time (and the ball's position now):
+#: the trails are most of what a view is sent, and a frame re-sends each one whole.
+VIEW_TRAIL_SPACING = 0.1
 
 #: Fixed namespace of the recording ids (uuid5 of the parameters).
 RECORDING_NAMESPACE = uuid.uuid5(uuid.NAMESPACE_DNS, 'ball_world.ros.rerun')
@@ -113,7 +133,11 @@ ARROW_SECONDS = 0.25
 #: ...but at least / at most this fraction of the scene's larger side.
 ARROW_MIN_FRACTION = 0.12
 ARROW_MAX_FRACTION = 0.3
-IMPULSE_COLOR = (255, 255, 255)
+#: ...and shortened so that its head stays this fraction of the scene inside its bounds.
+ARROW_INSET_FRACTION = 0.01
+#: Deep pink: no ball has it (their colours are lighter), and it keeps a contrast of at least
+#: 4.5 to 1 against both a white and a black background (the viewer's light and dark themes).
+IMPULSE_COLOR = (225, 0, 130)
 
 #: A velocity arrow is the velocity times this many seconds.
 VELOCITY_SECONDS = 0.25
@@ -121,23 +145,54 @@ VELOCITY_SECONDS = 0.25
 #: The real-time factor is measured over this much wall time (plus the step just before).
 RTF_WINDOW = 1.0
 
-WALL_COLOR = (200, 200, 200)
+#: Mid grey: seen on the viewer's light theme and on its dark one (contrast over 3 to 1 on
+#: both).
+WALL_COLOR = (128, 128, 128)
+ENERGY_COLOR = (200, 130, 0)
 GOLDEN_RATIO_CONJUGATE = (math.sqrt(5.0) - 1.0) / 2.0
+#: Perceived lightness (OKLCH L) and the most chroma of the balls' colours (ball_color).
+BALL_LIGHTNESS = 0.565
+BALL_CHROMA = 0.14
 
 
 def ball_color(name):
     """A stable colour per ball name, kept when other balls come and go.
 
     `ball_<i>` gets hue i times the golden ratio (neighbouring indices stay distinct for any
-    N); any other name a hue from its CRC-32.
+    N); any other name a hue from its CRC-32. Every hue has the same perceived lightness
+    (OKLCH, BALL_LIGHTNESS), a mid tone that keeps a contrast of about 4 to 1 against white
+    and against black: a ball and its label are seen on the viewer's light theme and on its
+    dark one alike (light pastels vanished on the light one).
     """
     prefix, _, index = name.rpartition('_')
     if prefix == 'ball' and index.isdigit() and len(index) < 10:
         hue = (int(index) * GOLDEN_RATIO_CONJUGATE) % 1.0
     else:
         hue = zlib.crc32(name.encode()) / 2**32
-    red, green, blue = colorsys.hsv_to_rgb(hue, 0.65, 0.95)
-    return round(red * 255), round(green * 255), round(blue * 255)
+    chroma = BALL_CHROMA
+    while True:  # the most colourful of this lightness and hue that sRGB can show
+        linear = _oklch_to_linear_srgb(BALL_LIGHTNESS, chroma, hue)
+        if all(-1e-9 <= c <= 1.0 + 1e-9 for c in linear) or chroma <= 0.0:
+            break
+        chroma -= 0.005
+    return tuple(round(_srgb_encode(min(max(c, 0.0), 1.0)) * 255) for c in linear)
+
+
+def _oklch_to_linear_srgb(lightness, chroma, hue):
+    """Björn Ottosson's OKLab (here in polar form, hue in turns) to linear sRGB."""
+    a = chroma * math.cos(2.0 * math.pi * hue)
+    b = chroma * math.sin(2.0 * math.pi * hue)
+    long_ = (lightness + 0.3963377774 * a + 0.2158037573 * b) ** 3
+    medium = (lightness - 0.1055613458 * a - 0.0638541728 * b) ** 3
+    short = (lightness - 0.0894841775 * a - 1.2914855480 * b) ** 3
+    return (4.0767416621 * long_ - 3.3077115913 * medium + 0.2309699292 * short,
+            -1.2684380046 * long_ + 2.6097574011 * medium - 0.3413193965 * short,
+            -0.0041960863 * long_ - 0.7034186147 * medium + 1.7076147010 * short)
+
+
+def _srgb_encode(value):
+    """Linear light to the sRGB transfer curve, both in [0, 1]."""
+    return 12.92 * value if value <= 0.0031308 else 1.055 * value ** (1.0 / 2.4) - 0.055
 
 
 def default_names(count):
@@ -190,33 +245,56 @@ def real_time_factor_axis(parameters):
     return None if expected is None else rrb.ScalarAxis(range=(0.0, 1.25 * expected))
 
 
-def blueprint(world, parameters=None):
+def blueprint(world, parameters=None, plot_seconds=None):
     """The arena large on the left (+y up, bounds fitted), the plots stacked on the right.
 
     The 2D view's origin is the root, above the `arena` flip, so its visual bounds are in the
     flipped frame: world y in [ymin, ymax] is view y in [-ymax, -ymin]. The legends of the
-    rising plots sit top left, where their curves (starting at 0) do not go.
+    rising plots sit top left, where their curves (starting at 0) do not go. plot_seconds:
+    the plots show only that much simulated time up to the time shown (a live view: what a
+    viewer draws each frame stays bounded however long the run), else the whole run.
     """
     # With room at the bottom and the left for the ruler's labels (rerun_scale).
     xmin, ymin, xmax, ymax = (float(v) for v in padded(scene_bounds(world)))
     arena = rrb.Spatial2DView(
         origin='/', contents=f'/{ARENA}/**', name='arena (+y up)',
         visual_bounds=rrb.VisualBounds2D(x_range=[xmin, xmax], y_range=[-ymax, -ymin]))
+    window = {} if plot_seconds is None else {'time_ranges': rrb.VisibleTimeRange(
+        SIM_TIME, start=rrb.TimeRangeBoundary.cursor_relative(seconds=-plot_seconds),
+        end=rrb.TimeRangeBoundary.cursor_relative())}
     plots = rrb.Vertical(
         rrb.TimeSeriesView(origin=f'/{ENERGY}', name='kinetic energy change since step 0 [%]',
-                           plot_legend=rrb.PlotLegend(corner='LeftTop')),
+                           plot_legend=rrb.PlotLegend(corner='LeftTop'), **window),
         # Momentum is logged (it is part of the recording) but, in a walled box, mostly
         # the walls' doing: it sits in a tab behind the collisions.
         rrb.Tabs(rrb.TimeSeriesView(origin=f'/{COLLISIONS}', name='collisions since step 0',
-                                    plot_legend=rrb.PlotLegend(corner='LeftTop')),
-                 rrb.TimeSeriesView(origin=f'/{MOMENTUM}', name='momentum [kg m/s]')),
+                                    plot_legend=rrb.PlotLegend(corner='LeftTop'), **window),
+                 rrb.TimeSeriesView(origin=f'/{MOMENTUM}', name='momentum [kg m/s]', **window)),
         rrb.TimeSeriesView(origin=f'/{REAL_TIME_FACTOR}',
                            name=f'real-time factor (last {RTF_WINDOW:g} s)',
-                           axis_y=real_time_factor_axis(parameters or {})))
+                           axis_y=real_time_factor_axis(parameters or {}), **window))
     return rrb.Blueprint(
         rrb.Horizontal(arena, plots, column_shares=[2, 1]),
         rrb.TimePanel(timeline=SIM_TIME, state='collapsed', play_state='following'),
         collapse_panels=True)
+
+
+def clip_arrow(origin, vector, bounds):
+    """The vector shortened (same direction) so that origin + vector lies within bounds.
+
+    bounds: (xmin, ymin, xmax, ymax), which must hold the origin. An arrow pushed past the
+    edge of the view would lose its head, which is what tells a push's direction.
+    """
+    scale = 1.0
+    for axis in (0, 1):
+        low, high = bounds[axis], bounds[axis + 2]
+        start, length = float(origin[axis]), float(vector[axis])
+        tip = start + length
+        if tip > high and length > 0.0:
+            scale = min(scale, max(0.0, (high - start) / length))
+        elif tip < low and length < 0.0:
+            scale = min(scale, max(0.0, (low - start) / length))
+    return (vector[0] * scale, vector[1] * scale)
 
 
 def energy_change(energy, energy0):
@@ -280,20 +358,23 @@ class _Pending:
 
     def add(self, row):
         self.rows.append(row)
-        self.position_count += len(row[2])
+        if row[2] is not None:
+            self.position_count += len(row[2])
 
     def clear(self):
         self.rows = []
         self.position_count = 0
 
     def columns(self):
-        """The rows as columns: steps, times, positions, velocities, energy, collisions,
-        momentum, and (steps, times, values) of the real-time factor where it is known."""
+        """The rows as columns: steps, times, positions and velocities (of the rows that have
+        them: a file's), energy, collisions, momentum, and (steps, times, values) of the
+        real-time factor where it is known."""
         steps, times, positions, velocities, energy, collisions, momentum, rtf = \
             zip(*self.rows)
         known = [(s, t, f) for s, t, f in zip(steps, times, rtf) if f is not None]
-        return (steps, times, positions, [v for v in velocities if v is not None], energy,
-                collisions, momentum, tuple(zip(*known)) if known else ((), (), ()))
+        return (steps, times, [p for p in positions if p is not None],
+                [v for v in velocities if v is not None], energy, collisions, momentum,
+                tuple(zip(*known)) if known else ((), (), ()))
 
     def __len__(self):
         return len(self.rows)
@@ -309,27 +390,33 @@ class _Segment:
         self.smallest = min(self.radius.values(), default=0.1)
         xmin, ymin, xmax, ymax = scene_bounds(world)
         self.span = max(xmax - xmin, ymax - ymin)
+        # Arrow heads stay this far inside the scene's bounds (the view's edges).
+        inset = ARROW_INSET_FRACTION * self.span
+        self.inside = (xmin + inset, ymin + inset, xmax - inset, ymax - inset)
 
 
 class RerunSink:
     """Logs a run to a Rerun `.rrd` file and/or a live viewer; see the module docstring.
 
     path: the .rrd file, or None. view: None, 'spawn' (start the native viewer) or a
-    rerun+http://HOST:PORT/proxy URL. every=k logs every k-th step of a segment, plus step
-    0, every step with impulses or edits and the last step before a reset or close;
-    collision totals stay exact. velocities, trail_seconds: the optional layers. clock: a
-    wall clock in seconds (time.monotonic) to measure the real-time factor over the last
-    second; without it the record's value is logged. report: called with one line when one
-    destination fails while another goes on (when the last one fails, the sink raises
-    instead, so its owner drops it and says so).
+    rerun+http://HOST:PORT/proxy URL. every=k logs every k-th step of a segment to the
+    file, plus step 0, every step with impulses or edits and the last step before a reset
+    or close; collision totals stay exact. The view gets a frame at most view_fps times a
+    second of wall time instead (see _Feed). velocities, trail_seconds: the optional layers.
+    clock: a wall clock in seconds (time.monotonic) to measure the real-time factor over
+    the last second; without it the record's value is logged. report: called with one line
+    when one destination fails while another goes on (when the last one fails, the sink
+    raises instead, so its owner drops it and says so).
     """
 
     def __init__(self, path=None, every=1, view=None, velocities=False, trail_seconds=0.0,
-                 clock=None, report=None):
+                 clock=None, report=None, view_fps=VIEW_FPS):
         if isinstance(every, bool) or not isinstance(every, int) or every < 1:
             raise ValueError(f'every must be a whole number >= 1, got {every!r}')
         if not (isinstance(trail_seconds, (int, float)) and 0.0 <= trail_seconds < math.inf):
             raise ValueError(f'trail_seconds must be >= 0, got {trail_seconds!r}')
+        if not (isinstance(view_fps, (int, float)) and 0.0 < view_fps < math.inf):
+            raise ValueError(f'view_fps must be > 0, got {view_fps!r}')
         if path is None and view is None:
             raise ValueError('RerunSink needs a path, a view or both')
         if view is not None:
@@ -338,11 +425,94 @@ class RerunSink:
         if self.path is not None:
             _probe_file(self.path)
         self.view = view
-        self.every = every
-        self.velocities = bool(velocities)
-        self.trail_seconds = float(trail_seconds)
         self.report = report or (lambda line: print(f'ball_world: {line}', file=sys.stderr))
-        self.outlets = []
+        layers = dict(velocities=bool(velocities), trail_seconds=float(trail_seconds),
+                      clock=clock)
+        self._feeds = []
+        if self.path is not None:
+            path = self.path
+            self._feeds.append(_Feed(lambda stream, plan: Outlet.file(path, stream, plan),
+                                     every=every, **layers))
+        if view is not None:
+            self._feeds.append(_Feed(lambda stream, plan: Outlet.view(view, stream, plan),
+                                     frame_period=1.0 / view_fps,
+                                     frame_clock=clock or time.monotonic, **layers))
+        self._closed = False
+
+    def start_segment(self, world, info):
+        """Open the destinations on the first segment; log the segment's walls and balls."""
+        if self._closed:
+            raise RuntimeError('RerunSink is closed')
+        self._each_feed(lambda feed: feed.start_segment(world, info))
+
+    def write_step(self, record):
+        """Hand the step to each destination, which logs it or not (every, frame rate)."""
+        if self._closed:
+            raise RuntimeError('RerunSink.write_step after close')
+        self._each_feed(lambda feed: feed.write_step(record))
+
+    def flush(self):
+        """Send the buffered steps and have each destination write them (bounded waits)."""
+        if not self._closed:
+            self._each_feed(lambda feed: feed.flush())
+
+    def close(self):
+        """Log the final state, send everything and finish the file (footer included)."""
+        if self._closed:
+            return
+        self._closed = True
+        errors = []
+        for feed in self._feeds:
+            try:
+                feed.close()
+            except OutletFailed as error:
+                errors.append(str(error))
+        if errors:
+            raise OutletFailed('; '.join(errors))
+
+    def _each_feed(self, action):
+        """Run action on every live destination; drop one that failed and say so once.
+
+        When the last one fails the error is raised, so the Simulation drops the sink and
+        its owner reports it; the sink then holds nothing that could block.
+        """
+        for feed in list(self._feeds):
+            try:
+                action(feed)
+            except OutletFailed as error:
+                self._feeds.remove(feed)
+                if not self._feeds:
+                    self._closed = True
+                    raise
+                self.report(f'{error}; going on without it')
+
+
+class _Feed:
+    """What one destination gets, and when: the file every (k-th) step, a view by frames.
+
+    A file (frame_period None) buffers its steps and sends them as columns, MAX_PENDING_STEPS
+    at a time: cheap at thousands of balls, and the file is read later. A live view
+    (frame_period, frame_clock: seconds of wall time) gets one frame at most every
+    frame_period s, sent at once: positions, trails, arrows and plots of the same step,
+    so they stay in step on screen and a viewer takes a bounded amount of data per second,
+    whatever the world's rate. Impulses of the steps between frames are kept and drawn at
+    the next frame. What changes seldom (the walls, the balls' sizes, colours and labels)
+    is logged static to a view: a Rerun server keeps static data when its memory limit
+    drops the oldest frames, so a page opened late still gets it.
+    """
+
+    def __init__(self, open_outlet, every=1, velocities=False, trail_seconds=0.0, clock=None,
+                 frame_period=None, frame_clock=None):
+        self._open_outlet = open_outlet
+        self.every = every
+        self.velocities = velocities
+        self.trail_seconds = trail_seconds
+        self.live = frame_period is not None
+        self._frame_period = frame_period
+        self._frame_clock = frame_clock
+        self._next_frame = None
+        self._plots_sent = None
+        self.outlet = None
         self._rtf = RealTimeFactor(clock) if clock is not None else None
         self._opened = False
         self._pending = _Pending()
@@ -353,16 +523,14 @@ class RerunSink:
         self._totals = np.zeros(2, dtype=np.int64)  # collisions since step 0 of the segment
         self._energy0 = None
         self._shown_names = None
-        self._impulses = []  # (expires log ns, origin, vector, label) on screen
+        self._impulses = []  # (expires log ns, origin, vector, label) on screen or due
+        self._impulses_changed = False
         self._trail = deque()  # (log ns, positions) of the trail's steps
         self._closed = False
 
     # Sink protocol ----------------------------------------------------------------------
 
     def start_segment(self, world, info):
-        """Open the destinations on the first segment; log the segment's walls and balls."""
-        if self._closed:
-            raise RuntimeError('RerunSink is closed')
         if not self._opened:
             self._open(world, info.parameters)
         else:
@@ -373,13 +541,15 @@ class RerunSink:
         self._energy0 = None
         self._shown_names = None
         self._impulses = []
+        self._impulses_changed = False
         self._trail.clear()
         if self._rtf is not None:
             self._rtf.clear()
         self._set_time(self._segment_base, info.log_offset_ns)
         strips = np.asarray(world.walls, dtype=np.float64).reshape(-1, 2, 2)
         self._emit('log', WALLS, rr.LineStrips2D(
-            strips, radii=rr.Radius.ui_points(1.5), colors=WALL_COLOR, draw_order=20.0))
+            strips, radii=rr.Radius.ui_points(1.5), colors=WALL_COLOR, draw_order=20.0),
+            static=self.live)
         self._emit('log', IMPULSES, rr.Arrows2D.cleared())
         self._log_ruler(world)
 
@@ -393,7 +563,7 @@ class RerunSink:
             places, radii=0.0, labels=texts, show_labels=True, colors=WALL_COLOR))
 
     def write_step(self, record):
-        """Buffer the step if it is one to log; send the buffer when it is full."""
+        """Log the step if it is one to log; a file sends its buffer when it is full."""
         if not self._opened or self._closed:
             raise RuntimeError('RerunSink.write_step before start_segment or after close')
         self._last_global = self._segment_base + record.step
@@ -401,13 +571,20 @@ class RerunSink:
         if self._energy0 is None:
             self._energy0 = float(record.kinetic_energy)
             self._set_time(self._last_global, record.log_time_ns)
-            self._emit('log', ENERGY, rr.SeriesLines(names=energy_legend(self._energy0)))
+            self._emit('log', ENERGY, rr.SeriesLines(names=energy_legend(self._energy0)),
+                       static=self.live)
         rtf = record.real_time_factor
         if self._rtf is not None:
             # Step 0 is the initial state, written when the world is built, not a step: the
             # pause before the first step (the node starting up) is no slowness.
             rtf = self._rtf.add(record.log_time_ns) if record.step else None
-        if record.step % self.every == 0 or record.impulses or record.edits:
+        if record.impulses:
+            self._add_impulses(record)
+        if self.live:
+            logged = self._frame_due(record)
+        else:
+            logged = record.step % self.every == 0 or record.impulses or record.edits
+        if logged:
             self._log(record, rtf)
         else:
             self._unlogged = (record, rtf)
@@ -416,14 +593,12 @@ class RerunSink:
             self._log_scans(record, agents, self._segment_base + record.step)
 
     def flush(self):
-        """Send the buffered steps and have each destination write them (bounded waits)."""
-        if not self._opened or self._closed:
-            return
-        self._send()
-        self._each_outlet(lambda outlet: outlet.flush())
+        if self._opened and not self._closed:
+            if not self.live:  # a view sends its plots on its own period (_log_frame)
+                self._send()
+            self._each_outlet(lambda outlet: outlet.flush())
 
     def close(self):
-        """Log the final state, send everything and finish the file (footer included)."""
         if self._closed:
             return
         try:
@@ -433,31 +608,24 @@ class RerunSink:
             self._send()
         finally:
             self._closed = True
-            errors = []
-            for outlet in self.outlets:
-                try:
-                    outlet.close()
-                except OutletFailed as error:
-                    errors.append(str(error))
-            if errors:
-                raise OutletFailed('; '.join(errors))
+            if self.outlet is not None:
+                self.outlet.close()
 
-    # Destinations -----------------------------------------------------------------------
+    # Destination ------------------------------------------------------------------------
 
     def _open(self, world, parameters):
-        """Create the destinations, with the blueprint fitted to the first world."""
+        """Create the destination, with the blueprint fitted to the first world."""
         self._opened = True
-        plan = None if world is None else blueprint(world, parameters)
-        rid = recording_id(parameters)
-        if self.path is not None:
-            self.outlets.append(Outlet.file(self.path, new_stream(APPLICATION_ID, rid), plan))
-        if self.view is not None:
-            self.outlets.append(Outlet.view(self.view, new_stream(APPLICATION_ID, rid), plan))
+        plan = None if world is None else blueprint(
+            world, parameters, VIEW_PLOT_SECONDS if self.live else None)
+        stream = new_stream(APPLICATION_ID, recording_id(parameters),
+                            VIEW_FLUSH_SECONDS if self.live else None)
+        self.outlet = self._open_outlet(stream, plan)
         self._emit('log', ARENA, rr.Transform3D(
             rotation=rr.RotationAxisAngle(axis=(1.0, 0.0, 0.0), degrees=180.0)), static=True)
-        self._emit('log', ENERGY, rr.SeriesLines(colors=(230, 180, 40)), static=True)
+        self._emit('log', ENERGY, rr.SeriesLines(colors=ENERGY_COLOR), static=True)
         self._emit('log', COLLISIONS, rr.SeriesLines(
-            names=['ball-ball', 'ball-wall'], colors=[(90, 150, 240), (200, 200, 200)],
+            names=['ball-ball', 'ball-wall'], colors=[(90, 150, 240), WALL_COLOR],
             aggregation_policy='Max', interpolation_mode='StepAfter'), static=True)
         self._emit('log', REAL_TIME_FACTOR, rr.SeriesLines(
             names='real-time factor', colors=(180, 120, 230)), static=True)
@@ -465,30 +633,31 @@ class RerunSink:
             names=['x', 'y'], colors=[(230, 80, 80), (80, 200, 90)]), static=True)
 
     def _emit(self, name, *args, **kwargs):
-        """Queue the same SDK call on every destination (failures surface at flush)."""
-        for outlet in self.outlets:
-            outlet.call(name, *args, **kwargs)
+        """Queue an SDK call on the destination (a failure surfaces at flush)."""
+        if self.outlet is not None:
+            self.outlet.call(name, *args, **kwargs)
 
     def _each_outlet(self, action):
-        """Run action on every live outlet; drop one that failed and say so once.
-
-        When the last one fails the error is raised, so the Simulation drops the sink and
-        its owner reports it; the sink then holds nothing that could block.
-        """
-        for outlet in list(self.outlets):
-            try:
-                action(outlet)
-            except OutletFailed as error:
-                self.outlets.remove(outlet)
-                if not self.outlets:
-                    self._closed = True
-                    raise
-                self.report(f'{error}; going on without it')
+        """Run action on the outlet; a failure closes this feed and is raised."""
+        try:
+            action(self.outlet)
+        except OutletFailed:
+            self._closed = True
+            raise
 
     # Logging ----------------------------------------------------------------------------
 
+    def _frame_due(self, record):
+        """A live view's cadence: step 0 of a segment, then a frame per frame_period s."""
+        now = self._frame_clock()
+        if record.step and self._next_frame is not None and now < self._next_frame:
+            return False
+        following = (self._next_frame or now) + self._frame_period
+        self._next_frame = following if following > now else now + self._frame_period
+        return True
+
     def _finish_segment(self):
-        """Log the segment's last step if every=k skipped it, so the file ends on the truth."""
+        """Log the segment's last step if it was skipped, so the file ends on the truth."""
         if self._unlogged is not None:
             self._log(*self._unlogged)
 
@@ -502,22 +671,61 @@ class RerunSink:
         names = names_of(record)
         if names != self._shown_names:
             self._log_balls(record, names, step)
-        pending = self._pending
-        pending.add((
-            step, record.log_time_ns, np.asarray(record.positions, dtype=np.float32),
-            np.asarray(record.velocities, dtype=np.float32) if self.velocities else None,
-            energy_change(record.kinetic_energy, self._energy0), self._totals.copy(),
-            np.asarray(record.momentum, dtype=np.float64),
-            rtf if rtf is not None and math.isfinite(rtf) else None))
-        self._log_impulses(record, names, step)
         arrows = heading_arrows(record)
         if arrows is not None:
             self._set_time(step, record.log_time_ns)
             self._emit('log', AGENTS, arrows)
+        if self.live:
+            self._log_frame(record, rtf, step)
+            self._show_impulses(step, record.log_time_ns)
+            return
+        self._buffer(record, rtf, step)
+        self._show_impulses(step, record.log_time_ns)
         if self.trail_seconds:
             self._log_trails(record, names, step)
+        pending = self._pending
         if (len(pending) >= MAX_PENDING_STEPS
                 or pending.position_count >= MAX_PENDING_POSITIONS):
+            self._send()
+
+    def _buffer(self, record, rtf, step):
+        """A file's step, sent later with others as columns (_send)."""
+        self._buffer_plots(
+            record, rtf, step, np.asarray(record.positions, dtype=np.float32),
+            np.asarray(record.velocities, dtype=np.float32) if self.velocities else None)
+
+    def _buffer_plots(self, record, rtf, step, positions=None, velocities=None):
+        """The step's row (with its balls for a file; a view sends those in frames), added in
+        one operation (_Pending)."""
+        self._pending.add((
+            step, record.log_time_ns, positions, velocities,
+            energy_change(record.kinetic_energy, self._energy0), self._totals.copy(),
+            np.asarray(record.momentum, dtype=np.float64),
+            rtf if rtf is not None and math.isfinite(rtf) else None))
+
+    def _log_frame(self, record, rtf, step):
+        """A view's frame: the balls with their trails and velocities now, in one row.
+
+        The web viewer takes in about one message per frame it draws, and draws a few a
+        second in software: so a frame's layers share the balls' entity and row (one chunk
+        per VIEW_FLUSH_SECONDS, never balls of one moment with trails of another), and the
+        plots, which need not move smoothly, are sent as columns every VIEW_PLOT_PERIOD s.
+        """
+        self._set_time(step, record.log_time_ns)
+        positions = np.asarray(record.positions, dtype=np.float32)
+        frame = [rr.Points2D.from_fields(positions=positions)]
+        if self.trail_seconds:
+            frame.append(rr.LineStrips2D.from_fields(
+                strips=self._trail_strips(record.log_time_ns, positions)))
+        if self.velocities:
+            frame.append(rr.Arrows2D.from_fields(
+                origins=positions, vectors=np.asarray(record.velocities, dtype=np.float32)
+                * np.float32(VELOCITY_SECONDS)))
+        self._emit('log', BALLS, *frame)
+        self._buffer_plots(record, rtf, step)
+        now = self._frame_clock()
+        if self._plots_sent is None or now - self._plots_sent >= VIEW_PLOT_PERIOD:
+            self._plots_sent = now
             self._send()
 
     def _log_balls(self, record, names, step):
@@ -529,18 +737,23 @@ class RerunSink:
         self._shown_names = names
         self._trail.clear()  # a trail follows an index: start again when the balls change
         self._set_time(step, record.log_time_ns)
-        self._emit('log', BALLS, rr.Points2D.from_fields(
-            radii=np.asarray(radii, dtype=np.float32),
-            colors=np.array([ball_color(name) for name in names], dtype=np.uint8).reshape(-1, 3),
-            labels=list(names), show_labels=len(names) <= LABEL_LIMIT, draw_order=30.0))
+        colors = np.array([ball_color(name) for name in names], dtype=np.uint8).reshape(-1, 3)
+        looks = [rr.Points2D.from_fields(
+            radii=np.asarray(radii, dtype=np.float32), colors=colors, labels=list(names),
+            show_labels=len(names) <= LABEL_LIMIT, draw_order=30.0)]
+        if self.live and self.trail_seconds:
+            looks.append(rr.LineStrips2D.from_fields(
+                colors=colors, radii=rr.Radius.ui_points(1.0), draw_order=10.0))
+        if self.live and self.velocities:
+            looks.append(rr.Arrows2D.from_fields(colors=colors, draw_order=35.0))
+        self._emit('log', BALLS, *looks, static=self.live)
 
-    def _log_impulses(self, record, names, step):
-        """Keep each impulse on screen IMPULSE_SECONDS; re-log the arrows when they change."""
-        now = record.log_time_ns
-        shown = [i for i in self._impulses if i[0] > now]
-        changed = len(shown) != len(self._impulses) or bool(record.impulses)
+    def _add_impulses(self, record):
+        """Put the step's impulses on screen for IMPULSE_SECONDS from the step on."""
+        names = names_of(record)
         masses = getattr(record, 'masses', None)
         index_of = None
+        now = record.log_time_ns
         for impulse in record.impulses:
             ball = impulse.ball  # its index when it was applied
             if record.edits:  # a later edit of the step may have moved or deleted the ball
@@ -551,11 +764,18 @@ class RerunSink:
                     continue
             name = names[ball]
             mass = masses[ball] if masses is not None else self._segment.mass[name]
-            shown.append((now + round(IMPULSE_SECONDS * 1e9),
-                          np.asarray(record.positions[ball], dtype=np.float64),
-                          self._arrow(impulse.jx / mass, impulse.jy / mass),
-                          f'{name}: J = ({impulse.jx:.3g}, {impulse.jy:.3g}) N s'))
+            origin = np.asarray(record.positions[ball], dtype=np.float64)
+            self._impulses.append((now + round(IMPULSE_SECONDS * 1e9), origin,
+                                   self._arrow(origin, impulse.jx / mass, impulse.jy / mass),
+                                   f'{name}: J = ({impulse.jx:.3g}, {impulse.jy:.3g}) N s'))
+            self._impulses_changed = True
+
+    def _show_impulses(self, step, now):
+        """Re-log the arrows when one came or went since the last logged step."""
+        shown = [i for i in self._impulses if i[0] > now]
+        changed = self._impulses_changed or len(shown) != len(self._impulses)
         self._impulses = shown
+        self._impulses_changed = False
         if not changed:
             return
         self._set_time(step, now)
@@ -579,23 +799,34 @@ class RerunSink:
                 points.astype(np.float32), radii=rr.Radius.ui_points(2.0), colors=SCAN_COLOR,
                 draw_order=35.0))
 
-    def _arrow(self, dvx, dvy):
-        """The velocity change times ARROW_SECONDS, its length clamped to the scene's size."""
+    def _arrow(self, origin, dvx, dvy):
+        """The velocity change times ARROW_SECONDS, its length clamped to the scene's size,
+        shortened if need be so that its head stays inside the scene (clip_arrow)."""
         length = math.hypot(dvx, dvy)
         if length == 0.0:
             return (0.0, 0.0)
-        span = self._segment.span
-        shown = min(max(length * ARROW_SECONDS, ARROW_MIN_FRACTION * span),
-                    ARROW_MAX_FRACTION * span)
-        return (dvx / length * shown, dvy / length * shown)
+        segment = self._segment
+        shown = min(max(length * ARROW_SECONDS, ARROW_MIN_FRACTION * segment.span),
+                    ARROW_MAX_FRACTION * segment.span)
+        return clip_arrow(origin, (dvx / length * shown, dvy / length * shown),
+                          segment.inside)
+
+    def _trail_strips(self, now, positions):
+        """Each ball's path over the last trail_seconds, ending at `positions` (now).
+
+        A file keeps every logged step; a view a point per VIEW_TRAIL_SPACING s.
+        """
+        trail = self._trail
+        while trail and trail[0][0] < now - self.trail_seconds * 1e9:
+            trail.popleft()
+        points = [kept for _, kept in trail] + [positions]
+        if not self.live or not trail or now - trail[-1][0] >= VIEW_TRAIL_SPACING * 1e9:
+            trail.append((now, positions))
+        return np.stack(points, axis=1)
 
     def _log_trails(self, record, names, step):
-        trail = self._trail
         now = record.log_time_ns
-        trail.append((now, np.asarray(record.positions, dtype=np.float32)))
-        while trail[0][0] < now - self.trail_seconds * 1e9:
-            trail.popleft()
-        strips = np.stack([positions for _, positions in trail], axis=1)
+        strips = self._trail_strips(now, np.asarray(record.positions, dtype=np.float32))
         self._set_time(step, now)
         self._emit('log', TRAILS, rr.LineStrips2D(
             strips, colors=np.array([ball_color(n) for n in names], dtype=np.uint8)
@@ -609,11 +840,12 @@ class RerunSink:
         steps, times, positions, velocities, energy, collisions, momentum, rtf = \
             pending.columns()
         index = self._index(steps, times)
-        sizes = [len(p) for p in positions]
-        positions = np.concatenate(positions)
-        self._emit('send_columns', BALLS, index, [rr.ComponentColumn(
-            rr.Points2D.descriptor_positions(), rr.components.Position2DBatch(positions),
-            lengths=sizes)])
+        if positions:
+            sizes = [len(p) for p in positions]
+            positions = np.concatenate(positions)
+            self._emit('send_columns', BALLS, index, [rr.ComponentColumn(
+                rr.Points2D.descriptor_positions(), rr.components.Position2DBatch(positions),
+                lengths=sizes)])
         if velocities:
             vectors = np.concatenate(velocities) * np.float32(VELOCITY_SECONDS)
             self._emit('send_columns', VELOCITIES, index, [

@@ -95,10 +95,15 @@ def spawn_call(stream, blueprint, viewer=None):
     return rr.spawn, arguments
 
 
-def new_stream(application_id, recording_id):
-    """A stream with the simulation's timelines only (no wall-clock log_time, no log_tick)."""
+def new_stream(application_id, recording_id, flush_seconds=None):
+    """A stream with the simulation's timelines only (no wall-clock log_time, no log_tick).
+
+    flush_seconds: how long the SDK gathers logged rows into one chunk per entity before
+    sending them (its default, 0.2 s, when None).
+    """
+    config = None if flush_seconds is None else rr.ChunkBatcherConfig(flush_tick=flush_seconds)
     stream = rr.RecordingStream(application_id, recording_id=recording_id,
-                                send_properties=False)
+                                send_properties=False, batcher_config=config)
     stream.set_log_time_enabled(False)
     stream.set_log_tick_enabled(False)
     return stream
