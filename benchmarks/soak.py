@@ -1068,8 +1068,9 @@ def run_viewer(args, workdir):
 #: The node's start line and progress lines, with their ROS log stamps (s since the epoch).
 START_LINE = re.compile(r'\[(\d+\.\d+)\] \[ball_world\]: world: .*?, dt ([0-9.e+-]+) s,')
 STEP_LINE = re.compile(r'\[(\d+\.\d+)\] \[ball_world\]: step (\d+): ')
-#: A screenshot line of scripts/screenshot_web.js: its file and when it was taken.
-SHOT_LINE = re.compile(r'^(\S+\.png) (\d+\.\d+)$', re.MULTILINE)
+#: A screenshot line of scripts/screenshot_web.js: its file, when it was asked for and
+#: when it was taken.
+SHOT_LINE = re.compile(r'^(\S+\.png) (\d+\.\d+) (\d+\.\d+)$', re.MULTILINE)
 
 
 def node_sim_time(log, when):
@@ -1171,8 +1172,8 @@ def run_liveview(args, workdir):
             raise SoakError(f'page {name}: no screenshot ({text.strip()[-300:]})')
         opened = node_sim_time(log, float(loaded.group(1)))
         findings.append(f'{name} page (loaded at node t = {opened:.1f} s): ' + ', '.join(
-            f'{Path(path).name} node t = {node_sim_time(log, float(when)):.1f} s'
-            for path, when in shots))
+            f'{Path(path).name} node t = {node_sim_time(log, float(asked)):.1f}-'
+            f'{node_sim_time(log, float(taken)):.1f} s' for path, asked, taken in shots))
     what = (f'`make view` (the default world, trails 1 s) on ports {ports[0]}/{ports[1]}, '
             f'pages in headless Chromium (SwiftShader), load average '
             f'{os.getloadavg()[0]:.1f} at the end; screenshots in {workdir}')

@@ -12,8 +12,9 @@
 // writes view-10s.png, view-25s.png and view-40s.png: the page 10, 25 and 40 s after it
 // loaded (default 25: Chromium renders WebGPU/WebGL in software, SwiftShader, and the
 // viewer's wasm takes about 20 s to load that way). For each it prints one line with the
-// wall-clock time of the shot (seconds since the epoch), to compare the simulated time the
-// page shows with the node's at that moment (benchmarks/live_view.py does).
+// wall-clock times (seconds since the epoch) when the shot was asked for and when it was
+// taken (a busy page takes a while to draw it), to compare the simulated time the page shows
+// with the node's then (`make soak ARGS=liveview` does).
 'use strict';
 const puppeteer = require('puppeteer-core');
 
@@ -43,9 +44,9 @@ async function main() {
         await new Promise((resolve) => setTimeout(resolve, wait));
       }
       const output = `${prefix}-${after}s.png`;
-      const taken = Date.now();
+      const started = Date.now();
       await page.screenshot({path: output});
-      console.log(`${output} ${taken / 1000}`);
+      console.log(`${output} ${started / 1000} ${Date.now() / 1000}`);
     }
   } finally {
     await browser.close();

@@ -25,9 +25,10 @@ done
 mkdir -p runs
 # The server keeps what it relays for pages opened later, up to VIEW_SERVER_MEMORY; past it
 # the oldest frames go (the walls, the balls' looks and the layout are kept: the node logs
-# them static). A page opened an hour in gets the last seconds, newest first, not the hour.
+# them static). A page opened an hour in gets the last few seconds, not the hour: a web
+# viewer rendering in software takes in a backlog slowly, and shows nothing new meanwhile.
 "$rerun_bin" --serve-web --bind 127.0.0.1 --port "$grpc_port" --web-viewer-port "$web_port" \
-  --server-memory-limit "${VIEW_SERVER_MEMORY:-4MiB}" --newest-first \
+  --server-memory-limit "${VIEW_SERVER_MEMORY:-128KiB}" \
   --hide-welcome-screen > runs/rerun_server.log 2>&1 &
 server=$!
 stop_server() {

@@ -46,9 +46,10 @@ Destinations: the file and the viewer each get their own stream with the same re
 differently (_Feed). The file gets every logged step, buffered and sent as columns (one
 chunk per entity for many steps), which keeps logging cheap at thousands of balls; `flush()`
 sends what is buffered. A live view gets frames: at most VIEW_FPS a second of wall time,
-each sent at once with the balls, trails, arrows and plots of one step, and the walls and
-the balls' looks logged static, so a page opened late, after a Rerun server dropped the
-oldest frames, still has them. It shows now, not every step.
+the balls with their trails and velocities in one row (always drawn in step), sent every
+VIEW_FLUSH_SECONDS, the plots every VIEW_PLOT_PERIOD, and the walls and the balls' looks
+logged static, so a page opened late, after a Rerun server dropped the oldest frames, still
+has them. It shows now, not every step.
 
 Balls are named: `ball_<i>` by default, or the `names` a record (and a WorldSnapshot)
 carries, in pose order, so balls may appear and disappear between steps; a record may also
@@ -104,16 +105,18 @@ MAX_PENDING_STEPS = 64
 MAX_PENDING_POSITIONS = 500_000
 
 #: Frames per second of wall time sent to a live view. The web viewer, rendering in
-#: software on a 2-core machine, takes in about this many and stays live; a frame per step
-#: (60-100 a second, trails included) it could not take, and it fell minutes behind.
-VIEW_FPS = 25.0
+#: software on a 2-core machine, takes in this and stays live (make soak ARGS=liveview); a
+#: frame per step (60-100 a second, trails included) it could not take, and it fell minutes
+#: behind.
+VIEW_FPS = 10.0
 #: A view's SDK stream sends what it gathered this often: one chunk per entity holding
-#: several frames. The web viewer's cost is per message more than per byte.
-VIEW_FLUSH_SECONDS = 0.25
+#: several frames. The web viewer takes in about one message per frame it draws, and draws
+#: a few a second in software: its cost is per message more than per byte.
+VIEW_FLUSH_SECONDS = 0.5
 #: A view's plots show this much simulated time up to now...
 VIEW_PLOT_SECONDS = 30.0
 #: ...and are sent every this many seconds of wall time, as columns.
-VIEW_PLOT_PERIOD = 2.0
+VIEW_PLOT_PERIOD = 5.0
 #: A view's trails keep a point per this much simulated time (and the ball's position now):
 #: the trails are most of what a view is sent, and a frame re-sends each one whole.
 VIEW_TRAIL_SPACING = 0.1
@@ -493,8 +496,7 @@ class _Feed:
     A file (frame_period None) buffers its steps and sends them as columns, MAX_PENDING_STEPS
     at a time: cheap at thousands of balls, and the file is read later. A live view
     (frame_period, frame_clock: seconds of wall time) gets one frame at most every
-    frame_period s, sent at once: positions, trails, arrows and plots of the same step,
-    so they stay in step on screen and a viewer takes a bounded amount of data per second,
+    frame_period s (_log_frame): a viewer takes a bounded amount of data per second,
     whatever the world's rate. Impulses of the steps between frames are kept and drawn at
     the next frame. What changes seldom (the walls, the balls' sizes, colours and labels)
     is logged static to a view: a Rerun server keeps static data when its memory limit

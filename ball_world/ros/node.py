@@ -277,7 +277,7 @@ class BallWorld(Node):
         """
         period = 0.0 if rate_hz == 0.0 else 1.0 / rate_hz
         self._step_period = period
-        self._next_due = time.monotonic() + period
+        self._next_due = None  # the schedule starts at the next tick: start-up is no lag
         self._tick = min(period, MAX_TIMER_PERIOD)
         tick_ns = int(self._tick * 1e9)
         if self._timer is None:
@@ -289,8 +289,11 @@ class BallWorld(Node):
     def _on_timer(self):
         if self.paused or self.finished:
             return
+        now = time.monotonic()
+        if self._next_due is None:  # the first tick: the first step is a period after start
+            self._next_due = now + self._step_period - self._tick
         take, self._next_due, dropped = steps_due(
-            time.monotonic(), self._next_due, self._step_period, self._tick)
+            now, self._next_due, self._step_period, self._tick)
         if dropped:
             self._dropped_steps += dropped
             self.get_logger().warning(
