@@ -395,3 +395,29 @@ def test_delete_and_reset_simulation(world):
     assert world.simulation.step_index == 0
     assert np.array_equal(world.simulation.world.positions,
                           [[2.0, 2.0], [8.0, 2.0], [5.0, 8.0]])
+
+
+def test_set_state_is_checked_against_the_impulses_queued_before_it(world):
+    """A queued impulse and a SetEntityState that each pass alone, but not together: the
+    state is refused (the impulse, which came first, is applied), and no ball can ever
+    reach more than the speed the world can step."""
+    pause(world)
+    simulation = world.simulation
+    limit = simulation.world.speed_limit(simulation.dt_ns * 1e-9)
+    vx0 = float(simulation.world.velocities[0, 0])
+    world.impulse('ball_0', 0.75 * limit - vx0, 0.0)  # ball_0 (1 kg) to 0.75 x the limit
+    world.spin_until(lambda: simulation.queued == 1)
+    request = SetEntityState.Request(entity='ball_1')
+    request.state.pose.position.x, request.state.pose.position.y = 8.0, 6.0
+    request.state.pose.orientation.w = 1.0
+    request.state.twist.linear.x = 0.75 * limit  # ball_1 (1 kg) too: together 1.06 x
+    answer = world.call(SetEntityState, 'set_entity_state', request)
+    assert answer.result.result == SetEntityState.Response.INVALID_POSE
+    assert 'faster than' in answer.result.error_message
+    velocities = simulation.world.velocities
+    assert velocities[0, 0] == pytest.approx(0.75 * limit)
+    energy = 0.5 * float(np.sum(simulation.world.masses * np.sum(velocities ** 2, axis=1)))
+    assert np.sqrt(2.0 * energy / simulation.world.masses.min()) <= limit
+    # Alone (the impulse applied) a smaller state passes.
+    request.state.twist.linear.x = 0.1 * limit
+    assert world.call(SetEntityState, 'set_entity_state', request).result.result == OK
