@@ -188,18 +188,25 @@ def test_fifty_concurrent_calls_and_goals_are_all_answered(probe, node):
     client.destroy()
 
 
-def test_quitting_answers_the_running_goal_before_the_node_leaves(probe, node):
+@pytest.mark.parametrize('how', ['goal', 'service'])
+def test_quitting_answers_the_goal_or_step_call_running(probe, node, how):
+    """The answer comes before the node leaves (it used to leave the client waiting)."""
     assert probe.result(set_state(probe, SimulationState.STATE_PAUSED)).result.result == OK
     client = ActionClient(probe.node, SimulateSteps, f'{NODE}/simulate_steps')
-    probe.spin_until(client.server_is_ready, 'the action server')
-    goal = probe.result(client.send_goal_async(SimulateSteps.Goal(steps=2**63)))
-    result = goal.get_result_async()
+    if how == 'goal':
+        probe.spin_until(client.server_is_ready, 'the action server')
+        goal = probe.result(client.send_goal_async(SimulateSteps.Goal(steps=2**63)))
+        running = goal.get_result_async()
+    else:
+        running = call_async(probe, StepSimulation, 'step_simulation',
+                             StepSimulation.Request(steps=2**63 - 1))
     before = len(node.stats)
-    probe.spin_until(lambda: len(node.stats) > before + 20, 'the goal to step', process=node)
+    probe.spin_until(lambda: len(node.stats) > before + 20, 'the steps to run', process=node)
     assert probe.result(set_state(probe, SimulationState.STATE_QUITTING)).result.result == OK
-    ended = probe.result(result, 'the goal result after QUITTING')
-    assert ended.result.result.result == Result.RESULT_OPERATION_FAILED
-    assert 'the run ended after' in ended.result.result.error_message
+    ended = probe.result(running, 'the answer after QUITTING')
+    result = ended.result.result if how == 'goal' else ended.result
+    assert result.result == Result.RESULT_OPERATION_FAILED
+    assert 'the run ended after' in result.error_message
     code, _, err = finish(node)
     assert code == 0 and 'Traceback' not in err, err
     client.destroy()
