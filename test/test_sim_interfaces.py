@@ -421,3 +421,33 @@ def test_set_state_is_checked_against_the_impulses_queued_before_it(world):
     # Alone (the impulse applied) a smaller state passes.
     request.state.twist.linear.x = 0.1 * limit
     assert world.call(SetEntityState, 'set_entity_state', request).result.result == OK
+
+
+def test_a_large_get_entities_states_is_built_while_the_world_keeps_stepping():
+    """20,000 states take a while to build (they took 70 us each, all before any step);
+    now the world steps between slices of the answer, which is the world as it was when
+    the request came."""
+    made = InProcessWorld(**{'random.count': 20_000, 'arena': [0.0, 0.0, 300.0, 300.0],
+                             'random.speed': 0.5, 'rate_hz': 100.0, 'markers.rate_hz': 0.0})
+    try:
+        calls = made.node.interfaces.calls
+        steps_during = []
+        step_once = made.node.step_once
+
+        def watched_step():
+            steps_during.append(calls.in_flight > 0)
+            return step_once()
+
+        made.node.step_once = watched_step
+        client = made.probe.node.create_client(GetEntitiesStates,
+                                               '/ball_world/get_entities_states')
+        made.spin_until(client.service_is_ready)
+        answer = made.probe.result(client.call_async(GetEntitiesStates.Request()))
+        assert answer.result.result == OK
+        assert len(answer.states) == len(answer.entities) == 20_000
+        assert any(steps_during), 'no step while the answer was built'
+        stamps = {(s.header.stamp.sec, s.header.stamp.nanosec) for s in answer.states}
+        assert len(stamps) == 1
+        assert answer.entities[:2] == ['ball_0', 'ball_1']
+    finally:
+        made.close()
