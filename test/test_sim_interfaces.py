@@ -20,6 +20,8 @@ from simulation_interfaces.srv import (DeleteEntity, GetEntities, GetEntitiesSta
                                        SpawnEntities, SpawnEntity, StepSimulation)
 from std_msgs.msg import String
 
+from ball_world.core.edits import first_overlap, Neighbours
+from ball_world.core.world import Walls
 from ball_world.ros.sim_interfaces import name_filter, UNSUPPORTED
 
 THREE_BALLS = {'random.count': 0, 'rate_hz': 100.0, 'markers.rate_hz': 0.0,
@@ -451,3 +453,29 @@ def test_a_large_get_entities_states_is_built_while_the_world_keeps_stepping():
         assert answer.entities[:2] == ['ball_0', 'ball_1']
     finally:
         made.close()
+
+
+def test_spawn_checks_only_nearby_balls_and_finds_the_same_first_overlap():
+    """Neighbours (balls sorted by x) must never hide an overlap: against a plain loop over
+    every ball, for random worlds, probes, touching pairs and a ball to skip."""
+    rng = np.random.default_rng(7)
+    walls = Walls(np.zeros((0, 4)))
+    for _ in range(30):
+        n = int(rng.integers(1, 400))
+        positions = rng.uniform(0.0, 20.0, (n, 2))
+        positions[: n // 4, 0] = positions[0, 0]  # ties in x
+        radii = rng.uniform(0.05, 0.5, n)
+        near = Neighbours(positions, radii)
+        for _ in range(50):
+            x, y = rng.uniform(-1.0, 21.0, 2)
+            radius = float(rng.uniform(0.01, 1.0))
+            if rng.random() < 0.3:  # exactly touching ball k: not an overlap
+                k = int(rng.integers(n))
+                x = positions[k, 0] + radii[k] + radius
+                y = positions[k, 1]
+            skip = int(rng.integers(n)) if rng.random() < 0.3 else None
+            expected = next((('ball', i) for i in range(n) if i != skip and (
+                (positions[i, 0] - x) ** 2 + (positions[i, 1] - y) ** 2
+                < (radii[i] + radius) ** 2)), None)
+            assert first_overlap(x, y, radius, positions, radii, walls, skip, near) == \
+                expected == first_overlap(x, y, radius, positions, radii, walls, skip)
