@@ -15,7 +15,7 @@ from ball_world import __version__
 from ball_world.core import limits
 from ball_world.core.agents import agent_names, Agents, CommandRejected, frames, Limits
 from ball_world.core.edits import (check_placement, check_speeds, EditRefused, Entities,
-                                   INVALID_POSE, MAX_SPAWN_BATCH, TOO_MANY)
+                                   INVALID_POSE, MAX_SPAWN_BATCH, Neighbours, TOO_MANY)
 from ball_world.core.impulses import ImpulseRejected, lookup_ball, velocity_after
 from ball_world.core.limits import MAX_SIM_TIME_NS
 from ball_world.core.parameters import checked
@@ -335,6 +335,8 @@ class Simulation:
         lightest = float(world.masses.min()) if len(world) else math.inf
         smallest = world.min_radius if len(world) else math.inf
         largest = float(world.radii.max()) if len(world) else 0.0
+        near = Neighbours(world.positions, world.radii)
+        placed = np.empty((len(requests), 3))
         for request in requests:
             ball = request.ball
             try:
@@ -344,8 +346,8 @@ class Simulation:
                 name = self.entities.new_name(request.name, request.allow_renaming, taken)
                 what = f"ball '{name}' at"
                 check_placement(world, self.entities, self.arena, ball.x, ball.y,
-                                ball.radius, what)
-                self._check_against_new(ball, accepted, what)
+                                ball.radius, what, near=near)
+                self._check_against_new(ball, accepted, placed, what)
                 low = min(smallest, ball.radius)
                 high = max(largest, ball.radius)
                 if high > limits.MAX_RADIUS_RATIO * low:
@@ -359,6 +361,7 @@ class Simulation:
                 continue
             energy, lightest, smallest, largest = added, min(lightest, ball.mass), low, high
             taken.add(name)
+            placed[len(accepted)] = ball.x, ball.y, ball.radius
             accepted.append((name, ball))
             results.append(name)
         if accepted:
@@ -377,14 +380,15 @@ class Simulation:
         return results, rejected
 
     @staticmethod
-    def _check_against_new(ball, accepted, what):
+    def _check_against_new(ball, accepted, placed, what):
+        """Refuse a ball overlapping one accepted earlier in the request (placed: their x, y
+        and radius, one row each, filled as they are accepted)."""
         if not accepted:
             return
-        others = np.array([(b.x, b.y) for _, b in accepted])
-        radii = np.array([b.radius for _, b in accepted])
+        others = placed[:len(accepted)]
         dx = others[:, 0] - ball.x
         dy = others[:, 1] - ball.y
-        reach = radii + ball.radius
+        reach = others[:, 2] + ball.radius
         hits = np.flatnonzero(dx * dx + dy * dy < reach * reach)
         if len(hits):
             raise EditRefused(INVALID_POSE, f'{what} ({ball.x:g}, {ball.y:g}) overlaps '

@@ -19,6 +19,7 @@ from simulation_interfaces.srv import (GetEntities, GetEntitiesStates, GetSimula
 from std_msgs.msg import Float64MultiArray
 
 from ball_world.core.edits import MAX_RESOURCE_LENGTH
+from ball_world.ros.calls import Calls
 
 OK = Result.RESULT_OK
 NODE = '/ball_world'
@@ -187,18 +188,25 @@ def test_fifty_concurrent_calls_and_goals_are_all_answered(probe, node):
     client.destroy()
 
 
-def test_quitting_answers_the_running_goal_before_the_node_leaves(probe, node):
+@pytest.mark.parametrize('how', ['goal', 'service'])
+def test_quitting_answers_the_goal_or_step_call_running(probe, node, how):
+    """The answer comes before the node leaves (it used to leave the client waiting)."""
     assert probe.result(set_state(probe, SimulationState.STATE_PAUSED)).result.result == OK
     client = ActionClient(probe.node, SimulateSteps, f'{NODE}/simulate_steps')
-    probe.spin_until(client.server_is_ready, 'the action server')
-    goal = probe.result(client.send_goal_async(SimulateSteps.Goal(steps=2**63)))
-    result = goal.get_result_async()
+    if how == 'goal':
+        probe.spin_until(client.server_is_ready, 'the action server')
+        goal = probe.result(client.send_goal_async(SimulateSteps.Goal(steps=2**63)))
+        running = goal.get_result_async()
+    else:
+        running = call_async(probe, StepSimulation, 'step_simulation',
+                             StepSimulation.Request(steps=2**63 - 1))
     before = len(node.stats)
-    probe.spin_until(lambda: len(node.stats) > before + 20, 'the goal to step', process=node)
+    probe.spin_until(lambda: len(node.stats) > before + 20, 'the steps to run', process=node)
     assert probe.result(set_state(probe, SimulationState.STATE_QUITTING)).result.result == OK
-    ended = probe.result(result, 'the goal result after QUITTING')
-    assert ended.result.result.result == Result.RESULT_OPERATION_FAILED
-    assert 'the run ended after' in ended.result.result.error_message
+    ended = probe.result(running, 'the answer after QUITTING')
+    result = ended.result.result if how == 'goal' else ended.result
+    assert result.result == Result.RESULT_OPERATION_FAILED
+    assert 'the run ended after' in result.error_message
     code, _, err = finish(node)
     assert code == 0 and 'Traceback' not in err, err
     client.destroy()
@@ -217,3 +225,61 @@ def test_spawnables_echo_a_bounded_remark_and_control_characters_are_no_names(pr
                 initial_pose=pose_at(5.0, 5.0)))
             assert spawned.result.result == SpawnResult.NAME_INVALID, (name, spawned)
             assert 'control characters' in spawned.result.error_message
+
+
+class _Logger:
+    def __init__(self):
+        self.lines = []
+
+    def error(self, line):
+        self.lines.append(line)
+
+
+class _Node:
+    """What ros.calls needs of a node: a logger, `finished` and wake()."""
+
+    def __init__(self):
+        self.logger = _Logger()
+        self.finished = False
+
+    def get_logger(self):
+        return self.logger
+
+    def wake(self):
+        pass
+
+
+class _Unprintable(Exception):
+    def __str__(self):
+        raise ValueError('Exceeds the limit (4300 digits) for integer string conversion')
+
+
+@pytest.mark.parametrize('error', [OverflowError('int too large to convert to float'),
+                                   RecursionError('maximum recursion depth exceeded'),
+                                   ValueError('x' * 100_000), _Unprintable(), KeyError(7)])
+def test_any_exception_of_a_callback_is_one_bounded_answer_and_one_log_line(error):
+    """The class behind every crash of issue 19: whatever a callback raises, plain or
+    coroutine, the request gets RESULT_OPERATION_FAILED and the log one line."""
+    def plain(request, response):
+        response.entity_name = 'half filled'
+        raise error
+
+    async def coroutine(request, response):
+        raise error
+
+    for callback in (plain, coroutine):
+        node = _Node()
+        calls = Calls(node)
+        answer = calls.guarded('spawn_entity', callback)(SpawnEntity.Request(),
+                                                         SpawnEntity.Response())
+        if callback is coroutine:
+            with pytest.raises(StopIteration) as done:
+                answer.send(None)
+            answer = done.value.value
+            assert calls.in_flight == 0
+        assert answer.result.result == Result.RESULT_OPERATION_FAILED
+        assert answer.entity_name == ''
+        assert type(error).__name__ in answer.result.error_message
+        assert len(answer.result.error_message) < 300
+        assert node.logger.lines == [answer.result.error_message]
+        calls.sender.close()

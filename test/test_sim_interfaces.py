@@ -20,6 +20,8 @@ from simulation_interfaces.srv import (DeleteEntity, GetEntities, GetEntitiesSta
                                        SpawnEntities, SpawnEntity, StepSimulation)
 from std_msgs.msg import String
 
+from ball_world.core.edits import first_overlap, Neighbours
+from ball_world.core.world import Walls
 from ball_world.ros.sim_interfaces import name_filter, UNSUPPORTED
 
 THREE_BALLS = {'random.count': 0, 'rate_hz': 100.0, 'markers.rate_hz': 0.0,
@@ -397,3 +399,85 @@ def test_delete_and_reset_simulation(world):
     assert world.simulation.step_index == 0
     assert np.array_equal(world.simulation.world.positions,
                           [[2.0, 2.0], [8.0, 2.0], [5.0, 8.0]])
+
+
+def test_set_state_is_checked_against_the_impulses_queued_before_it(world):
+    """A queued impulse and a SetEntityState that each pass alone, but not together: the
+    state is refused (the impulse, which came first, is applied), and no ball can ever
+    reach more than the speed the world can step."""
+    pause(world)
+    simulation = world.simulation
+    limit = simulation.world.speed_limit(simulation.dt_ns * 1e-9)
+    vx0 = float(simulation.world.velocities[0, 0])
+    world.impulse('ball_0', 0.75 * limit - vx0, 0.0)  # ball_0 (1 kg) to 0.75 x the limit
+    world.spin_until(lambda: simulation.queued == 1)
+    request = SetEntityState.Request(entity='ball_1')
+    request.state.pose.position.x, request.state.pose.position.y = 8.0, 6.0
+    request.state.pose.orientation.w = 1.0
+    request.state.twist.linear.x = 0.75 * limit  # ball_1 (1 kg) too: together 1.06 x
+    answer = world.call(SetEntityState, 'set_entity_state', request)
+    assert answer.result.result == SetEntityState.Response.INVALID_POSE
+    assert 'faster than' in answer.result.error_message
+    velocities = simulation.world.velocities
+    assert velocities[0, 0] == pytest.approx(0.75 * limit)
+    energy = 0.5 * float(np.sum(simulation.world.masses * np.sum(velocities ** 2, axis=1)))
+    assert np.sqrt(2.0 * energy / simulation.world.masses.min()) <= limit
+    # Alone (the impulse applied) a smaller state passes.
+    request.state.twist.linear.x = 0.1 * limit
+    assert world.call(SetEntityState, 'set_entity_state', request).result.result == OK
+
+
+def test_a_large_get_entities_states_is_built_while_the_world_keeps_stepping():
+    """20,000 states take a while to build (they took 70 us each, all before any step);
+    now the world steps between slices of the answer, which is the world as it was when
+    the request came."""
+    made = InProcessWorld(**{'random.count': 20_000, 'arena': [0.0, 0.0, 300.0, 300.0],
+                             'random.speed': 0.5, 'rate_hz': 100.0, 'markers.rate_hz': 0.0})
+    try:
+        calls = made.node.interfaces.calls
+        steps_during = []
+        step_once = made.node.step_once
+
+        def watched_step():
+            steps_during.append(calls.in_flight > 0)
+            return step_once()
+
+        made.node.step_once = watched_step
+        client = made.probe.node.create_client(GetEntitiesStates,
+                                               '/ball_world/get_entities_states')
+        made.spin_until(client.service_is_ready)
+        answer = made.probe.result(client.call_async(GetEntitiesStates.Request()))
+        assert answer.result.result == OK
+        assert len(answer.states) == len(answer.entities) == 20_000
+        assert any(steps_during), 'no step while the answer was built'
+        stamps = {(s.header.stamp.sec, s.header.stamp.nanosec) for s in answer.states}
+        assert len(stamps) == 1
+        assert answer.entities[:2] == ['ball_0', 'ball_1']
+    finally:
+        made.close()
+
+
+def test_spawn_checks_only_nearby_balls_and_finds_the_same_first_overlap():
+    """Neighbours (balls sorted by x) must never hide an overlap: against a plain loop over
+    every ball, for random worlds, probes, touching pairs and a ball to skip."""
+    rng = np.random.default_rng(7)
+    walls = Walls(np.zeros((0, 4)))
+    for _ in range(30):
+        n = int(rng.integers(1, 400))
+        positions = rng.uniform(0.0, 20.0, (n, 2))
+        positions[: n // 4, 0] = positions[0, 0]  # ties in x
+        radii = rng.uniform(0.05, 0.5, n)
+        near = Neighbours(positions, radii)
+        for _ in range(50):
+            x, y = rng.uniform(-1.0, 21.0, 2)
+            radius = float(rng.uniform(0.01, 1.0))
+            if rng.random() < 0.3:  # exactly touching ball k: not an overlap
+                k = int(rng.integers(n))
+                x = positions[k, 0] + radii[k] + radius
+                y = positions[k, 1]
+            skip = int(rng.integers(n)) if rng.random() < 0.3 else None
+            expected = next((('ball', i) for i in range(n) if i != skip and (
+                (positions[i, 0] - x) ** 2 + (positions[i, 1] - y) ** 2
+                < (radii[i] + radius) ** 2)), None)
+            assert first_overlap(x, y, radius, positions, radii, walls, skip, near) == \
+                expected == first_overlap(x, y, radius, positions, radii, walls, skip)

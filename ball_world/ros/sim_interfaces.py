@@ -212,35 +212,42 @@ def echoed(items):
     return f'[{shown}' + (f', and {more:,} more]' if more > 0 else ']')
 
 
+def _bare(message_type):
+    """A message made without its constructor, its field checks off (values are trusted)."""
+    message = message_type.__new__(message_type)
+    message._check_fields = False
+    return message
+
+
 def entity_states(positions, velocities, stamp_ns, frame_id):
-    """EntityStates of balls, built about 8 times faster than through their constructors.
+    """EntityStates of balls, built about 5 times faster than through their constructors.
 
     Why: a generated message's __init__ builds every nested default even when it is given
     (kwargs.get(name, Default())): about 70 us per EntityState, 7 s for 100,000 balls. Here
-    each message is made with __new__ and filled through its own setters (with field checks
-    off: the values are floats from numpy), and the parts every state shares (the header, the
-    unrotated orientation, the zero spin and acceleration) are one object each.
+    each message is made with __new__ and its slots (rosidl_generator_py names a field f's
+    slot _f) are filled directly with floats from numpy, without the setters' type checks;
+    the parts every state shares (the header, the unrotated orientation, the zero spin and
+    acceleration) are one object each.
     """
     sec, nanosec = divmod(int(stamp_ns), 10**9)
     header = Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id)
     unrotated = Quaternion()
     still = Vector3()
     acceleration = Accel()
-
-    def made(message_type, **fields):
-        message = message_type.__new__(message_type)
-        message._check_fields = False
-        for name, value in fields.items():
-            setattr(message, name, value)
-        return message
-
     states = []
     for (x, y), (vx, vy) in zip(positions.tolist(), velocities.tolist()):
-        states.append(made(
-            EntityState, header=header,
-            pose=made(Pose, position=made(Point, x=x, y=y, z=0.0), orientation=unrotated),
-            twist=made(Twist, linear=made(Vector3, x=vx, y=vy, z=0.0), angular=still),
-            acceleration=acceleration))
+        position = _bare(Point)
+        position._x, position._y, position._z = x, y, 0.0
+        pose = _bare(Pose)
+        pose._position, pose._orientation = position, unrotated
+        linear = _bare(Vector3)
+        linear._x, linear._y, linear._z = vx, vy, 0.0
+        twist = _bare(Twist)
+        twist._linear, twist._angular = linear, still
+        state = _bare(EntityState)
+        state._header, state._pose, state._twist, state._acceleration = \
+            header, pose, twist, acceleration
+        states.append(state)
     return states
 
 
