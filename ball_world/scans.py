@@ -57,7 +57,12 @@ def fan_from(parameters, radius):
 def check(parameters):
     """Refuse agent.scan.* values that cannot make a scanner (ParameterError)."""
     if int(parameters['agent.scan.samples']) > 0:
-        fan_from(parameters, 0.0).check()
+        try:
+            fan_from(parameters, 0.0).check()
+        except ParameterError:
+            raise
+        except ValueError as error:  # Fan's own refusal, should the table's ranges allow one
+            raise ParameterError('agent.scan', str(error)) from None
 
 
 class AgentScans:
@@ -78,6 +83,7 @@ class AgentScans:
         return step_index == 0 or end // self.period_ns != (end - dt_ns) // self.period_ns
 
     def scanner(self, name, radius):
+        """Agent `name`'s Scanner, made again when its radius changed (range_min follows it)."""
         key = (name, radius)
         scanner = self._scanners.get(key)
         if scanner is None:

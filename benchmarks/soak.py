@@ -722,6 +722,9 @@ def rtf_parameters(args, path):
                   'physics.mode': args.mode}
     if args.record:
         parameters['record.mcap'] = path
+    if getattr(args, 'scanning_agents', 0):
+        names = ', '.join(f'ball_{i}' for i in range(args.scanning_agents))
+        parameters['agents'] = f'[{names}]'
     return parameters, side
 
 
@@ -779,7 +782,11 @@ def run_rtf(args, workdir):
               'wall time); node log, every 10 s window: '
               + (', '.join(f'{rtf:.3f}' for rtf in windows) if windows else 'none')
               + f'; `stats` since start {stats_rtf:.3f}')
-    row(f'rtf --mode {args.mode} --balls {args.balls} --speed {args.speed:g}', what, figure)
+    agents = getattr(args, 'scanning_agents', 0)
+    if agents:
+        what += f'; {agents} agents, each scanning 360 beams at 10 Hz (recorded)'
+    row(f'rtf --mode {args.mode} --balls {args.balls} --speed {args.speed:g}'
+        + (f' --scanning-agents {agents}' if agents else ''), what, figure)
     return 0 if code == 0 and overall >= args.target else 1
 
 
@@ -1245,6 +1252,9 @@ def main(argv=None):
                      help='record nothing (default: record MCAP)')
     rtf.add_argument('--target', type=float, default=0.99,
                      help='least real-time factor that passes (default 0.99)')
+    rtf.add_argument('--scanning-agents', type=int, default=0,
+                     help='make ball_0 ... ball_<N-1> agents, each scanning 360 beams at 10 Hz '
+                          '(issue 22: 10 in the 10,000-ball world; default 0)')
     startup = cases.add_parser('startup', help='process start to the first `balls` message of '
                                                'the default world, numba cached and cold, numpy')
     startup.add_argument('--repeats', type=int, default=3)

@@ -345,3 +345,31 @@ def test_tf_static_follows_a_new_frame_id():
     assert decode_tf_message(record.agents.tf_static_cdr).frame_ids == ['map']
     record, _ = simulation.step()
     assert record.agents.tf_static_cdr is None
+
+
+def test_the_drive_applied_at_once_is_bit_for_bit_the_drive_one_by_one(monkeypatch):
+    parameters = {'random.count': 60, 'random.seed': 11, 'physics.backend': 'numpy',
+                  'agents': [f'ball_{i}' for i in range(0, 60, 3)], 'agent.cmd_timeout': 0.0}
+    batched = Simulation(parameters)
+    single = Simulation(parameters)
+    monkeypatch.setattr(single, '_apply_at_once', lambda drive: False)
+    for simulation in (batched, single):
+        for k, name in enumerate(simulation.agents.names):
+            simulation.command(name, 0.1 * k - 1.0, 0.05 * k, 0.3 * (k % 5) - 0.6)
+    for _ in range(40):
+        one, _ = batched.step()
+        other, _ = single.step()
+        assert len(one.impulses) > 1
+        assert [(i.ball, i.jx, i.jy, i.cdr) for i in one.impulses] == [
+            (i.ball, i.jx, i.jy, i.cdr) for i in other.impulses]
+        assert one.state_cdr == other.state_cdr
+
+
+def test_impulses_encoded_together_are_the_bytes_of_one_at_a_time():
+    from ball_world.msgs.cdr import encode_vector3_stamped
+    from ball_world.msgs.impulse_batch import encode_impulses
+    names = ['b', 'ball_12', 'rover_with_a_long_name', 'x1234567']
+    xs, ys = [1.5, -2e-300, 0.0, 7.0], [math.pi, 1e300, -0.0, 2.0]
+    for stamp in (0, 16_666_667, -1_700_000_000, 2**31 * 10**9 - 1):
+        assert encode_impulses(stamp, names, xs, ys) == [
+            encode_vector3_stamped(stamp, n, x, y, 0.0) for n, x, y in zip(names, xs, ys)]

@@ -194,3 +194,23 @@ def test_resim_checks_every_recorded_scan_bit_for_bit(tmp_path, monkeypatch, bac
     assert not comparison.identical
     assert 'scan ball_0' in comparison.first.what and comparison.first.step == 0
     assert comparison.count == 6  # steps 0, 6, 12, 18, 24, 30
+
+
+def test_foxglove_3d_panel_draws_a_recorded_scan(tmp_path):
+    import json
+    from pathlib import Path
+
+    from ball_world.recording.mcap_reader import Recording
+    from ball_world.recording.mcap_writer import McapSink
+    layout = json.loads((Path(__file__).parent.parent / 'foxglove' / 'ball_world.json')
+                        .read_text())
+    scene = layout['configById']['3D!world']
+    assert scene['topics']['/ball_0/scan']['visible'] is True
+    path = tmp_path / 'agent.mcap'
+    simulation = Simulation({'random.count': 3, 'agents': ['ball_0'],
+                             'physics.backend': 'numpy'}, sinks=[McapSink(path)])
+    simulation.step()
+    simulation.close()
+    topics = Recording(path).topics
+    assert topics['/ball_0/scan'].type == 'sensor_msgs/msg/LaserScan'
+    assert topics['/tf'].type == 'tf2_msgs/msg/TFMessage'  # how Foxglove places the scan

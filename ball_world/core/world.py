@@ -214,6 +214,12 @@ class World:
         self.velocities[ball, 0] += jx / mass
         self.velocities[ball, 1] += jy / mass
 
+    def apply_impulses(self, balls, jx, jy):
+        """apply_impulse for several distinct balls at once (arrays), with the same bits."""
+        masses = self.masses[balls]
+        self.velocities[balls, 0] += jx / masses
+        self.velocities[balls, 1] += jy / masses
+
     def add_balls(self, positions, velocities, radii, masses):
         """Append balls (checked against core.limits); returns their indices.
 
