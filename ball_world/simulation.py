@@ -155,9 +155,15 @@ class Simulation:
         world = World(state.positions.copy(), state.velocities.copy(), state.radii.copy(),
                       state.masses.copy(), walls=base.walls.segments, backend=base.backend,
                       mode=base.mode)
-        self.reset(parameters, BuiltWorld(built.parameters, world, built.dt_ns))
+        # The agents are the state's (the parameters name those the segment began with).
+        self.reset({**built.parameters, 'agents': []},
+                   BuiltWorld({**built.parameters, 'agents': []}, world, built.dt_ns))
+        self.parameters = built.parameters
         self.entities = Entities.restored(state.names, state.retired, len(base))
         self._names = tuple(self.entities.names)
+        commands = dict(state.commands)
+        for name, yaw in zip(state.agents, state.yaws):
+            self.agents.restore(name, yaw, commands.get(name))
         self.step_index = state.step
         self.segment = segment
         self.log_offset_ns = log_offset_ns

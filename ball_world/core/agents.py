@@ -165,6 +165,13 @@ class Agents:
         self._yaw.pop(name, None)
         self._command.pop(name, None)
 
+    def restore(self, name, yaw, command=None):
+        """Make `name` an agent with heading yaw and its last Command, as they were at a
+        step of a recorded run (a split file resumes there): both kept bit for bit."""
+        self._yaw[name] = float(yaw)
+        if command is not None:
+            self._command[name] = command
+
     def set_yaw(self, name, yaw):
         self._yaw[name] = wrapped(float(yaw))
 
