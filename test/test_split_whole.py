@@ -10,17 +10,20 @@ import json
 import math
 import struct
 
-from ball_world_testing.harness import rewrite_recording
+from ball_world_testing.harness import finish, node_command, rewrite_recording, start_node
 from geometry_msgs.msg import Twist
 from mcap.reader import make_reader
+from nav_msgs.msg import Odometry
 import pytest
 from rclpy.serialization import serialize_message
+from test_agents_node import twist, WORLD as AGENT_WORLD
 from test_edit_recordings import FIRST, SECOND, spawn
-from test_split_recordings import crafted_resume
+from test_split_recordings import crafted_resume, NODE_TIMEOUT
 import yaml
 
 from ball_world.core.agents import Command
 from ball_world.core.edits import Ball
+from ball_world.recording.mcap_writer import McapSink
 from ball_world.recording.recording_set import open_recording
 from ball_world.recording.split_writer import SplitMcapSink
 from ball_world.simulation import Simulation, SpawnRequest
@@ -83,7 +86,36 @@ def test_closing_records_of_a_split_run_go_to_the_open_file(tmp_path, capsys):
     assert 'segment 0: 6 steps compared (last step 45)' in out, out
     assert out.count('after the last step 1 impulses and 2 edits: identical') == 2, out
     assert info.main([str(directory)]) == 0
-    assert 'edits:       4 (2 spawn, 2 delete)' in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert 'edits:       4 (2 spawn, 2 delete)' in out
+    # the closing records are no steps: 45 + 5 steps, each segment's last the one before
+    assert 'steps:       50 after the initial states' in out, out
+    assert ('steps 0-45 (+ 2 edits and 1 impulse after the last step), dt 50 ms' in out
+            and 'steps 0-5 (+ 2 edits and 1 impulse after the last step)' in out), out
+    assert info.main([str(directory / names[-1])]) == 0
+    out = capsys.readouterr().out
+    assert 'steps:       11 after the initial states' in out, out
+    assert 'steps 40-45 (+ 2 edits and 1 impulse after the last step)' in out, out
+
+
+def test_info_says_a_closing_record_is_no_step(tmp_path, capsys):
+    """One file, two segments: a closing record of one edit, then one of an edit and a push
+    it applied; info reads them from the file's index, as any finished file."""
+    path = tmp_path / 'closed.mcap'
+    simulation = Simulation(FIRST, sinks=[McapSink(path)])
+    for _ in range(3):
+        simulation.step()
+    simulation.delete('ball_2')
+    simulation.reset(SECOND)
+    simulation.step()
+    close_with_edits(simulation, 'late')
+    simulation.close()
+    assert info.main([str(path)]) == 0
+    out = capsys.readouterr().out
+    assert 'steps:       4 after the initial states (6 messages on /balls)' in out, out
+    assert '  0: from log time 0 s, steps 0-3 (+ 1 edit after the last step), dt' in out, out
+    assert ('  1: from log time 0.25 s, steps 0-1 (+ 2 edits and 1 impulse after the last '
+            'step), dt') in out, out
 
 
 AGENTS = {'rate_hz': 50.0, 'random.count': 12, 'random.seed': 5,
@@ -191,3 +223,51 @@ def test_a_crafted_agent_resume_state_is_refused_in_one_line(tmp_path, capsys, s
         assert len(err) == 1 and err[0].startswith(
             f"{prog}: {crafted}: segment 0: 'ball_world' metadata: the state it resumes "
             'from: ') and words in err[0], err
+
+
+def test_max_files_without_a_split_is_said_at_start(tmp_path):
+    path = tmp_path / 'one.mcap'
+    code, out, err = finish(start_node('max_steps:=3', 'rate_hz:=0.0', 'dt:=0.05',
+                                       f'record.mcap:={path}', 'record.max_files:=2'),
+                            NODE_TIMEOUT)
+    assert code == 0, err
+    said = [line for line in (out + err).splitlines() if 'record.max_files' in line]
+    assert len(said) == 1 and said[0].endswith(
+        'record.max_files 2 has no effect: the recording is one file unless '
+        'record.max_bytes or record.max_seconds is set'), out + err
+    assert path.is_file()  # recorded as one file, as asked
+    # with a split, or with nothing recorded, nothing is said
+    bag = tmp_path / 'bag'
+    for parameters in (('record.max_seconds:=0.1', f'record.mcap:={bag}'), ()):
+        code, out, err = finish(start_node('max_steps:=3', 'rate_hz:=0.0', 'dt:=0.05',
+                                           'record.max_files:=2', *parameters), NODE_TIMEOUT)
+        assert code == 0 and 'has no effect' not in out + err, err
+
+
+def test_a_node_run_with_agents_split_resimulates_file_by_file(probe, processes, tmp_path,
+                                                               capsys):
+    """The node, cmd_vel from another participant, files of 25 steps: each file alone."""
+    directory = tmp_path / 'node'
+    process = processes.start(node_command(*AGENT_WORLD, 'max_steps:=150',
+                                           f'record.mcap:={directory}',
+                                           'record.max_seconds:=0.5'))
+    odom = probe.listen(Odometry, 'ball_1/odom')
+    command = probe.node.create_publisher(Twist, 'ball_1/cmd_vel', 10)
+    probe.spin_until(lambda: command.get_subscription_count() > 0 and odom,
+                     'a reader of cmd_vel', process=process)
+    for k in range(25):  # a changing command every 0.1 s: one in force at most splits
+        command.publish(twist(x=1.0 + 0.05 * k, y=-0.5, wz=2.0 - 0.2 * k))
+        probe.spin_for(0.1)
+    code, _, err = finish(process, NODE_TIMEOUT)
+    assert code == 0, err
+    names = metadata(directory)['relative_file_paths']
+    assert len(names) == 7  # steps 0-24, 25-49, ..., 125-149, then 150
+    assert resim.main([str(directory)]) == 0
+    assert 'all 151 recorded steps re-simulate bit-identically' in capsys.readouterr().out
+    commanded = 0
+    for name in names:
+        assert resim.main([str(directory / name)]) == 0, (name, capsys.readouterr())
+        assert '/tf_static' in first_messages(directory / name), name
+        resume = open_recording(directory / name).segments[0].resume
+        commanded += bool(resume is not None and resume.commands)
+    assert commanded >= 1  # a file resumed with a command in force, and re-simulated

@@ -109,6 +109,14 @@ class RecordingSet:
         for f in self.files:
             yield from f.messages(topics)
 
+    def messages_at(self, times, topics):
+        """Recording.messages_at over the files (each file's log times its own)."""
+        found = {}
+        for f in self.files:
+            for time, messages in f.messages_at(times, topics).items():
+                found.setdefault(time, []).extend(messages)
+        return found
+
     def last_message(self, topic):
         for f in reversed(self.files):
             message = f.last_message(topic)

@@ -49,6 +49,18 @@ def splits(values):
     return bool(values['record.max_bytes'] or values['record.max_seconds'])
 
 
+def unused_max_files(values):
+    """The warning line for record.max_files set where it cannot act, or None.
+
+    Only split files are removed: without record.max_bytes or record.max_seconds the run
+    is one file, which is never deleted, and the user asked for bounded disk.
+    """
+    if values['record.max_files'] and values['record.mcap'] and not splits(values):
+        return (f"record.max_files {values['record.max_files']} has no effect: the recording "
+                'is one file unless record.max_bytes or record.max_seconds is set')
+    return None
+
+
 def open_split_sink(values, report=None):
     """The SplitMcapSink the record.* parameters describe (raises OSError naming the path)."""
     return SplitMcapSink(values['record.mcap'], values['record.max_bytes'],
