@@ -145,10 +145,11 @@ class Simulation:
         """Continue a recorded segment where a split file starts (re-simulation only).
 
         state: recording.resume.ResumeState, the world at the end of step state.step. Walls,
-        backend and mode come from the parameters, the balls and their names from the state,
-        so that seed-mode steps from here are bit for bit the recorded run's. (Exact mode
-        carries predictions from step to step that a state cannot hold: see
-        docs/reliability.md.) Meant for a Simulation without sinks.
+        backend and mode come from the parameters; the balls, their names and the agents
+        (headings, last commands) from the state, so that seed-mode steps from here are bit
+        for bit the recorded run's. (Exact mode carries predictions from step to step that
+        a state cannot hold: see docs/reliability.md.) Meant for a Simulation without
+        sinks.
         """
         built = build(parameters)
         base = built.world

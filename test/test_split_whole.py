@@ -10,13 +10,15 @@ import json
 import math
 import struct
 
-from ball_world_testing.harness import finish, node_command, rewrite_recording, start_node
+from ball_world_testing.harness import (finish, node_command, rewrite_recording, run_tool,
+                                        start_node)
 from geometry_msgs.msg import Twist
 from mcap.reader import make_reader
 from nav_msgs.msg import Odometry
 import pytest
 from rclpy.serialization import serialize_message
 from test_agents_node import twist, WORLD as AGENT_WORLD
+from test_closing_edits import _node_edits_then_stops
 from test_edit_recordings import FIRST, SECOND, spawn
 from test_split_recordings import crafted_resume, NODE_TIMEOUT
 import yaml
@@ -271,3 +273,22 @@ def test_a_node_run_with_agents_split_resimulates_file_by_file(probe, processes,
         resume = open_recording(directory / name).segments[0].resume
         commanded += bool(resume is not None and resume.commands)
     assert commanded >= 1  # a file resumed with a command in force, and re-simulated
+
+
+def test_the_node_records_a_closing_record_in_a_split_run(probe, processes, tmp_path):
+    """Pause, step, push, spawn, delete, Ctrl-C: through the node's writer thread too."""
+    directory = _node_edits_then_stops(probe, processes, tmp_path, 'sigint',
+                                       'record.max_seconds:=0.02')
+    names = metadata(directory)['relative_file_paths']
+    assert len(names) >= 2  # a file every two steps (dt 1/60 s)
+    steps = list(open_recording(directory).steps())
+    last = steps[-2].step
+    assert [(s.step, len(s.impulses), len(s.edits)) for s in steps if s.closing] == [
+        (last + 1, 1, 2)] and steps[-1].closing
+    for target in (directory, directory / names[-1]):  # the set, and its last file alone
+        code, out, err = run_tool('ball_world_resim', str(target))
+        assert code == 0, out + err
+        assert 'after the last step 1 impulses and 2 edits: identical' in out, out
+    code, out, err = run_tool('ball_world_info', str(directory))
+    assert code == 0, err
+    assert f'-{last} (+ 2 edits and 1 impulse after the last step)' in out, out
