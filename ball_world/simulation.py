@@ -149,19 +149,26 @@ class Simulation:
         """Continue a recorded segment where a split file starts (re-simulation only).
 
         state: recording.resume.ResumeState, the world at the end of step state.step. Walls,
-        backend and mode come from the parameters, the balls and their names from the state,
-        so that seed-mode steps from here are bit for bit the recorded run's. (Exact mode
-        carries predictions from step to step that a state cannot hold: see
-        docs/reliability.md.) Meant for a Simulation without sinks.
+        backend and mode come from the parameters; the balls, their names and the agents
+        (headings, last commands) from the state, so that seed-mode steps from here are bit
+        for bit the recorded run's. (Exact mode carries predictions from step to step that
+        a state cannot hold: see docs/reliability.md.) Meant for a Simulation without
+        sinks.
         """
         built = build(parameters)
         base = built.world
         world = World(state.positions.copy(), state.velocities.copy(), state.radii.copy(),
                       state.masses.copy(), walls=base.walls.segments, backend=base.backend,
                       mode=base.mode)
-        self.reset(parameters, BuiltWorld(built.parameters, world, built.dt_ns))
+        # The agents are the state's (the parameters name those the segment began with).
+        self.reset({**built.parameters, 'agents': []},
+                   BuiltWorld({**built.parameters, 'agents': []}, world, built.dt_ns))
+        self.parameters = built.parameters
         self.entities = Entities.restored(state.names, state.retired, len(base))
         self._names = tuple(self.entities.names)
+        commands = dict(state.commands)
+        for name, yaw in zip(state.agents, state.yaws):
+            self.agents.restore(name, yaw, commands.get(name))
         self.step_index = state.step
         self.segment = segment
         self.log_offset_ns = log_offset_ns

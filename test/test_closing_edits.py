@@ -109,12 +109,13 @@ def test_a_closing_edit_the_world_refuses_is_a_difference(tmp_path):
         assert f'first difference: {first}' in out, out
 
 
-def _node_edits_then_stops(probe, processes, tmp_path, how):
+def _node_edits_then_stops(probe, processes, tmp_path, how, *extra):
+    """extra: more parameters (a split recording: path is then a bag directory)."""
     path = tmp_path / f'{how}.mcap'
     node = processes.start_node('random.count:=0', 'balls.x:=[2.0, 8.0]', 'balls.y:=[2.0, 2.0]',
                                 'balls.vx:=[1.0, 0.0]', 'balls.vy:=[0.0, 0.0]',
                                 'balls.radius:=[0.3, 0.3]', 'balls.mass:=[1.0, 1.0]',
-                                'markers.rate_hz:=0.0', f'record.mcap:={path}')
+                                'markers.rate_hz:=0.0', f'record.mcap:={path}', *extra)
     assert probe.call(SetBool, '/ball_world/pause', SetBool.Request(data=True)).success
     assert probe.call(Trigger, '/ball_world/step', Trigger.Request()).success
     pusher = probe.node.create_publisher(Vector3Stamped, 'impulse', RECEIVE_QOS)

@@ -189,6 +189,13 @@ class Agents:
         self._commands = np.delete(self._commands, row, axis=0)
         self._since = np.delete(self._since, row)
 
+    def restore(self, name, yaw, command=None):
+        """Make `name` an agent with heading yaw and its last Command, as they were at a
+        step of a recorded run (a split file resumes there): both kept bit for bit."""
+        self._yaw[name] = float(yaw)
+        if command is not None:
+            self._command[name] = command
+
     def set_yaw(self, name, yaw):
         self._yaws[self._row[name]] = wrapped(float(yaw))
 

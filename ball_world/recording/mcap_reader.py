@@ -822,6 +822,30 @@ class Recording:
                         best = record
         return None if best is None else self._message(best)
 
+    def messages_at(self, times, topics):
+        """{log time: [RecordedMessage]} of the messages on `topics` at any of `times`.
+
+        Indexed, only the chunks spanning one of the times are read; without summary the
+        file is scanned once for all of them.
+        """
+        times = set(times)
+        wanted = self._channel_ids(set(topics))
+        found = {}
+        if not self.has_summary:
+            for message in self.messages(topics):
+                if message.log_time_ns in times:
+                    found.setdefault(message.log_time_ns, []).append(message)
+            return found
+        with open_regular(self.path) as stream:
+            for index in self._chunks(wanted):
+                if not any(index.message_start_time <= t <= index.message_end_time
+                           for t in times):
+                    continue
+                for record in self._chunk_messages(stream, index, wanted):
+                    if record.log_time in times:
+                        found.setdefault(record.log_time, []).append(self._message(record))
+        return found
+
     def _message(self, record):
         channel = self.channels.get(record.channel_id)
         if channel is None:

@@ -97,14 +97,25 @@ class RecordingSet:
         self.segments = sorted(merged.values(), key=lambda s: s.log_offset_ns)
         self._offsets = [s.log_offset_ns for s in self.segments]
         self.roles = {}
+        self.agent_roles = {}  # the agents' topics (Recording.agent_roles) of every file
         for f in files:
             for topic, role in f.roles.items():
                 self.roles.setdefault(topic, role)
+            for topic, role in f.agent_roles.items():
+                self.agent_roles.setdefault(topic, role)
 
     def messages(self, topics=None):
         """RecordedMessages of every file in order (files never overlap in log time)."""
         for f in self.files:
             yield from f.messages(topics)
+
+    def messages_at(self, times, topics):
+        """Recording.messages_at over the files (each file's log times its own)."""
+        found = {}
+        for f in self.files:
+            for time, messages in f.messages_at(times, topics).items():
+                found.setdefault(time, []).extend(messages)
+        return found
 
     def last_message(self, topic):
         for f in reversed(self.files):

@@ -8,6 +8,13 @@ the end of step k: the balls' entity names in pose order, the names deleted earl
 segment (never given again), and positions, velocities, radii and masses as little-endian
 float64 in base64, so they come back bit for bit. The file's first step is then k + 1.
 
+A world with agents (core.agents) adds what drives them on: `agents`, their names in agent
+order, `yaws`, their headings (float64, base64), and of those that were given one the last
+command, which may still be in force: `commanded` (names), `commands` (vx, vy, wz each,
+float64, base64) and `since_ns` (the simulation time it took effect). A state without agents
+has none of these keys, as before agents existed. CommandsInForce follows the records of a
+segment to know the commands, which a StepRecord carries only at the step they were given.
+
 The state is untrusted when read back: parse_resume checks every count, name and number
 and raises ValueError saying which one is wrong.
 """
@@ -20,12 +27,14 @@ import math
 import numpy as np
 
 from ball_world.core import limits
+from ball_world.core.agents import Command, MAX_COMMAND
 from ball_world.core.edits import NAME_PATTERN
 
 RESUME_STEP = 'resume_step'
 RESUME_STATE = 'resume_state'
 _ARRAYS = {'positions': 2, 'velocities': 2, 'radii': 1, 'masses': 1}
 _FIELDS = frozenset(('names', 'retired', *_ARRAYS))
+_AGENT_FIELDS = frozenset(('agents', 'yaws', 'commanded', 'commands', 'since_ns'))
 _BOUNDS = {'positions': (-limits.COORDINATE_LIMIT, limits.COORDINATE_LIMIT),
            'radii': (limits.MIN_RADIUS, limits.MAX_RADIUS),
            'masses': (limits.MIN_MASS, limits.MAX_MASS)}
@@ -45,20 +54,58 @@ class ResumeState:
     velocities: np.ndarray  # (N, 2)
     radii: np.ndarray  # (N,)
     masses: np.ndarray  # (N,)
+    agents: tuple = ()  # agent names, in agent order (core.agents.Agents.names)
+    yaws: tuple = ()  # their headings, rad, in the same order
+    commands: tuple = ()  # ((name, core.agents.Command), ...): the last command of each
+
+
+class CommandsInForce:
+    """The last command of every agent in a segment, from its StepRecords in order.
+
+    A command recorded with step k took effect at k's stamp (Simulation.command), the last
+    one given wins (core.agents.Agents.command), and a deleted agent's goes with it.
+    """
+
+    def __init__(self):
+        self.commands = {}
+
+    def restart(self):
+        """A new segment: no agent has a command."""
+        self.commands = {}
+
+    def follow(self, record):
+        """Take the commands and deletions recorded with `record` (a StepRecord, or the
+        PendingEvents of a closing record, which holds no commands)."""
+        stamp_ns = record.stamp_ns
+        for command in getattr(record, 'commands', ()):
+            self.commands[command.name] = Command(command.vx, command.vy, command.wz,
+                                                  stamp_ns)
+        for edit in record.edits:
+            if edit.kind == 'delete':
+                self.commands.pop(edit.name, None)
 
 
 def _encode(array):
     return base64.b64encode(np.ascontiguousarray(array, dtype='<f8').tobytes()).decode()
 
 
-def resume_metadata(record, retired):
+def resume_metadata(record, retired, commands=None):
     """The two metadata values for a file that continues after StepRecord `record`.
 
-    retired: the names deleted earlier in the segment.
+    retired: the names deleted earlier in the segment. commands: agent name -> its last
+    Command (CommandsInForce.commands), for a world with agents.
     """
     state = {'names': list(record.names), 'retired': sorted(retired),
              'positions': _encode(record.positions), 'velocities': _encode(record.velocities),
              'radii': _encode(record.radii), 'masses': _encode(record.masses)}
+    if record.agents is not None:
+        names = list(record.agents.names)
+        given = [name for name in names if name in (commands or {})]
+        state.update(
+            agents=names, yaws=_encode(record.agents.yaws), commanded=given,
+            commands=_encode([(commands[n].vx, commands[n].vy, commands[n].wz)
+                              for n in given]),
+            since_ns=[commands[name].since_ns for name in given])
     return {RESUME_STEP: str(record.step), RESUME_STATE: json.dumps(state)}
 
 
@@ -73,20 +120,20 @@ def _names(value, what):
     return tuple(value)
 
 
-def _array(state, key, count):
+def _array(state, key, count, width=None, bounds=None, what='balls'):
     text = state[key]
     try:
         data = base64.b64decode(text.encode('ascii'), validate=True)
     except (AttributeError, UnicodeEncodeError, binascii.Error):
         raise ValueError(f'{key} is not base64 text') from None
-    width = _ARRAYS[key]
+    width = width or _ARRAYS[key]
     if len(data) != 8 * width * count:
         raise ValueError(f'{key} holds {len(data)} bytes, not {width} float64 for each of '
-                         f'the {count} balls')
+                         f'the {count} {what}')
     array = np.frombuffer(data, dtype='<f8').astype(np.float64)
     if not np.isfinite(array).all():
         raise ValueError(f'{key} holds a value that is not finite')
-    low, high = _BOUNDS.get(key, (-math.inf, math.inf))
+    low, high = bounds or _BOUNDS.get(key, (-math.inf, math.inf))
     if len(array) and not (array.min() >= low and array.max() <= high):
         raise ValueError(f'{key} holds a value outside {low:g} to {high:g}')
     return array.reshape(count, width) if width > 1 else array
@@ -104,13 +151,42 @@ def parse_resume(values, parse_json):
     if not isinstance(step_text, str) or not step_text.isdigit() or len(step_text) > 19:
         raise ValueError(f"'{RESUME_STEP}' is {repr(step_text)[:40]}, not a step number")
     state = parse_json(values.get(RESUME_STATE), f"'{RESUME_STATE}'")
-    if not isinstance(state, dict) or set(state) != _FIELDS:
+    if not isinstance(state, dict) or set(state) not in (_FIELDS, _FIELDS | _AGENT_FIELDS):
         raise ValueError(f"'{RESUME_STATE}' does not hold exactly "
-                         f"{', '.join(sorted(_FIELDS))}")
+                         f"{', '.join(sorted(_FIELDS))} (and with agents "
+                         f"{', '.join(sorted(_AGENT_FIELDS))})")
     names = _names(state['names'], 'names')
     if len(names) > limits.MAX_BALLS or len(set(names)) != len(names):
         raise ValueError(f'names lists {len(names):,} balls, or one twice')
     retired = _names(state['retired'], 'retired')
     count = len(names)
     arrays = {key: _array(state, key, count) for key in _ARRAYS}
+    if 'agents' in state:
+        arrays.update(_agents(state, names))
     return ResumeState(step=int(step_text), names=names, retired=retired, **arrays)
+
+
+def _subset(state, key, of, what):
+    """state[key]: names, each once, each one of `of`."""
+    names = _names(state[key], key)
+    if len(set(names)) != len(names) or not set(names) <= set(of):
+        raise ValueError(f'{key} names an agent twice, or one that is not {what}')
+    return names
+
+
+def _agents(state, names):
+    """The agents' fields of a resume state, checked: agents, yaws, commands."""
+    agents = _subset(state, 'agents', names, 'a ball of the state')
+    yaws = _array(state, 'yaws', len(agents), 1, (-math.pi, math.pi), 'agents')
+    given = _subset(state, 'commanded', agents, 'an agent')
+    values = _array(state, 'commands', len(given), 3, (-MAX_COMMAND, MAX_COMMAND),
+                    'agents commanded')
+    since = state['since_ns']
+    if not (isinstance(since, list) and len(since) == len(given) and all(
+            type(t) is int and 0 <= t <= limits.MAX_SIM_TIME_NS for t in since)):
+        raise ValueError(f'since_ns is not a simulation time in ns for each of the '
+                         f'{len(given)} agents commanded')
+    commands = tuple((name, Command(*(float(v) for v in row), since[i]))
+                     for i, (name, row) in enumerate(zip(given, values.reshape(-1, 3))))
+    return {'agents': agents, 'yaws': tuple(float(yaw) for yaw in yaws),
+            'commands': commands}

@@ -10,9 +10,11 @@ the writer's memory is bounded by one file.
 Every file stands alone: a file begun inside a segment starts with that segment's
 'ball_world' metadata record (parameters, topics) plus the state it continues from
 (recording.resume: the step before its first, with every ball's name, position, velocity,
-radius and mass), then the markers of that world (and whatever else McapSink writes at a
-segment start). A reset starts the next segment in whichever file is open (a due split is
-made first, so the new file begins with the segment).
+radius and mass; with agents, their headings and the commands in force), then the
+markers of that world (and whatever else McapSink writes at a segment start); its first
+step carries the segment's /tf_static when there are agents. A reset starts the next
+segment in whichever file is open (a due split is made first, so the new file begins with
+the segment). A segment's closing record (edits after its last step) goes to the open file.
 
 After each finished file metadata.yaml is rewritten (recording.bag), after record.max_files
 is applied: the oldest files beyond it are removed, each said through `report`. Errors are
@@ -24,7 +26,7 @@ import os
 
 from ball_world.recording.bag import (claim_directory, file_name, summarize, write_metadata)
 from ball_world.recording.mcap_writer import CHUNK_BYTES, McapRecordingError, McapSink
-from ball_world.recording.resume import resume_metadata
+from ball_world.recording.resume import CommandsInForce, resume_metadata
 
 #: Smallest chunk a split file is cut into: small files still compress well.
 MIN_CHUNK_BYTES = 16 << 10
@@ -45,6 +47,18 @@ def split_chunk_bytes(max_bytes):
 def splits(values):
     """Whether parameters ask for a split recording (record.max_bytes or max_seconds)."""
     return bool(values['record.max_bytes'] or values['record.max_seconds'])
+
+
+def unused_max_files(values):
+    """The warning line for record.max_files set where it cannot act, or None.
+
+    Only split files are removed: without record.max_bytes or record.max_seconds the run
+    is one file, which is never deleted, and the user asked for bounded disk.
+    """
+    if values['record.max_files'] and values['record.mcap'] and not splits(values):
+        return (f"record.max_files {values['record.max_files']} has no effect: the recording "
+                'is one file unless record.max_bytes or record.max_seconds is set')
+    return None
 
 
 def open_split_sink(values, report=None):
@@ -80,6 +94,8 @@ class SplitMcapSink:
         self._world = self._info = None  # the current segment's start
         self._last = None  # the segment's last StepRecord
         self._retired = set()  # names deleted in the segment so far
+        self._commands = CommandsInForce()  # the agents' last commands in the segment
+        self._tf_static = None  # the segment's last /tf_static, for each file's start
         self._file_steps = 0
         self._file_start_ns = None
         try:
@@ -111,18 +127,36 @@ class SplitMcapSink:
         self._world, self._info = world, info
         self._last = None
         self._retired = set()
+        self._commands.restart()
+        self._tf_static = None
         self._run(self._sink.start_segment, world, info)
 
     def write_step(self, record):
         self._check_open()
         if self._due(record.log_time_ns) and self._last is not None:
             self._run(self._roll, self._last)
+            record = self._with_tf_static(record)
         self._run(self._sink.write_step, record)
+        if record.agents is not None and record.agents.tf_static_cdr is not None:
+            self._tf_static = record.agents.tf_static_cdr
+        self._commands.follow(record)
         if self._file_start_ns is None:
             self._file_start_ns = record.log_time_ns
         self._file_steps += 1
         self._last = record
         self._retired.update(edit.name for edit in record.edits if edit.kind == 'delete')
+
+    def write_pending(self, events):
+        """The segment's closing record (step_record.PendingEvents), into the open file.
+
+        It belongs to the segment it closes, so it never begins a file: a file that began
+        with it would hold edits and no step to check them against. The file's summary and
+        so metadata.yaml count its messages and its log time, as any other.
+        """
+        self._check_open()
+        self._run(self._sink.write_pending, events)
+        self._retired.update(edit.name for edit in events.edits if edit.kind == 'delete')
+        self._commands.follow(events)
 
     def flush(self):
         self._check_open()
@@ -201,6 +235,16 @@ class SplitMcapSink:
             raise McapRecordingError(error.errno, error.strerror or str(error),
                                      metadata) from None
 
+    def _with_tf_static(self, record):
+        """The first record of a file that continues a segment, with the segment's /tf_static
+        (the bytes the node latched) when it has agents: a reader of the file alone needs
+        the frames, and a latched message comes once."""
+        frame = record.agents
+        if frame is None or frame.tf_static_cdr is not None or self._tf_static is None:
+            return record
+        return dataclasses.replace(record, agents=dataclasses.replace(
+            frame, tf_static_cdr=self._tf_static))
+
     def _roll(self, resume_from):
         """Finish the open file and begin the next; resume_from: the StepRecord it follows.
 
@@ -214,5 +258,6 @@ class SplitMcapSink:
                 self._world, radii=record.radii, masses=record.masses,
                 positions=record.positions, velocities=record.velocities, names=record.names)
             info = dataclasses.replace(self._info,
-                                       resume=resume_metadata(record, self._retired))
+                                       resume=resume_metadata(record, self._retired,
+                                                              self._commands.commands))
             self._sink.start_segment(world, info)

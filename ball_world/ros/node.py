@@ -98,8 +98,10 @@ def open_sinks(values):
     other recording's file is refused.
     """
     from ball_world.recording.files import claim_output, ClaimedSink
-    from ball_world.recording.split_writer import open_split_sink, splits
+    from ball_world.recording.split_writer import open_split_sink, splits, unused_max_files
     logger = rclpy.logging.get_logger('ball_world')
+    if unused_max_files(values):
+        logger.warning(unused_max_files(values))
     claims = []
     sinks = []
     name = None

@@ -52,23 +52,53 @@ def _first(recording, topic):
 
 def _segment_lines(recording):
     """A line per segment, and the steps taken in all of them: a segment starts at step 0,
-    its initial state, which is published and recorded but is not a step."""
+    its initial state, which is published and recorded but is not a step.
+
+    A segment's last log time is its last step, unless it holds a closing record (impulses
+    and edits made after that step, with no balls: mcap_reader.RecordedStep.closing); then
+    the step before it is the last, and the closing record is said as what it is.
+    """
     lines = []
     taken = 0
     segments = recording.segments
+    last_logs = []
     for position, segment in enumerate(segments):
         if position + 1 < len(segments):
-            last_log = segments[position + 1].log_offset_ns - segment.dt_ns
+            last_logs.append(segments[position + 1].log_offset_ns - segment.dt_ns)
         else:
-            last_log = recording.end_ns if recording.end_ns is not None else 0
+            last_logs.append(recording.end_ns if recording.end_ns is not None else 0)
+    closing = _closing_records(recording, last_logs)
+    for segment, last_log in zip(segments, last_logs):
         last_step = max(0, (last_log - segment.log_offset_ns) // segment.dt_ns)
+        after = closing.get(last_log)
+        if after and last_step > 0:
+            last_step -= 1
         resumed_from = 0 if segment.resume is None else segment.resume.step
         taken += last_step - resumed_from
         first_step = 0 if segment.resume is None else resumed_from + 1
         lines.append(f'  {segment.index}: from log time {_duration(segment.log_offset_ns)}, '
-                     f'steps {first_step}-{last_step}, dt {segment.dt_ns / 1e6:.6g} ms, frame '
+                     f'steps {first_step}-{last_step}'
+                     f"{f' (+ {after} after the last step)' if after else ''}, dt "
+                     f'{segment.dt_ns / 1e6:.6g} ms, frame '
                      f"'{segment.frame_id}', written by ball_world {segment.package_version}")
     return lines, taken
+
+
+def _closing_records(recording, last_logs):
+    """{log time: 'N edits and M impulses'} of the segments' last log times that hold a
+    closing record: impulse or edit messages, and no balls, state or stats."""
+    roles = ('balls', 'state', 'stats', 'impulse', 'edits')
+    topics = {recording.topic_of(role): role for role in roles if recording.topic_of(role)}
+    found = {}
+    for time, messages in recording.messages_at(last_logs, topics).items():
+        held = [topics[message.topic] for message in messages]
+        if any(role in held for role in roles[:3]):
+            continue
+        counts = [_plural(held.count(role), word) for role, word in (
+            ('edits', 'edit'), ('impulse', 'impulse')) if role in held]
+        if counts:
+            found[time] = ' and '.join(counts)
+    return found
 
 
 def _file_lines(recording):
