@@ -276,3 +276,15 @@ def test_spawned_agent_is_a_robot_driven_and_turned_through_the_services(probe, 
     assert velocity.y == pytest.approx(0.0, abs=1e-12)  # forward along its heading
     process.send_signal(2)
     assert finish(process)[0] == 0
+
+
+def test_a_world_without_agents_adds_nothing_to_the_graph(probe, processes):
+    process = processes.start(node_command('rate_hz:=50.0', 'markers.rate_hz:=0.0'))
+    probe.spin_until(lambda: probe.node.count_publishers('/balls') > 0, 'the world',
+                     process=process)
+    probe.spin_for(1.0)  # discovery of anything else the node might have made
+    assert 'ball_world_agents' not in probe.node.get_node_names()
+    assert probe.node.count_publishers('/tf') == 0
+    assert probe.node.count_publishers('/tf_static') == 0
+    process.send_signal(2)
+    assert finish(process)[0] == 0

@@ -15,7 +15,8 @@ message: a refusal is counted, and a warning is logged at most once per WARN_PER
 formatting anything in between.
 
 The per-agent subscriptions and publishers belong to a second node of the same process,
-`<node name>_agents` in the same namespace, that no executor spins: the world node drains
+`<node name>_agents` in the same namespace (made with the first agent), that no executor
+spins: the world node drains
 the subscriptions itself before each step (take_message), and publishers need no spinning.
 Why: rclpy's executor walks every subscription and event handler of its nodes on every wait
 and takes one message per wait, so 100 agents under a stream of commands took most of the
@@ -55,9 +56,7 @@ class AgentTopics:
 
     def __init__(self, node, stamped):
         self.node = node
-        self._io = Node(f'{node.get_name()}_agents', namespace=node.get_namespace(),
-                        context=node.context, use_global_arguments=False,
-                        start_parameter_services=False)
+        self._io = None  # the node of the per-agent entities, made with the first agent
         self.stamped = stamped
         self._message_type = TwistStamped if stamped else Twist
         self._decode = self._decode_stamped if stamped else decode_twist
@@ -80,8 +79,13 @@ class AgentTopics:
 
         A world without agents creates nothing, not even /tf: it speaks as before.
         """
-        node = self._io
         names = self.simulation.agents.names
+        if names and self._io is None:
+            world = self.node
+            self._io = Node(f'{world.get_name()}_agents', namespace=world.get_namespace(),
+                            context=world.context, use_global_arguments=False,
+                            start_parameter_services=False)
+        node = self._io
         for name in [name for name in self._topics if name not in names]:
             subscription, publisher = self._topics.pop(name)
             node.destroy_subscription(subscription)
@@ -104,11 +108,15 @@ class AgentTopics:
 
     def destroy(self):
         """Leave the graph (the world node is closing)."""
-        self._io.destroy_node()
+        if self._io is not None:
+            self._io.destroy_node()
+            self._io = None
 
     def names(self):
-        """The resolved topic names, for the node's start-up line."""
+        """The resolved topic names of the agents' topics."""
         node = self._io
+        if node is None:
+            return []
         return [node.resolve_topic_name(f'{name}/{topic}') for name in self._topics
                 for topic in ('cmd_vel', 'odom')]
 
