@@ -281,3 +281,28 @@ def test_spawned_agent_is_a_robot_driven_and_turned_through_the_services(probe, 
     assert velocity.y == pytest.approx(0.0, abs=1e-12)  # forward along its heading
     process.send_signal(2)
     assert finish(process)[0] == 0
+
+
+def test_a_world_without_agents_adds_nothing_to_the_graph(probe, processes):
+    process = processes.start(node_command('rate_hz:=50.0', 'markers.rate_hz:=0.0'))
+    probe.spin_until(lambda: probe.node.count_publishers('/balls') > 0, 'the world',
+                     process=process)
+    probe.spin_for(1.0)  # discovery of anything else the node might have made
+    assert 'ball_world_agents' not in probe.node.get_node_names()
+    assert probe.node.count_publishers('/tf') == 0
+    assert probe.node.count_publishers('/tf_static') == 0
+    process.send_signal(2)
+    assert finish(process)[0] == 0
+
+
+@pytest.mark.parametrize('value, words', [
+    ('[ball_99]', "no ball named 'ball_99' to make an agent"),
+    ('[ball_1, ball_1]', "'ball_1' is listed twice"),
+    ('[1]', "parameter 'agents'"),
+])
+def test_unknown_agents_stop_the_start_with_one_line(value, words):
+    code, out, err = run_tool('ball_world', '--ros-args', '-p', 'random.count:=3',
+                              '-p', f'agents:={value}')
+    assert code == 2
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and words in lines[0] and 'Traceback' not in err + out, err

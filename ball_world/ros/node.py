@@ -621,6 +621,7 @@ class BallWorld(Node):
     def close(self):
         """Finish the recordings (called on every way out)."""
         self.simulation.close()
+        self.agent_topics.destroy()
 
 
 def usage():
