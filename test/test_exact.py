@@ -539,7 +539,7 @@ def single_grid_run(world, dt, steps):
     walls = world.walls
     geometry = (walls.segments, walls.starts, walls.ends, walls.directions, walls.lengths)
     state = kernel.build(world.positions, world.velocities, world.radii, *geometry, math.inf)
-    assert len(state.cells) == 1
+    assert len(state.grids) == 2  # one class, and the totals
     per_ball = np.zeros(len(world), dtype=np.int64)
     for _ in range(steps):
         status = kernel.advance(state, world.positions, world.velocities, world.radii,

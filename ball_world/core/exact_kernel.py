@@ -76,6 +76,14 @@ COLUMNS = 12
 NO_BALL = -1
 NO_PARTNER = -1
 
+# Columns of State.grids (one row per radius class, and a last row of totals).
+SHIFT = 0         # the class's cells are unit * 2 ** SHIFT wide
+COLUMN_MASK = 1   # its buckets tile the plane: COLUMN_MASK + 1 columns of cells,
+ROW_BITS = 2      # 2 ** ROW_BITS rows (see _bucket)
+BUCKETS = 3       # its first bucket in heads and wall_first (last row: all buckets)
+GLOBALS = 4       # its first wall in global_walls, which all its balls check (last row: all)
+REACH = 5         # REACH + b: how far (in units) grid b is searched around its cells (_span)
+
 # Outcomes of a step.
 DONE = 0
 OVER_BUDGET = 1
@@ -98,13 +106,10 @@ WALL_ENTRIES_PER_BUCKET = 16
 CLASS_RATIO = 4.0
 
 State = collections.namedtuple('State', (
-    'cells',            # (C,) cell width of each radius class's grid, m: unit * 2 ** shift
-    'shifts',           # (C,) int64
-    'column_masks',     # (C,) each class's buckets tile the plane: column_mask + 1 columns
-    'row_bits',         # (C,) of cells, 2 ** row_bits rows (see _bucket)
-    'offsets',          # (C + 1,) class c's buckets are heads[offsets[c]:offsets[c + 1]]
-    'reach',            # (C, C) int64: how far (in units) class b's cells are searched
-                        # around a cell of class a (see _span)
+    'unit',             # cell width of the smallest radius class's grid, m
+    'grids',            # (C + 1, REACH + C) int64: each class's grid, see its column names
+                        # (one array, not one per column: every array in the state costs
+                        # reference counting on each call that passes it)
     'leaves',           # leaves of the tournament tree (a power of two >= balls)
     'clock',            # (N,) each ball's own time within the step, s
     'hit_time',         # (N,) each ball's earliest impact, s from the step's start
@@ -114,8 +119,7 @@ State = collections.namedtuple('State', (
     'heads',            # (buckets,) first ball of each bucket
     'wall_first',       # (buckets + 1,) each bucket's walls: wall_items[first[b]:first[b+1]]
     'wall_items',
-    'global_first',     # (C + 1,) walls every ball of class c checks:
-    'global_walls',     # global_walls[global_first[c]:global_first[c + 1]]
+    'global_walls',     # walls every ball of a class checks (grids' GLOBALS)
     'tree',             # (2 leaves,) winner ball of each node, NO_BALL if none
     'seen_positions',   # what the kernel left in the world, to notice edits
     'seen_velocities',
@@ -143,7 +147,14 @@ def _bucket(cx, cy, column_mask, row_bits):
 @compile_inline
 def _home(state, c, cx, cy):
     """Cell (cx, cy) of class c's grid: its bucket in heads (and in wall_first)."""
-    return state.offsets[c] + _bucket(cx, cy, state.column_masks[c], state.row_bits[c])
+    grids = state.grids
+    return grids[c, BUCKETS] + _bucket(cx, cy, grids[c, COLUMN_MASK], grids[c, ROW_BITS])
+
+
+@compile_inline
+def _width(state, c):
+    """Class c's cell width (exact: a power of two times the unit)."""
+    return state.unit * (1 << state.grids[c, SHIFT])
 
 
 @compile_inline
@@ -193,8 +204,9 @@ def _unlink(balls, heads, i, bucket):
 def _place(state, i, px, py):
     """Put ball i in the cell of (px, py) of its class's grid."""
     c = state.balls[i, CLASS]
-    cx = _cell_of(px, state.cells[c])
-    cy = _cell_of(py, state.cells[c])
+    cell = _width(state, c)
+    cx = _cell_of(px, cell)
+    cy = _cell_of(py, cell)
     state.balls[i, CELL_X] = cx
     state.balls[i, CELL_Y] = cy
     _link(state.balls, state.heads, i, _home(state, c, cx, cy))
@@ -347,6 +359,7 @@ def _predict(state, i, now, x, v, radii, starts, ends, directions, lengths):
     py = x[i, 1] + v[i, 1] * (now - state.clock[i])
     vx = v[i, 0]
     vy = v[i, 1]
+    grids = state.grids
     a = balls[i, CLASS]
     cx = balls[i, CELL_X]
     cy = balls[i, CELL_Y]
@@ -354,18 +367,17 @@ def _predict(state, i, now, x, v, radii, starts, ends, directions, lengths):
     balls[i, HIT_KIND] = NOTHING
     balls[i, HIT_PARTNER] = NO_PARTNER
     balls[i, HIT_STAMP] = 0
-    _predict_exit(i, now, px, py, vx, vy, balls, state.exit_time, state.cells[a])
+    _predict_exit(i, now, px, py, vx, vy, balls, state.exit_time, _width(state, a))
     _scan_walls(i, now, px, py, vx, vy, _home(state, a, cx, cy), balls, state.hit_time,
-                state.wall_first, state.wall_items, state.global_walls, state.global_first[a],
-                state.global_first[a + 1], radii, starts, ends, directions, lengths)
-    shifts = state.shifts
-    for b in range(shifts.shape[0]):
-        reach = state.reach[a, b]
-        low_x, high_x = _span(cx, shifts[a], shifts[b], reach)
-        low_y, high_y = _span(cy, shifts[a], shifts[b], reach)
+                state.wall_first, state.wall_items, state.global_walls, grids[a, GLOBALS],
+                grids[a + 1, GLOBALS], radii, starts, ends, directions, lengths)
+    for b in range(grids.shape[0] - 1):
+        reach = grids[a, REACH + b]
+        low_x, high_x = _span(cx, grids[a, SHIFT], grids[b, SHIFT], reach)
+        low_y, high_y = _span(cy, grids[a, SHIFT], grids[b, SHIFT], reach)
         _scan_balls(i, now, px, py, vx, vy, low_x, high_x, low_y, high_y, balls,
-                    state.hit_time, state.heads, state.clock, state.offsets[b],
-                    state.column_masks[b], state.row_bits[b], x, v, radii)
+                    state.hit_time, state.heads, state.clock, grids[b, BUCKETS],
+                    grids[b, COLUMN_MASK], grids[b, ROW_BITS], x, v, radii)
     _schedule(i, balls, state.hit_time, state.exit_time, state.event_time)
 
 
@@ -379,6 +391,7 @@ def _cross(state, i, now, x, v, radii, starts, ends, directions, lengths):
     predicted with a ball now out of reach is still exact).
     """
     balls = state.balls
+    grids = state.grids
     a = balls[i, CLASS]
     old_x = balls[i, CELL_X]
     old_y = balls[i, CELL_Y]
@@ -395,17 +408,16 @@ def _cross(state, i, now, x, v, radii, starts, ends, directions, lengths):
     py = x[i, 1] + v[i, 1] * (now - state.clock[i])
     vx = v[i, 0]
     vy = v[i, 1]
-    _predict_exit(i, now, px, py, vx, vy, balls, state.exit_time, state.cells[a])
+    _predict_exit(i, now, px, py, vx, vy, balls, state.exit_time, _width(state, a))
     _scan_walls(i, now, px, py, vx, vy, _home(state, a, cx, cy), balls, state.hit_time,
-                state.wall_first, state.wall_items, state.global_walls, state.global_first[a],
-                state.global_first[a + 1], radii, starts, ends, directions, lengths)
-    shifts = state.shifts
-    for b in range(shifts.shape[0]):
-        reach = state.reach[a, b]
+                state.wall_first, state.wall_items, state.global_walls, grids[a, GLOBALS],
+                grids[a + 1, GLOBALS], radii, starts, ends, directions, lengths)
+    for b in range(grids.shape[0] - 1):
+        reach = grids[a, REACH + b]
         # Along the axis of the move: the cells within reach of the new cell, not the old.
-        old_low, old_high = _span(old_x if direction < 2 else old_y, shifts[a], shifts[b],
-                                  reach)
-        low, high = _span(cx if direction < 2 else cy, shifts[a], shifts[b], reach)
+        old_low, old_high = _span(old_x if direction < 2 else old_y, grids[a, SHIFT],
+                                  grids[b, SHIFT], reach)
+        low, high = _span(cx if direction < 2 else cy, grids[a, SHIFT], grids[b, SHIFT], reach)
         if direction == 0 or direction == 2:
             low = old_high + 1
         else:
@@ -413,16 +425,16 @@ def _cross(state, i, now, x, v, radii, starts, ends, directions, lengths):
         if low > high:
             continue
         # Across it: the same cells as before.
-        across_low, across_high = _span(cy if direction < 2 else cx, shifts[a], shifts[b],
-                                        reach)
+        across_low, across_high = _span(cy if direction < 2 else cx, grids[a, SHIFT],
+                                        grids[b, SHIFT], reach)
         if direction < 2:
             _scan_balls(i, now, px, py, vx, vy, low, high, across_low, across_high, balls,
-                        state.hit_time, state.heads, state.clock, state.offsets[b],
-                        state.column_masks[b], state.row_bits[b], x, v, radii)
+                        state.hit_time, state.heads, state.clock, grids[b, BUCKETS],
+                        grids[b, COLUMN_MASK], grids[b, ROW_BITS], x, v, radii)
         else:
             _scan_balls(i, now, px, py, vx, vy, across_low, across_high, low, high, balls,
-                        state.hit_time, state.heads, state.clock, state.offsets[b],
-                        state.column_masks[b], state.row_bits[b], x, v, radii)
+                        state.hit_time, state.heads, state.clock, grids[b, BUCKETS],
+                        grids[b, COLUMN_MASK], grids[b, ROW_BITS], x, v, radii)
     _schedule(i, balls, state.hit_time, state.exit_time, state.event_time)
 
 
@@ -641,7 +653,7 @@ def _classes(radii, ratio):
 
 @compile_kernel
 def _grids(x, radii, classes, count):
-    """Each class's grid: (cells, shifts, column_masks, row_bits, offsets, reach) of State.
+    """Each class's grid: (unit, grids) of State, GLOBALS not yet filled in.
 
     A class's cells are as _cell_width makes them for its own balls and largest radius,
     rounded up to the smallest class's width (the unit) times a power of two, so the cells
@@ -662,62 +674,54 @@ def _grids(x, radii, classes, count):
         extents[c, 0], extents[c, 1], extents[c, 2], extents[c, 3] = extent
         wanted[c] = _cell_width(own, extent, 2.0 * largest[c] * CELL_MARGIN)
     unit = wanted[0]
-    cells = np.empty(count)
-    shifts = np.zeros(count, dtype=np.int64)
-    column_masks = np.empty(count, dtype=np.int64)
-    row_bits = np.empty(count, dtype=np.int64)
-    offsets = np.zeros(count + 1, dtype=np.int64)
+    grids = np.zeros((count + 1, REACH + count), dtype=np.int64)
     for c in range(count):
         width = unit
         while width < wanted[c]:
             width *= 2.0
-            shifts[c] += 1
-        cells[c] = width
+            grids[c, SHIFT] += 1
         extent = (extents[c, 0], extents[c, 1], extents[c, 2], extents[c, 3])
-        column_masks[c], row_bits[c] = _torus(members[c], extent, width)
-        offsets[c + 1] = offsets[c] + ((column_masks[c] + 1) << row_bits[c])
-    reach = np.empty((count, count), dtype=np.int64)
-    for a in range(count):
+        grids[c, COLUMN_MASK], grids[c, ROW_BITS] = _torus(members[c], extent, width)
+        grids[c + 1, BUCKETS] = grids[c, BUCKETS] + ((grids[c, COLUMN_MASK] + 1)
+                                                     << grids[c, ROW_BITS])
         for b in range(count):
-            units = math.ceil((largest[a] + largest[b]) * CELL_MARGIN / unit)
-            reach[a, b] = max(1, int(units))
-    return cells, shifts, column_masks, row_bits, offsets, reach
+            units = math.ceil((largest[c] + largest[b]) * CELL_MARGIN / unit)
+            grids[c, REACH + b] = max(1, int(units))
+    return unit, grids
 
 
 @compile_kernel
-def _class_walls(cells, column_masks, row_bits, offsets, starts, directions, lengths):
+def _class_walls(unit, grids, starts, directions, lengths):
     """The walls of every class's buckets, one after another (wall_first, wall_items), and
-    each class's global walls (global_first, global_walls): _register_walls per grid."""
-    count = cells.shape[0]
+    all classes' global walls (fills in grids' GLOBALS): _register_walls per grid."""
+    count = grids.shape[0] - 1
     firsts = []
     items = []
     globals_ = []
     listed = 0
-    unlisted = 0
     for c in range(count):
-        first, entries, global_walls = _register_walls(cells[c], column_masks[c], row_bits[c],
-                                                       starts, directions, lengths)
+        first, entries, global_walls = _register_walls(
+            unit * (1 << grids[c, SHIFT]), grids[c, COLUMN_MASK], grids[c, ROW_BITS], starts,
+            directions, lengths)
         firsts.append(first)
         items.append(entries)
         globals_.append(global_walls)
         listed += first[first.shape[0] - 1]
-        unlisted += global_walls.shape[0]
-    wall_first = np.zeros(offsets[count] + 1, dtype=np.int64)
+        grids[c + 1, GLOBALS] = grids[c, GLOBALS] + global_walls.shape[0]
+    wall_first = np.zeros(grids[count, BUCKETS] + 1, dtype=np.int64)
     wall_items = np.empty(max(1, listed), dtype=np.int64)
-    global_first = np.zeros(count + 1, dtype=np.int64)
-    global_walls = np.empty(unlisted, dtype=np.int64)
+    global_walls = np.empty(grids[count, GLOBALS], dtype=np.int64)
     filled = 0
     for c in range(count):
         first = firsts[c]
         buckets = first.shape[0] - 1
         for b in range(buckets):
-            wall_first[offsets[c] + b] = filled + first[b]
+            wall_first[grids[c, BUCKETS] + b] = filled + first[b]
         wall_items[filled:filled + first[buckets]] = items[c][:first[buckets]]
         filled += first[buckets]
-        global_first[c + 1] = global_first[c] + globals_[c].shape[0]
-        global_walls[global_first[c]:global_first[c + 1]] = globals_[c]
-    wall_first[offsets[count]] = filled
-    return wall_first, wall_items, global_first, global_walls
+        global_walls[grids[c, GLOBALS]:grids[c + 1, GLOBALS]] = globals_[c]
+    wall_first[grids[count, BUCKETS]] = filled
+    return wall_first, wall_items, global_walls
 
 
 @compile_kernel
@@ -730,17 +734,17 @@ def build(x, v, radii, segments, starts, ends, directions, lengths, class_ratio=
     """
     n = x.shape[0]
     classes, count = _classes(radii, class_ratio)
-    cells, shifts, column_masks, row_bits, offsets, reach = _grids(x, radii, classes, count)
+    unit, grids = _grids(x, radii, classes, count)
     leaves = 1
     while leaves < n:
         leaves *= 2
-    wall_first, wall_items, global_first, global_walls = _class_walls(
-        cells, column_masks, row_bits, offsets, starts, directions, lengths)
-    state = State(cells, shifts, column_masks, row_bits, offsets, reach, leaves, np.zeros(n),
+    wall_first, wall_items, global_walls = _class_walls(unit, grids, starts, directions,
+                                                        lengths)
+    state = State(unit, grids, leaves, np.zeros(n),
                   np.empty(n), np.empty(n), np.empty(n),
                   np.empty((n, COLUMNS), dtype=np.int64),
-                  np.full(offsets[count], NO_BALL, np.int64),
-                  wall_first, wall_items, global_first, global_walls,
+                  np.full(grids[count, BUCKETS], NO_BALL, np.int64),
+                  wall_first, wall_items, global_walls,
                   np.full(2 * leaves, NO_BALL, np.int64), x.copy(), v.copy(), radii.copy(),
                   segments.copy())
     balls = state.balls
