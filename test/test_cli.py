@@ -12,9 +12,14 @@ WORLD = ['random.count:=0', 'balls.x:=[2.0, 5.0, 8.0]', 'balls.y:=[5.0, 5.0, 5.0
          'start_paused:=true']
 
 
+#: How long the tool may wait for the world (its default is 10 s): discovery on two loaded
+#: cores can take longer; only a hang takes this long.
+TIMEOUT = ('--timeout', '60')
+
+
 def cli(*args):
     """(exit code, stdout, stderr) of ball_world_cli driving the world in NAMESPACE."""
-    return run_tool('ball_world_cli', '--ns', NAMESPACE, *args)
+    return run_tool('ball_world_cli', '--ns', NAMESPACE, *TIMEOUT, *args)
 
 
 def ok(*args):
@@ -86,7 +91,7 @@ def test_spawn_set_state_and_delete_through_simulation_interfaces(world):
 
 
 def test_the_namespace_can_come_from_ros_arguments(world):
-    code, out, err = run_tool('ball_world_cli', 'status', '--ros-args', '-r',
+    code, out, err = run_tool('ball_world_cli', *TIMEOUT, 'status', '--ros-args', '-r',
                               f'__ns:={NAMESPACE}')
     assert (code, out) == (0, 'stopped (paused at step 0)\n'), err
 
