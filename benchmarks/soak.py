@@ -652,7 +652,37 @@ def rtf_parameters(args, path):
                   'physics.mode': args.mode}
     if args.record:
         parameters['record.mcap'] = path
+    if args.agents:
+        parameters['agents'] = '[' + ', '.join(agent_names(args.agents)) + ']'
     return parameters, side
+
+
+def agent_names(count):
+    return [f'ball_{i}' for i in range(count)]
+
+
+class Commander:
+    """Drives every agent as a controller at COMMAND_HZ would: a Twist on each cmd_vel."""
+
+    COMMAND_HZ = 10.0
+
+    def __init__(self, node, namespace, count):
+        from geometry_msgs.msg import Twist
+        self.message = Twist()
+        self.message.linear.x, self.message.angular.z = 1.0, 0.5
+        self.publishers = [node.create_publisher(Twist, f'{namespace}/{name}/cmd_vel', 10)
+                           for name in agent_names(count)]
+        self.due = 0.0
+        self.sent = 0
+
+    def tick(self):
+        now = time.monotonic()
+        if now < self.due:
+            return
+        self.due = now + 1.0 / self.COMMAND_HZ
+        for publisher in self.publishers:
+            publisher.publish(self.message)
+        self.sent += len(self.publishers)
 
 
 def run_rtf(args, workdir):
@@ -662,6 +692,7 @@ def run_rtf(args, workdir):
     parameters, side = rtf_parameters(args, path)
     node = NodeProcess(workdir, ns, f'rtf-{args.mode}', parameters)
     listener = Listener(ns, stats=True)
+    commander = Commander(listener.probe.node, ns, args.agents)
     me = psutil.Process()
     try:
         listener.spin_until(lambda: listener.heard > 0, 'the first step', node)
@@ -672,6 +703,7 @@ def run_rtf(args, workdir):
         end = began + args.seconds
         while time.monotonic() < end:
             node.check_alive()
+            commander.tick()
             listener.spin(0.05)
         elapsed = time.monotonic() - began
         steps = listener.last_step - first_step
@@ -692,6 +724,9 @@ def run_rtf(args, workdir):
             f'{args.speed:g} m/s), {args.mode} mode ({args.backend} backend), rate_hz 100, '
             f'dt {DT:g} s, markers at their default rate, a probe subscribed to `balls` and '
             '`stats`' + (f', recording MCAP ({size:,.0f} MB)' if args.record else '')
+            + (f', {args.agents} agents commanded at {Commander.COMMAND_HZ:g} Hz '
+               f'({commander.sent:,} cmd_vel sent; each publishes odom and /tf)'
+               if args.agents else '')
             + f'; {steps:,} steps in {elapsed:.1f} s; node exit {code}; CPU (share of one '
             'core): ' + ', '.join(f'{part} {share:.2f}' for part, share in sorted(parts.items()))
             + f', this probe {(mine_after - mine_before) / elapsed:.2f}; node RSS '
@@ -700,7 +735,8 @@ def run_rtf(args, workdir):
               'wall time); node log, every 10 s window: '
               + (', '.join(f'{rtf:.3f}' for rtf in windows) if windows else 'none')
               + f'; `stats` since start {stats_rtf:.3f}')
-    row(f'rtf --mode {args.mode} --balls {args.balls} --speed {args.speed:g}', what, figure)
+    row(f'rtf --mode {args.mode} --balls {args.balls} --speed {args.speed:g}'
+        + (f' --agents {args.agents}' if args.agents else ''), what, figure)
     return 0 if code == 0 and overall >= args.target else 1
 
 
@@ -1026,6 +1062,8 @@ def main(argv=None):
     rtf.add_argument('--speed', type=float, default=24.0,
                      help='random.speed: largest initial speed, m/s (default 24)')
     rtf.add_argument('--seconds', type=float, default=60.0)
+    rtf.add_argument('--agents', type=int, default=0,
+                     help='make ball_0... agents driven by cmd_vel at 10 Hz (issue 21: 100)')
     rtf.add_argument('--no-record', dest='record', action='store_false',
                      help='record nothing (default: record MCAP)')
     rtf.add_argument('--target', type=float, default=0.99,
