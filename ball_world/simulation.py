@@ -25,6 +25,7 @@ from ball_world.msgs.agent_cdr import encode_odometry, encode_tf_message
 from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
                                  encode_vector3_stamped)
 from ball_world.msgs.impulse_batch import encode_impulses
+from ball_world.msgs.twist_cdr import encode_twist, encode_twist_stamped
 from ball_world.scans import AgentScans, check as check_scans
 from ball_world.step_record import (AgentFrame, AppliedCommand, AppliedEdit, AppliedImpulse,
                                     PendingEvents, RunInfo, STATS_FIELDS, StepRecord,
@@ -289,13 +290,18 @@ class Simulation:
         """Give agent `name` a body-frame velocity command, in force from the next step.
 
         Raises CommandRejected (counted in `rejected` as cmd_vel_<reason>) for an unknown
-        agent or a bad command. Taken commands are recorded with the next step.
+        agent or a bad command. Taken commands are recorded with the next step, as `cdr`
+        (the message as received), or encoded here when given in code.
         """
+        since_ns = (self.step_index + 1) * self.dt_ns
         try:
-            self.agents.command(name, vx, vy, wz, (self.step_index + 1) * self.dt_ns)
+            self.agents.command(name, vx, vy, wz, since_ns)
         except CommandRejected as rejection:
             self.count_rejection('cmd_vel_' + rejection.reason)
             raise
+        if not cdr:
+            cdr = (encode_twist_stamped(since_ns, '', vx, vy, wz)
+                   if self.parameters['agent.cmd_vel_stamped'] else encode_twist(vx, vy, wz))
         self._commands.append(AppliedCommand(name, float(vx), float(vy), float(wz), cdr))
 
     def apply_drive(self):

@@ -722,15 +722,45 @@ def rtf_parameters(args, path):
                   'physics.mode': args.mode}
     if args.record:
         parameters['record.mcap'] = path
+    if args.agents:
+        parameters['agents'] = '[' + ', '.join(agent_names(args.agents)) + ']'
+        parameters['agent.scan.samples'] = 0  # agents alone; --scanning-agents scan
     if getattr(args, 'scanning_agents', 0):
-        names = ', '.join(f'ball_{i}' for i in range(args.scanning_agents))
-        parameters['agents'] = f'[{names}]'
+        parameters['agents'] = '[' + ', '.join(agent_names(args.scanning_agents)) + ']'
     return parameters, side
 
 
 #: The node's (throttled) warning that it fell more than pacing.MAX_LAG behind: its total.
 DROPPED_LINE = re.compile(r'behind the [^ ]+ Hz schedule: dropped \d+ steps of wall time '
                           r'\((\d+) so far\)')
+
+
+def agent_names(count):
+    return [f'ball_{i}' for i in range(count)]
+
+
+class Commander:
+    """Drives every agent as a controller at COMMAND_HZ would: a Twist on each cmd_vel."""
+
+    COMMAND_HZ = 10.0
+
+    def __init__(self, node, namespace, count):
+        from geometry_msgs.msg import Twist
+        self.message = Twist()
+        self.message.linear.x, self.message.angular.z = 1.0, 0.5
+        self.publishers = [node.create_publisher(Twist, f'{namespace}/{name}/cmd_vel', 10)
+                           for name in agent_names(count)]
+        self.due = 0.0
+        self.sent = 0
+
+    def tick(self):
+        now = time.monotonic()
+        if now < self.due:
+            return
+        self.due = now + 1.0 / self.COMMAND_HZ
+        for publisher in self.publishers:
+            publisher.publish(self.message)
+        self.sent += len(self.publishers)
 
 
 def run_rtf(args, workdir):
@@ -740,6 +770,7 @@ def run_rtf(args, workdir):
     parameters, side = rtf_parameters(args, path)
     node = NodeProcess(workdir, ns, f'rtf-{args.mode}', parameters)
     listener = Listener(ns, stats=True)
+    commander = Commander(listener.probe.node, ns, args.agents)
     me = psutil.Process()
     try:
         listener.spin_until(lambda: listener.heard > 0, 'the first step', node)
@@ -750,6 +781,7 @@ def run_rtf(args, workdir):
         end = began + args.seconds
         while time.monotonic() < end:
             node.check_alive()
+            commander.tick()
             listener.spin(0.05)
         elapsed = time.monotonic() - began
         steps = listener.last_step - first_step
@@ -772,6 +804,9 @@ def run_rtf(args, workdir):
             f'{args.speed:g} m/s), {args.mode} mode ({args.backend} backend), rate_hz 100, '
             f'dt {DT:g} s, markers at their default rate, a probe subscribed to `balls` and '
             '`stats`' + (f', recording MCAP ({size:,.0f} MB)' if args.record else '')
+            + (f', {args.agents} agents commanded at {Commander.COMMAND_HZ:g} Hz '
+               f'({commander.sent:,} cmd_vel sent; each publishes odom and /tf)'
+               if args.agents else '')
             + f'; {steps:,} steps in {elapsed:.1f} s; node exit {code}; CPU (share of one '
             'core): ' + ', '.join(f'{part} {share:.2f}' for part, share in sorted(parts.items()))
             + f', this probe {(mine_after - mine_before) / elapsed:.2f}; node RSS '
@@ -786,6 +821,7 @@ def run_rtf(args, workdir):
     if agents:
         what += f'; {agents} agents, each scanning 360 beams at 10 Hz (recorded)'
     row(f'rtf --mode {args.mode} --balls {args.balls} --speed {args.speed:g}'
+        + (f' --agents {args.agents}' if args.agents else '')
         + (f' --scanning-agents {agents}' if agents else ''), what, figure)
     return 0 if code == 0 and overall >= args.target else 1
 
@@ -1248,6 +1284,8 @@ def main(argv=None):
     rtf.add_argument('--speed', type=float, default=24.0,
                      help='random.speed: largest initial speed, m/s (default 24)')
     rtf.add_argument('--seconds', type=float, default=60.0)
+    rtf.add_argument('--agents', type=int, default=0,
+                     help='make ball_0... agents driven by cmd_vel at 10 Hz (issue 21: 100)')
     rtf.add_argument('--no-record', dest='record', action='store_false',
                      help='record nothing (default: record MCAP)')
     rtf.add_argument('--target', type=float, default=0.99,

@@ -163,3 +163,25 @@ def test_agent_keys_of_recorded_edits_are_read_back():
         '{"kind": "set_state", "name": "a", "x": 1.0, "y": 1.0, "vx": 0.0, "vy": 0.0, '
         '"radius": 0.0, "mass": 0.0, "impulses_before": 0, "yaw": -0.5}'), 0)
     assert edit.yaw == -0.5 and not edit.agent
+
+
+def test_hostile_agent_messages_get_one_line_or_a_difference(tmp_path, capsys):
+    from ball_world.tools import to_rrd
+    path = record_run(tmp_path / 'agents.mcap', steps=20)
+    bad = tmp_path / 'bad.mcap'
+    rewrite_recording(path, bad, data=lambda topic, log_time, data: b'\x00\x01\x00\x00\x01'
+                      if topic in ('/ball_3/odom', '/ball_3/cmd_vel') and log_time == 60_000_000
+                      else data)
+    assert resim.main([str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and 'undecodable' in err
+    odom_only = tmp_path / 'odom.mcap'
+    # the lowest bit of the pose's x (after the stamp and the two frame names)
+    rewrite_recording(path, odom_only, data=lambda topic, log_time, data:
+                      data[:52] + bytes([data[52] ^ 1]) + data[53:]
+                      if topic == '/ball_3/odom' and log_time == 100_000_000 else data)
+    assert resim.main([str(odom_only)]) == 1
+    assert 'first difference: segment 0 step 5 odom of ball_3' in capsys.readouterr().out
+    assert to_rrd.main([str(bad), '-o', str(tmp_path / 'bad.rrd')]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and 'Traceback' not in err

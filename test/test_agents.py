@@ -373,3 +373,18 @@ def test_impulses_encoded_together_are_the_bytes_of_one_at_a_time():
     for stamp in (0, 16_666_667, -1_700_000_000, 2**31 * 10**9 - 1):
         assert encode_impulses(stamp, names, xs, ys) == [
             encode_vector3_stamped(stamp, n, x, y, 0.0) for n, x, y in zip(names, xs, ys)]
+
+
+def test_commands_given_in_code_are_recorded_as_their_messages():
+    from geometry_msgs.msg import Twist, TwistStamped
+    from rclpy.serialization import deserialize_message
+    for stamped in (False, True):
+        simulation = one_agent(**{'agent.cmd_vel_stamped': stamped})
+        simulation.command('ball_0', 0.5, -0.25, 1.5)
+        record, _ = simulation.step()
+        message = deserialize_message(record.commands[0].cdr,
+                                      TwistStamped if stamped else Twist)
+        twist = message.twist if stamped else message
+        assert (twist.linear.x, twist.linear.y, twist.angular.z) == (0.5, -0.25, 1.5)
+        if stamped:
+            assert message.header.stamp.nanosec == simulation.dt_ns

@@ -43,3 +43,24 @@ def test_a_world_without_agents_draws_no_arrows(tmp_path):
     simulation.close()
     _, content, _, _ = read(path)
     assert not any(entity == f'/{AGENTS}' for entity, _ in content)
+
+
+def test_a_recording_converted_to_rrd_draws_its_agents(tmp_path, capsys):
+    from ball_world.recording.mcap_writer import McapSink
+    from ball_world.tools import to_rrd
+    mcap = tmp_path / 'run.mcap'
+    simulation = Simulation({'random.count': 6, 'agents': ['ball_2', 'ball_4'],
+                             'agent.cmd_timeout': 0.0}, sinks=[McapSink(mcap)])
+    simulation.command('ball_4', 0.3, 0.0, -2.0)
+    records = [simulation.last_record] + [simulation.step()[0] for _ in range(10)]
+    simulation.close()
+    assert to_rrd.main([str(mcap), '-o', str(tmp_path / 'run.rrd')]) == 0
+    _, content, _, _ = read(tmp_path / 'run.rrd')
+    vectors = content[(f'/{AGENTS}', 'Arrows2D:vectors')]
+    labels = content[(f'/{AGENTS}', 'Arrows2D:labels')]
+    assert shown_at(labels, 10) == ['ball_2', 'ball_4']
+    yaw = float(records[10].agents.yaws[1])
+    radius = float(records[10].radii[4])
+    assert shown_at(vectors, 10)[1] == pytest.approx(
+        [HEADING_RADII * radius * math.cos(yaw), HEADING_RADII * radius * math.sin(yaw)],
+        rel=1e-6)

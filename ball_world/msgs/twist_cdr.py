@@ -6,7 +6,7 @@ than rclpy building a message object, and the bytes are what the recording keeps
 """
 import struct
 
-from ball_world.msgs.cdr import _HEADER_LEN, _Reader, ENCAPSULATION
+from ball_world.msgs.cdr import _HEADER_LEN, _header_payload, _pad, _Reader, ENCAPSULATION
 
 _TWIST = struct.Struct('<6d')
 
@@ -24,3 +24,15 @@ def decode_twist_stamped(data):
     stamp_ns = reader.stamp_ns()
     frame_id = reader.string()
     return stamp_ns, frame_id, tuple(float(v) for v in reader.f64(6))
+
+
+def encode_twist(vx, vy, wz):
+    """Twist bytes of a planar command (linear x, y; angular z), for commands given in code."""
+    return ENCAPSULATION + _TWIST.pack(vx, vy, 0.0, 0.0, 0.0, wz)
+
+
+def encode_twist_stamped(stamp_ns, frame_id, vx, vy, wz):
+    """TwistStamped bytes of a planar command."""
+    header = _header_payload(stamp_ns, frame_id)
+    return (ENCAPSULATION + header + b'\x00' * _pad(len(header), 8)
+            + _TWIST.pack(vx, vy, 0.0, 0.0, 0.0, wz))

@@ -14,7 +14,12 @@ Per step, with `<ns>` the node's namespace (that of `balls`):
 """
 import re
 
+import numpy as np
+
+from ball_world.core.orientation import quaternion_to_yaw
+from ball_world.msgs.agent_cdr import decode_odometry
 from ball_world.msgs.twist_cdr import decode_twist, decode_twist_stamped
+from ball_world.step_record import AgentFrame
 
 COMMAND = 'cmd_vel'
 ODOM = 'odom'
@@ -79,3 +84,25 @@ def decode_command(data, type_name):
     else:
         values = decode_twist(data)
     return values[0], values[1], values[5]
+
+
+def recorded_frame(odom, names):
+    """The AgentFrame a recorded step's odom gives ({agent: bytes} in recorded order), or None.
+
+    For the sinks fed from a recording (ball_world_to_rrd draws the headings): each agent's
+    row is found by name among the step's balls `names`; ValueError for odom that does not
+    decode or whose orientation is not a rotation about z (an untrusted file).
+    """
+    if not odom:
+        return None
+    row_of = {name: row for row, name in enumerate(names)}
+    agents = [name for name in odom if name in row_of]
+    decoded = [decode_odometry(odom[name]) for name in agents]
+    yaws = quaternion_to_yaw(np.array([d.pose[3:7] for d in decoded]).reshape(-1, 4))
+    twists = np.array([(d.twist[0], d.twist[1], d.twist[5]) for d in decoded]).reshape(-1, 3)
+    return AgentFrame(names=tuple(agents),
+                      indices=np.array([row_of[name] for name in agents], dtype=np.int64),
+                      yaws=np.asarray(yaws, dtype=np.float64).reshape(-1), twists=twists,
+                      odom_frames=tuple(d.frame_id for d in decoded),
+                      base_frames=tuple(d.child_frame_id for d in decoded),
+                      odom_cdr=tuple(odom[name] for name in agents), tf_cdr=b'')

@@ -1135,6 +1135,10 @@ def step_record(step, impulses, roster):
     impulses: what roster.follow(step) returned; the roster then holds the step's balls.
     """
     rtf = step.stat('real_time_factor')
+    try:
+        agents = agent_topics.recorded_frame(step.odom, roster.names)
+    except ValueError as error:
+        raise RecordingError(f'step {step.step}: undecodable odom: {error}') from None
     return StepRecord(
         step=step.step, stamp_ns=step.stamp_ns, log_time_ns=step.log_time_ns,
         positions=step.positions.copy(), velocities=step.state[:, 2:4].copy(),
@@ -1144,7 +1148,7 @@ def step_record(step, impulses, roster):
         balls_cdr=step.balls_cdr, state_cdr=step.state_cdr, stats_cdr=step.stats_cdr,
         impulses=impulses, real_time_factor=None if math.isnan(rtf) else rtf,
         edits=step.edits, names=roster.names, radii=roster.radii, masses=roster.masses,
-        world_changed=roster.take_changed())
+        world_changed=roster.take_changed(), agents=agents)
 
 
 def _ignore(events):
