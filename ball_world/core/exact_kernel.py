@@ -350,10 +350,14 @@ def _schedule(i, balls, hit_time, exit_time, event_time):
         balls[i, KIND] = NOTHING
 
 
-@compile_kernel
+@compile_inline
 def _predict(state, i, now, x, v, radii, starts, ends, directions, lengths):
     """Ball i's earliest events from time `now` on, over every grid's cells within reach of its
-    cell (in its own grid: the 3 x 3 block), and its own cell's walls (not the tree)."""
+    cell (in its own grid: the 3 x 3 block), and its own cell's walls (not the tree).
+
+    Inlined, as _cross is: a call that passes the state reference-counts each of its arrays,
+    which cost the gases about a tenth of their speed once the loop over grids was added.
+    """
     balls = state.balls
     px = x[i, 0] + v[i, 0] * (now - state.clock[i])
     py = x[i, 1] + v[i, 1] * (now - state.clock[i])
@@ -381,7 +385,7 @@ def _predict(state, i, now, x, v, radii, starts, ends, directions, lengths):
     _schedule(i, balls, state.hit_time, state.exit_time, state.event_time)
 
 
-@compile_kernel
+@compile_inline
 def _cross(state, i, now, x, v, radii, starts, ends, directions, lengths):
     """Move ball i into the next cell of its grid and predict against what is new there only.
 
