@@ -659,10 +659,14 @@ def _classes(radii, ratio):
 def _grids(x, radii, classes, count):
     """Each class's grid: (unit, grids) of State, GLOBALS not yet filled in.
 
-    A class's cells are as _cell_width makes them for its own balls and largest radius,
-    rounded up to the smallest class's width (the unit) times a power of two, so the cells
-    of all grids have edges on the unit grid and reaches can be counted in whole units.
-    With one class this is the single grid of equal radii, cells exactly _cell_width's.
+    The smallest class's cells are as _cell_width makes them for its balls and largest
+    radius; they are the unit. Every other class's cells are a little over its largest
+    diameter, rounded up to the unit times a power of two, so the cells of all grids have
+    edges on the unit grid and reaches can be counted in whole units. Only the smallest class
+    widens its cells: a larger class's cells set how many small cells its balls search on
+    every prediction, so a few far-apart large balls with cells as wide as their area per
+    ball would each search a whole grid of small ones. With one class this is the single
+    grid of equal radii, cells exactly _cell_width's.
     """
     largest = np.zeros(count)
     members = np.zeros(count, dtype=np.int64)
@@ -676,7 +680,8 @@ def _grids(x, radii, classes, count):
         own = x if count == 1 else x[np.flatnonzero(classes == c)]
         extent = _extent(own)
         extents[c, 0], extents[c, 1], extents[c, 2], extents[c, 3] = extent
-        wanted[c] = _cell_width(own, extent, 2.0 * largest[c] * CELL_MARGIN)
+        narrowest = 2.0 * largest[c] * CELL_MARGIN
+        wanted[c] = _cell_width(own, extent, narrowest) if c == 0 else narrowest
     unit = wanted[0]
     grids = np.zeros((count + 1, REACH + count), dtype=np.int64)
     for c in range(count):
