@@ -7,26 +7,27 @@ balls involved (each ball keeps its own clock) and predicts again for them; ever
 prediction that named one of them as partner is recognised as stale by the partner's
 collision counter when it comes up, and is then predicted again.
 
-Balls whose radii lie within a factor CLASS_RATIO of each other form a radius class, and each
-class has its own grid (one grid sized by the largest ball would put thousands of small balls
-in one cell when radii differ 100-fold). A class's cells are squares at least a little wider
-than its largest diameter, so touching balls of the class are always in neighbouring cells,
-and as wide as the class's area per ball where its balls are spread evenly (see _cell_width:
-in a dilute gas most events would otherwise be cell crossings, which only keep the books);
-their width is the smallest class's times a power of two, so all cell edges lie on one grid
-of units. A ball lives in its own class's grid, looks for partners in the cells of every
-grid within reach of its cell (_span: in its own grid, its 3 x 3 block) and for walls in
-its own cell. When it enters a new cell it only looks at the strip of cells new to its reach
-in each grid and the new cell's walls, keeping its stored impact for the rest. Nothing is
-missed: for any two balls in cells within reach of each other (a symmetric relation), their
-next impact on their current paths is no earlier than the stored impact of one of them (the
-one that changed course, or came into reach, last), and balls further apart cannot touch
-before one of them changes cell. With radii within CLASS_RATIO there is one grid, cell for
-cell the single grid exact mode had before classes. Buckets of cells form a torus laid over
-the plane (one torus per grid), so the world needs no bounds (distant cells sharing a bucket
-only add candidates, and a predicted impact is exact whatever the cells). Each wall is
-listed in the buckets of every cell of each grid where a ball of its class could touch it;
-a wall too long for that is checked by every ball of the class.
+Balls whose radii lie within a factor CLASS_RATIO of each other form a radius class, and
+each class has its own grid (one grid sized by the largest ball would put thousands of small
+balls in one cell when radii differ 100-fold). A class's cells are squares at least a little
+wider than its largest diameter, so touching balls of the class are always in neighbouring
+cells; the smallest class's are as wide as its area per ball where its balls are spread
+evenly (see _cell_width: in a dilute gas most events would otherwise be cell crossings,
+which only keep the books); the other classes' cells are the smallest class's times a power
+of two, so all cell edges lie on one grid of units (see _grids). A ball lives in its own
+class's grid, looks for partners in the cells of every grid within reach of its cell (_span:
+in its own grid, its 3 x 3 block) and for walls in its own cell. When it enters a new cell
+it only looks at the strip of cells new to its reach in each grid and the new cell's walls,
+keeping its stored impact for the rest. Nothing is missed: for any two balls in cells within
+reach of each other (a symmetric relation), their next impact on their current paths is no
+earlier than the stored impact of one of them (the one that changed course, or came into
+reach, last), and balls further apart cannot touch before one of them changes cell. With
+radii within CLASS_RATIO there is one grid, cell for cell the single grid exact mode had
+before classes. Buckets of cells form a torus laid over the plane (one torus per grid), so
+the world needs no bounds (distant cells sharing a bucket only add candidates, and a
+predicted impact is exact whatever the cells). Each wall is listed in the buckets of every
+cell of each grid where a ball of its class could touch it; a wall too long for that is
+checked by every ball of the class.
 
 Robustness near contact (why rounding cannot creep into overlap or loop):
 - A pair or a wall collides only while approaching, and a pair that already overlaps and
