@@ -573,3 +573,20 @@ def test_radii_100_apart_keep_energy_never_overlap_and_match_the_single_grid(kin
     assert per_ball.mean() > 1.0  # collisions per ball
     np.testing.assert_array_equal(per_ball, single_grid_run(twin, dt, steps))
     np.testing.assert_allclose(world.positions, twin.positions, rtol=0, atol=1e-9)
+
+
+def test_only_the_smallest_class_widens_its_cells():
+    """A dilute even gas of small balls gets cells of its area per ball (the unit); two large
+    balls far apart keep cells within twice their diameter (rounded up to the unit times a
+    power of two), where widening would make each of their predictions search every small
+    cell between them."""
+    from ball_world.core.exact_kernel import _classes, _grids, CELL_MARGIN, CLASS_RATIO, SHIFT
+    small = Gas(2000, 0.05, 1.0, 0.01).world('numba').positions
+    x = np.vstack((small, [[-500.0, -500.0], [500.0, 500.0]]))
+    radii = np.concatenate((np.full(len(small), 0.01), [1.0, 1.0]))
+    classes, count = _classes(radii, CLASS_RATIO)
+    assert count == 2 and classes[-2:].tolist() == [1, 1]
+    unit, grids = _grids(x, radii, classes, count)
+    assert unit > 4.0 * 0.01 * CELL_MARGIN  # the small gas's area per ball, wider than 2 r
+    large = unit * 2 ** grids[1, SHIFT]
+    assert 2.0 * CELL_MARGIN <= large < 2.0 * 2.0 * CELL_MARGIN

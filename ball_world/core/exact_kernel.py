@@ -7,26 +7,27 @@ balls involved (each ball keeps its own clock) and predicts again for them; ever
 prediction that named one of them as partner is recognised as stale by the partner's
 collision counter when it comes up, and is then predicted again.
 
-Balls whose radii lie within a factor CLASS_RATIO of each other form a radius class, and each
-class has its own grid (one grid sized by the largest ball would put thousands of small balls
-in one cell when radii differ 100-fold). A class's cells are squares at least a little wider
-than its largest diameter, so touching balls of the class are always in neighbouring cells,
-and as wide as the class's area per ball where its balls are spread evenly (see _cell_width:
-in a dilute gas most events would otherwise be cell crossings, which only keep the books);
-their width is the smallest class's times a power of two, so all cell edges lie on one grid
-of units. A ball lives in its own class's grid, looks for partners in the cells of every
-grid within reach of its cell (_span: in its own grid, its 3 x 3 block) and for walls in
-its own cell. When it enters a new cell it only looks at the strip of cells new to its reach
-in each grid and the new cell's walls, keeping its stored impact for the rest. Nothing is
-missed: for any two balls in cells within reach of each other (a symmetric relation), their
-next impact on their current paths is no earlier than the stored impact of one of them (the
-one that changed course, or came into reach, last), and balls further apart cannot touch
-before one of them changes cell. With radii within CLASS_RATIO there is one grid, cell for
-cell the single grid exact mode had before classes. Buckets of cells form a torus laid over
-the plane (one torus per grid), so the world needs no bounds (distant cells sharing a bucket
-only add candidates, and a predicted impact is exact whatever the cells). Each wall is
-listed in the buckets of every cell of each grid where a ball of its class could touch it;
-a wall too long for that is checked by every ball of the class.
+Balls whose radii lie within a factor CLASS_RATIO of each other form a radius class, and
+each class has its own grid (one grid sized by the largest ball would put thousands of small
+balls in one cell when radii differ 100-fold). A class's cells are squares at least a little
+wider than its largest diameter, so touching balls of the class are always in neighbouring
+cells; the smallest class's are as wide as its area per ball where its balls are spread
+evenly (see _cell_width: in a dilute gas most events would otherwise be cell crossings,
+which only keep the books); the other classes' cells are the smallest class's times a power
+of two, so all cell edges lie on one grid of units (see _grids). A ball lives in its own
+class's grid, looks for partners in the cells of every grid within reach of its cell (_span:
+in its own grid, its 3 x 3 block) and for walls in its own cell. When it enters a new cell
+it only looks at the strip of cells new to its reach in each grid and the new cell's walls,
+keeping its stored impact for the rest. Nothing is missed: for any two balls in cells within
+reach of each other (a symmetric relation), their next impact on their current paths is no
+earlier than the stored impact of one of them (the one that changed course, or came into
+reach, last), and balls further apart cannot touch before one of them changes cell. With
+radii within CLASS_RATIO there is one grid, cell for cell the single grid exact mode had
+before classes. Buckets of cells form a torus laid over the plane (one torus per grid), so
+the world needs no bounds (distant cells sharing a bucket only add candidates, and a
+predicted impact is exact whatever the cells). Each wall is listed in the buckets of every
+cell of each grid where a ball of its class could touch it; a wall too long for that is
+checked by every ball of the class.
 
 Robustness near contact (why rounding cannot creep into overlap or loop):
 - A pair or a wall collides only while approaching, and a pair that already overlaps and
@@ -659,10 +660,14 @@ def _classes(radii, ratio):
 def _grids(x, radii, classes, count):
     """Each class's grid: (unit, grids) of State, GLOBALS not yet filled in.
 
-    A class's cells are as _cell_width makes them for its own balls and largest radius,
-    rounded up to the smallest class's width (the unit) times a power of two, so the cells
-    of all grids have edges on the unit grid and reaches can be counted in whole units.
-    With one class this is the single grid of equal radii, cells exactly _cell_width's.
+    The smallest class's cells are as _cell_width makes them for its balls and largest
+    radius; they are the unit. Every other class's cells are a little over its largest
+    diameter, rounded up to the unit times a power of two, so the cells of all grids have
+    edges on the unit grid and reaches can be counted in whole units. Only the smallest class
+    widens its cells: a larger class's cells set how many small cells its balls search on
+    every prediction, so a few far-apart large balls with cells as wide as their area per
+    ball would each search a whole grid of small ones. With one class this is the single
+    grid of equal radii, cells exactly _cell_width's.
     """
     largest = np.zeros(count)
     members = np.zeros(count, dtype=np.int64)
@@ -676,7 +681,8 @@ def _grids(x, radii, classes, count):
         own = x if count == 1 else x[np.flatnonzero(classes == c)]
         extent = _extent(own)
         extents[c, 0], extents[c, 1], extents[c, 2], extents[c, 3] = extent
-        wanted[c] = _cell_width(own, extent, 2.0 * largest[c] * CELL_MARGIN)
+        narrowest = 2.0 * largest[c] * CELL_MARGIN
+        wanted[c] = _cell_width(own, extent, narrowest) if c == 0 else narrowest
     unit = wanted[0]
     grids = np.zeros((count + 1, REACH + count), dtype=np.int64)
     for c in range(count):
