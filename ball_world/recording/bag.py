@@ -55,11 +55,6 @@ def numbered_files(directory):
     return sorted(found)
 
 
-def is_bag(path):
-    """Whether a recording path is a directory (a bag) rather than one file."""
-    return os.path.isdir(path)
-
-
 class DirectoryClaim:
     """A bag directory created (or emptied of its bag files) for recording, locked."""
 
