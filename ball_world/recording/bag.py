@@ -124,9 +124,9 @@ def claim_directory(path, overwrite=False, hint=''):
     if not created:
         for _, name in numbered_files(path):
             os.unlink(os.path.join(path, name))
-        for name in (METADATA_FILE,):
-            if os.path.lexists(os.path.join(path, name)):
-                os.unlink(os.path.join(path, name))
+        metadata = os.path.join(path, METADATA_FILE)
+        if os.path.lexists(metadata):
+            os.unlink(metadata)
     return DirectoryClaim(path, fd, created)
 
 
