@@ -281,6 +281,17 @@ def crafted_resume(state):
     return change
 
 
+def assert_resume_state_refused(crafted, words, capsys):
+    """resim and info each refuse the file `crafted` (a crafted resume state) with exit 2 and
+    one line naming the file, the segment and the state, with `words` in it."""
+    for tool, prog in ((resim, 'ball_world_resim'), (info, 'ball_world_info')):
+        assert tool.main([str(crafted)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(
+            f"{prog}: {crafted}: segment 0: 'ball_world' metadata: the state it resumes "
+            'from: ') and words in err[0], err
+
+
 def nan_positions(document):
     count = len(document['names'])
     data = np.full((count, 2), np.nan).astype('<f8').tobytes()
@@ -301,12 +312,7 @@ def test_a_crafted_resume_state_is_refused_in_one_line(by_time, tmp_path, capsys
     directory, _ = by_time
     crafted = rewrite_recording(directory / 'run_1.mcap', tmp_path / 'crafted.mcap',
                                 metadata=crafted_resume(state))
-    for tool, prog in ((resim, 'ball_world_resim'), (info, 'ball_world_info')):
-        assert tool.main([str(crafted)]) == 2
-        err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and err[0].startswith(
-            f"{prog}: {crafted}: segment 0: 'ball_world' metadata: the state it resumes "
-            'from: ') and words in err[0], err
+    assert_resume_state_refused(crafted, words, capsys)
 
 
 def test_metadata_yaml_naming_a_path_outside_is_refused(tmp_path, capsys):

@@ -20,7 +20,7 @@ from rclpy.serialization import serialize_message
 from test_agents_node import twist, WORLD as AGENT_WORLD
 from test_closing_edits import _node_edits_then_stops
 from test_edit_recordings import FIRST, SECOND, spawn
-from test_split_recordings import crafted_resume, NODE_TIMEOUT
+from test_split_recordings import assert_resume_state_refused, crafted_resume, NODE_TIMEOUT
 import yaml
 
 from ball_world.core.agents import Command
@@ -219,12 +219,7 @@ def test_a_crafted_agent_resume_state_is_refused_in_one_line(tmp_path, capsys, s
     names = agents_run(directory, steps=60)
     crafted = rewrite_recording(directory / names[2], tmp_path / 'crafted.mcap',
                                 metadata=crafted_resume(state))
-    for tool, prog in ((resim, 'ball_world_resim'), (info, 'ball_world_info')):
-        assert tool.main([str(crafted)]) == 2
-        err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and err[0].startswith(
-            f"{prog}: {crafted}: segment 0: 'ball_world' metadata: the state it resumes "
-            'from: ') and words in err[0], err
+    assert_resume_state_refused(crafted, words, capsys)
 
 
 def test_max_files_without_a_split_is_said_at_start(tmp_path):

@@ -123,6 +123,17 @@ def _names(names, what: str) -> tuple:
     return names
 
 
+def _frame_pairs(frame_ids, child_frame_ids) -> tuple:
+    """Validated frame_ids and child_frame_ids as tuples, one pair per agent (Odometry and
+    TFMessage name each agent's frames alike)."""
+    frame_ids = _names(frame_ids, 'frame_ids')
+    child_frame_ids = _names(child_frame_ids, 'child_frame_ids')
+    if len(child_frame_ids) != len(frame_ids):
+        raise ValueError(f'{len(frame_ids)} frame_ids but {len(child_frame_ids)} '
+                         'child_frame_ids')
+    return frame_ids, child_frame_ids
+
+
 def _planar(positions, yaws, twists, count: int) -> tuple:
     """Validated (N, 2) positions, (N,) yaws and (N, 3) twists for `count` agents."""
     positions = np.asarray(positions, dtype=np.float64)
@@ -164,11 +175,8 @@ def encode_odometry(stamp_ns: int, frame_ids, child_frame_ids, positions, yaws,
     in the child frame (REP 105: odometry's twist is in the body frame). Covariances are zeros
     (see the module's docstring).
     """
-    frame_ids = _names(frame_ids, 'frame_ids')
-    child_frame_ids = _names(child_frame_ids, 'child_frame_ids')
+    frame_ids, child_frame_ids = _frame_pairs(frame_ids, child_frame_ids)
     count = len(frame_ids)
-    if len(child_frame_ids) != count:
-        raise ValueError(f'{count} frame_ids but {len(child_frame_ids)} child_frame_ids')
     positions, yaws, twists = _planar(positions, yaws, twists, count)
     values = np.zeros((count, _ODOM_FLOATS))
     values[:, 0:2] = positions
@@ -199,11 +207,8 @@ def encode_tf_message(stamp_ns: int, frame_ids, child_frame_ids, positions, yaws
     robot_state_publisher sends a whole robot's frames; /tf_static's identities are the same
     call with zero positions and yaws.
     """
-    frame_ids = _names(frame_ids, 'frame_ids')
-    child_frame_ids = _names(child_frame_ids, 'child_frame_ids')
+    frame_ids, child_frame_ids = _frame_pairs(frame_ids, child_frame_ids)
     count = len(frame_ids)
-    if len(child_frame_ids) != count:
-        raise ValueError(f'{count} frame_ids but {len(child_frame_ids)} child_frame_ids')
     positions, yaws, _ = _planar(positions, yaws, None, count)
     values = np.zeros((count, _TRANSFORM_FLOATS))
     values[:, 0:2] = positions

@@ -55,11 +55,6 @@ def numbered_files(directory):
     return sorted(found)
 
 
-def is_bag(path):
-    """Whether a recording path is a directory (a bag) rather than one file."""
-    return os.path.isdir(path)
-
-
 class DirectoryClaim:
     """A bag directory created (or emptied of its bag files) for recording, locked."""
 
@@ -83,6 +78,22 @@ class DirectoryClaim:
                 os.rmdir(self.path)
             except OSError:
                 pass  # it holds something: not ours to remove
+
+
+def lock_directory(path):
+    """Open the directory `path` and lock it (flock) for this process; return the descriptor.
+
+    One lock for the recorder and for repair in place, so each refuses the other. Raises
+    FileRefused naming the path when another process holds the lock.
+    """
+    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise FileRefused(errno.EBUSY, 'is being recorded by another process (it is locked)',
+                          path) from None
+    return fd
 
 
 def claim_directory(path, overwrite=False, hint=''):
@@ -109,19 +120,13 @@ def claim_directory(path, overwrite=False, hint=''):
             raise FileRefused(errno.EINVAL, 'is not a directory or a regular file', path)
     except OSError as error:
         raise FileRefused(error.errno, error.strerror, path) from None
-    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
-        raise FileRefused(errno.EBUSY, 'is being recorded by another process (it is locked)',
-                          path) from None
+    fd = lock_directory(path)
     if not created:
         for _, name in numbered_files(path):
             os.unlink(os.path.join(path, name))
-        for name in (METADATA_FILE,):
-            if os.path.lexists(os.path.join(path, name)):
-                os.unlink(os.path.join(path, name))
+        metadata = os.path.join(path, METADATA_FILE)
+        if os.path.lexists(metadata):
+            os.unlink(metadata)
     return DirectoryClaim(path, fd, created)
 
 

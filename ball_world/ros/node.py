@@ -100,8 +100,9 @@ def open_sinks(values):
     from ball_world.recording.files import claim_output, ClaimedSink
     from ball_world.recording.split_writer import open_split_sink, splits, unused_max_files
     logger = rclpy.logging.get_logger('ball_world')
-    if unused_max_files(values):
-        logger.warning(unused_max_files(values))
+    unused = unused_max_files(values)
+    if unused:
+        logger.warning(unused)
     claims = []
     sinks = []
     name = None

@@ -19,3 +19,10 @@ def print_report(text):
     except BrokenPipeError:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return False
+
+
+def usage_exit(parser, message):
+    """Report a command-line mistake as argparse does (one line naming the program), then
+    exit 2; the tools' parsers route parser.error here to add the pointer to --help."""
+    print(f'{parser.prog}: {message} (see --help)', file=sys.stderr)
+    sys.exit(2)

@@ -45,7 +45,7 @@ from simulation_interfaces.srv import (DeleteEntity, GetEntitiesStates, GetEntit
                                        StepSimulation)
 from std_msgs.msg import String
 
-from ball_world.tools import print_report
+from ball_world.tools import print_report, usage_exit
 
 PROG = 'ball_world_cli'
 #: The world node whose services are called, relative to the namespace.
@@ -86,7 +86,7 @@ class _Parser(argparse.ArgumentParser):
     """argparse, with every usage error (its subcommands' too) as one line and exit 2."""
 
     def error(self, message):
-        _usage_exit(self, message)
+        usage_exit(self, message)
 
 
 def _parser():
@@ -155,11 +155,6 @@ def _parser():
                                    'the SimulateSteps action, showing progress')
     simulate.add_argument('steps', type=int)
     return parser
-
-
-def _usage_exit(parser, message):
-    print(f'{parser.prog}: {message} (see --help)', file=sys.stderr)
-    sys.exit(2)
 
 
 class Client:
@@ -459,8 +454,8 @@ def run(argv):
         return 2
     args = _parser().parse_args(own)
     if not args.timeout > 0:
-        _usage_exit(_parser(), f'--timeout must be a positive number of seconds, got '
-                               f'{args.timeout:g}')
+        usage_exit(_parser(), f'--timeout must be a positive number of seconds, got '
+                              f'{args.timeout:g}')
     if args.ns is not None and not args.ns.startswith('/'):
         args.ns = '/' + args.ns
     for option, value, validate in (('--ns', args.ns, validate_namespace),
@@ -470,7 +465,7 @@ def run(argv):
                 validate(value)
         except NameValidationException as error:
             reason = str(error).splitlines()[0].rstrip(':')
-            _usage_exit(_parser(), f'{option} {value!r}: {reason}')
+            usage_exit(_parser(), f'{option} {value!r}: {reason}')
     client = None
     try:
         client = Client(args, argv)

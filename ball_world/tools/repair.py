@@ -194,37 +194,40 @@ def main(argv=None):
     if os.path.isdir(args.input):
         return _main_bag(args)
     target = args.output or default_target(args.input)
-    rrd = args.input.endswith('.rrd')
-    try:
-        if rrd:
-            report = repair_rrd(args.input, target, args.force)
-        else:
-            report = repair(args.input, target, args.force)
-    except RecordingError as error:
-        print(f'{PROG}: {args.input}: {error}', file=sys.stderr)
-        return 2
-    except OSError as error:
-        print(f'{PROG}: {error}', file=sys.stderr)
-        return 2
-    print_report((describe_rrd if rrd else describe)(report, args.input, target))
-    return 0
+    if args.input.endswith('.rrd'):
+        return _reported(args, lambda: repair_rrd(args.input, target, args.force),
+                         lambda report: describe_rrd(report, args.input, target))
+    return _reported(args, lambda: repair(args.input, target, args.force),
+                     lambda report: describe(report, args.input, target))
 
 
 def _main_bag(args):
     """A bag directory of split files: repaired in place (tools.repair_bag)."""
     from ball_world.tools.repair_bag import check_bag, repair_bag
-    try:
+
+    def work():
         if args.output:
             check_bag(args.input)
             raise RecordingError('a bag directory is repaired in place; -o is for one file')
-        lines = repair_bag(args.input)
+        return repair_bag(args.input)
+    return _reported(args, work, '\n'.join)
+
+
+def _reported(args, work, text):
+    """Do `work`, print `text` of its result; return the exit code (2: one line on stderr).
+
+    One place for how a file and a bag directory report failure: an unreadable recording
+    named with its path, an OS error (which names its own path) as it is.
+    """
+    try:
+        report = work()
     except RecordingError as error:
         print(f'{PROG}: {args.input}: {error}', file=sys.stderr)
         return 2
     except OSError as error:
         print(f'{PROG}: {error}', file=sys.stderr)
         return 2
-    print_report('\n'.join(lines))
+    print_report(text(report))
     return 0
 
 

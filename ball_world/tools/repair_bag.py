@@ -8,28 +8,16 @@ record at all holds nothing to lose and is removed; then metadata.yaml is writte
 from the files present, as the recorder writes it. A directory being recorded (locked) is
 refused. Files metadata.yaml listed that are gone are named in the report, not invented.
 """
-import errno
-import fcntl
 import os
 
 from mcap.records import Message
 
-from ball_world.recording.bag import (listed_files, METADATA_FILE, missing_metadata,
-                                      numbered_files, summarize, write_metadata)
-from ball_world.recording.files import FileRefused, open_regular
+from ball_world.recording.bag import (listed_files, lock_directory, METADATA_FILE,
+                                      missing_metadata, numbered_files, summarize,
+                                      write_metadata)
+from ball_world.recording.files import open_regular
 from ball_world.recording.mcap_reader import load_untrusted, Recording, RecordingError, Scan
 from ball_world.tools import repair as repair_file
-
-
-def _lock(directory):
-    fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
-        raise FileRefused(errno.EBUSY, 'is being recorded by another process (it is locked)',
-                          directory) from None
-    return fd
 
 
 def _holds_messages(path):
@@ -63,7 +51,7 @@ def repair_bag(directory, stream=None):
     OSError (FileRefused: the directory is being recorded).
     """
     check_bag(directory)
-    fd = _lock(directory)
+    fd = lock_directory(directory)
     try:
         lines = []
         listed = _previously_listed(directory)

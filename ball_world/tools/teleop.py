@@ -25,6 +25,7 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
 from ball_world.msgs.cdr import decode_pose_array
+from ball_world.tools import usage_exit
 from ball_world.tools.keyboard import KeyDecoder, Quit, RawKeys, Screen
 from ball_world.tools.teleop_drive import Drive
 
@@ -284,13 +285,8 @@ ROS parameters (after --ros-args):
 
 example:
   ros2 run ball_world {PROG} --ros-args -p ball:=ball_3""")
-    parser.error = lambda message: _usage_exit(parser, message)
+    parser.error = lambda message: usage_exit(parser, message)
     return parser
-
-
-def _usage_exit(parser, message):
-    print(f'{parser.prog}: {message} (see --help)', file=sys.stderr)
-    sys.exit(2)
 
 
 def run(argv):
