@@ -192,9 +192,13 @@ class Agents:
     def restore(self, name, yaw, command=None):
         """Make `name` an agent with heading yaw and its last Command, as they were at a
         step of a recorded run (a split file resumes there): both kept bit for bit."""
-        self._yaw[name] = float(yaw)
+        if name not in self._row:
+            self.add(name)
+        row = self._row[name]
+        self._yaws[row] = float(yaw)  # as recorded: wrapping it again could change a bit
         if command is not None:
-            self._command[name] = command
+            self._commands[row] = (command.vx, command.vy, command.wz)
+            self._since[row] = int(command.since_ns)
 
     def set_yaw(self, name, yaw):
         self._yaws[self._row[name]] = wrapped(float(yaw))
