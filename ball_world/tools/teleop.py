@@ -260,6 +260,9 @@ class Teleop(Node):
         position = self.selection.position()
         if position is None:
             return f'ball     {name}: not in the world'
+        if self.positions is None or position >= len(self.positions):
+            # entity_names (latched) can arrive before the balls they name
+            return f'ball     {name}: waiting for {self.balls_topic}'
         x, y = self.positions[position]
         agent = ', an agent: arrows drive it' if self.drive.ready(name) else ''
         return (f'ball     {name} ({position + 1} of {len(self.selection.names)}) '
