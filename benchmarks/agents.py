@@ -15,17 +15,20 @@ import sys
 import tempfile
 import time
 
-from benchmarks.bench import box_side, RADIUS
-
 from ball_world.recording.mcap_writer import McapSink
 from ball_world.simulation import Simulation
 
 RATE_HZ = 100.0
 COMMAND_EVERY = 10
+NOTE = ('Median ms of Simulation.step (the drive rule, its impulses, the physics, odom, /tf '
+        'and scan bytes) plus the MCAP write of the step, the rows interleaved step by step in '
+        'one process; every agent commanded anew every 10 steps (`benchmarks/agents.py`). '
+        'Publishing is not included: the node publishes the same bytes raw.')
 
 
 def world(n, agents, seed, path):
     """n balls (radii 0.25-0.5 m) in the benchmark's box for n, the first `agents` agents."""
+    from benchmarks.bench import box_side, RADIUS  # bench imports this module for its report
     side = box_side(n)
     simulation = Simulation({'arena': [0.0, 0.0, side, side], 'random.count': n,
                              'random.radius': [RADIUS / 2, RADIUS], 'random.speed': 1.0,

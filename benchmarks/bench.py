@@ -27,7 +27,7 @@ import sys
 import tempfile
 import time
 
-from benchmarks import exact_speed, lidar_speed
+from benchmarks import agents as agents_speed, exact_speed, lidar_speed
 import numpy as np
 
 from ball_world.core import limits
@@ -571,6 +571,8 @@ def markdown(results, args, pymunk, allocator, command):
     if results.get('scan'):
         lines += ['', '## Lidar: one 360-beam scan beside one physics step (median)', '',
                   lidar_speed.HEADER, *results['scan'], '', lidar_speed.NOTE]
+    for section in results.get('agents', []):
+        lines += ['', section, '', agents_speed.NOTE]
     if results['energy']:
         lines += ['', '## Kinetic energy', '',
                   '| engine | N | steps | relative change | balls outside the box |',
@@ -707,6 +709,9 @@ def parse_args(argv):
     parser.add_argument('--scan-n', type=int, nargs='*', default=[1000, 10000, 100000],
                         help='N of the lidar scan beside a step (default 1000 10000 100000; '
                              'none to skip)')
+    parser.add_argument('--agents-n', type=int, nargs='*', default=[10000],
+                        help='N of the per-step cost of 0, 10 and 100 agents (default 10000; '
+                             'none to skip)')
     parser.add_argument('--no-exact', action='store_true',
                         help='do not time exact mode beside seed mode')
     parser.add_argument('--no-extras', action='store_true',
@@ -738,12 +743,16 @@ def parse_args(argv):
     if args.quick:
         args.n, args.repeats, args.seconds, args.warmup_steps = [100, 300], 2, 0.05, 20
         args.energy_n, args.energy_steps, args.cdr_poses, args.budget_n = 300, 500, 1000, [300]
-        args.exact_n, args.scan_n = [300], [300]
+        args.exact_n, args.scan_n, args.agents_n = [300], [300], [300]
     if (any(n < 1 for n in args.n) or args.repeats < 1 or args.seconds <= 0.0
             or args.warmup_steps < 0):
         parser.error('--n values and --repeats must be >= 1, --seconds > 0 and '
                      '--warmup-steps >= 0')
     return args
+
+
+#: Agents timed per step beside the same world without them (issue 21: 100 agents).
+AGENT_COUNTS = (0, 10, 100)
 
 
 def exact_warm_up(args):
@@ -809,6 +818,8 @@ def main(argv=None):
             print(f'exact beside seed: {line}', flush=True)
             results['exact'].append(line)
     results['scan'] = lidar_speed.rows(args.scan_n, args.repeats, args.seed)
+    results['agents'] = [agents_speed.report(n, agents_speed.run(
+        n, AGENT_COUNTS, 20 if args.quick else 200, args.seed)) for n in args.agents_n]
     if not args.no_extras:
         results['cdr'] = bench_cdr(args.cdr_poses, args.repeats)
         with tempfile.TemporaryDirectory() as directory:

@@ -68,6 +68,12 @@ def test_quick_benchmark_writes_table_and_plot(tmp_path, capsys):
              if line.startswith('| ')]
     assert [row[0] for row in scans[1:]] == ['300']
 
+    agents = [_cells(line) for line in _section(text, 'Agents at 300 balls')
+              if line.startswith('| ')]
+    assert [row[0] for row in agents[1:]] == ['0', '10', '100']
+    assert agents[1][2] == '1.00'  # the row without agents is the unit
+    assert all(float(row[1]) > 0.0 for row in agents[1:])
+
     printed = capsys.readouterr().out
     energy = [_cells(line) for line in _section(printed, 'Kinetic energy')
               if line.startswith('| ball_world (')]
