@@ -229,20 +229,11 @@ class Agents:
             active &= (end_ns - since) * 1e-9 < timeout
         return active
 
-    def in_force(self, name, end_ns):
-        """The command acting on `name` in the step ending end_ns, or None (brake)."""
-        if not self._in_force(end_ns)[self._row[name]]:
-            return None
-        return self.last_command(name)
-
     def yaw_rates(self, end_ns):
         """The yaw rate (clamped) each agent turns at in the step ending end_ns, rad/s."""
         limit = self.limits.max_yaw_rate
         return np.where(self._in_force(end_ns),
                         np.clip(self._commands[:, 2], -limit, limit), 0.0)
-
-    def yaw_rate(self, name, end_ns):
-        return float(self.yaw_rates(end_ns)[self._row[name]])
 
     def headings_after(self, dt_ns, end_ns):
         """The headings at the end of the step ending end_ns (their yaw rates applied)."""
