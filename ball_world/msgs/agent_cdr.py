@@ -176,15 +176,21 @@ def encode_odometry(stamp_ns: int, frame_ids, child_frame_ids, positions, yaws,
     (see the module's docstring).
     """
     frame_ids, child_frame_ids = _frame_pairs(frame_ids, child_frame_ids)
-    count = len(frame_ids)
-    positions, yaws, twists = _planar(positions, yaws, twists, count)
-    values = np.zeros((count, _ODOM_FLOATS))
-    values[:, 0:2] = positions
-    values[:, 3:7] = yaw_to_quaternion(yaws)
+    positions, yaws, twists = _planar(positions, yaws, twists, len(frame_ids))
+    values = _planar_poses(positions, yaws, _ODOM_FLOATS)
     twist = values[:, _ODOM_TWIST]
     twist[:, 0:2] = twists[:, 0:2]
     twist[:, 5] = twists[:, 2]
     return _odometry_batch(frame_ids, child_frame_ids).fill(stamp_ns, values)
+
+
+def _planar_poses(positions, yaws, width):
+    """Rows of `width` floats starting with a pose: (x, y, 0) then the heading as a quaternion
+    (x, y, z, w), the rest zero: how Odometry's pose and a Transform both begin."""
+    values = np.zeros((len(positions), width))
+    values[:, 0:2] = positions
+    values[:, 3:7] = yaw_to_quaternion(yaws)
+    return values
 
 
 @functools.lru_cache(maxsize=8)
@@ -208,11 +214,8 @@ def encode_tf_message(stamp_ns: int, frame_ids, child_frame_ids, positions, yaws
     call with zero positions and yaws.
     """
     frame_ids, child_frame_ids = _frame_pairs(frame_ids, child_frame_ids)
-    count = len(frame_ids)
-    positions, yaws, _ = _planar(positions, yaws, None, count)
-    values = np.zeros((count, _TRANSFORM_FLOATS))
-    values[:, 0:2] = positions
-    values[:, 3:7] = yaw_to_quaternion(yaws)
+    positions, yaws, _ = _planar(positions, yaws, None, len(frame_ids))
+    values = _planar_poses(positions, yaws, _TRANSFORM_FLOATS)
     (message,) = _tf_batch(frame_ids, child_frame_ids).fill(stamp_ns, values)
     return message
 
