@@ -218,19 +218,23 @@ def test_hostile_cmd_vel_leaves_the_node_stepping_and_listening(probe, processes
 
 def test_a_recorded_run_with_agents_resimulates_bit_for_bit(probe, processes, tmp_path):
     path = tmp_path / 'agents.mcap'
-    process = processes.start(node_command(*WORLD, 'max_steps:=150', f'record.mcap:={path}'))
+    process = processes.start(node_command(*WORLD, 'max_steps:=400', f'record.mcap:={path}'))
     odom = probe.listen(Odometry, 'ball_1/odom')
     command = probe.node.create_publisher(Twist, 'ball_1/cmd_vel', 10)
     probe.spin_until(lambda: command.get_subscription_count() > 0 and odom,
                      'a reader of cmd_vel', process=process)
-    for _ in range(20):
+
+    def commanded():
+        # Matched on our side need not mean matched on the node's yet: publish until the
+        # odometry shows the command taken.
         command.publish(twist(x=1.0, y=-0.5, wz=2.0))
-        probe.spin_for(0.02)
+        return odom and forward(odom[-1]) > 0.0
+    probe.spin_until(commanded, 'the command to be followed', process=process)
     code, _, err = finish(process)
     assert code == 0, err
     code, out, err = run_tool('ball_world_resim', str(path))
     assert code == 0, out + err
-    assert 'all 151 recorded steps re-simulate bit-identically' in out
+    assert 'all 401 recorded steps re-simulate bit-identically' in out
     code, out, _ = run_tool('ball_world_info', str(path))
     commands = re.search(r'agents: +2 \(ball_0, ball_1\), ([0-9]+) commands', out)
     assert commands and int(commands.group(1)) >= 1, out

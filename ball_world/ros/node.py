@@ -17,7 +17,6 @@ from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 import rclpy.logging
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -42,6 +41,7 @@ from ball_world.ros.calls import SERVICE_QOS
 from ball_world.ros.parameters import converted, current_values, declare_all, ParameterError
 from ball_world.ros.rcl_init import init_quietly
 from ball_world.ros.sim_interfaces import ACTION, SimulationInterfaces
+from ball_world.ros.stopping import stopped_by_signal
 from ball_world.simulation import build, Simulation
 
 #: Seconds between the node's progress lines (achieved rate, real-time factor, impulses).
@@ -667,22 +667,15 @@ def run(args=None):
     node = None
     code = 0
     try:
-        node = BallWorld()
-        while rclpy.ok() and not node.finished:
-            rclpy.spin_once(node, timeout_sec=0.1)
-        if rclpy.ok():  # QUITTING or max_steps: answer the calls and goals still running
-            node.interfaces.finish(lambda: rclpy.spin_once(node, timeout_sec=0.05))
+        with stopped_by_signal():
+            node = BallWorld()
+            while rclpy.ok() and not node.finished:
+                rclpy.spin_once(node, timeout_sec=0.1)
+            if rclpy.ok():  # QUITTING or max_steps: answer the calls and goals still running
+                node.interfaces.finish(lambda: rclpy.spin_once(node, timeout_sec=0.05))
     except StartupError as error:
         print(f'ball_world: {error}', file=sys.stderr)
         code = 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:  # noqa: B902
-        # A signal shut the context down in the middle of a callback (a publish then fails
-        # with RCLError; a message being taken, with a RuntimeError from its conversion):
-        # that is a shutdown too. With the context still valid it is a real error.
-        if rclpy.ok():
-            raise
     finally:
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
         if node is not None:

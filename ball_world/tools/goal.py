@@ -39,12 +39,12 @@ from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64MultiArray, String
 
+from ball_world.ros.stopping import stopped_by_signal
 from ball_world.tools import goal_drive
 from ball_world.tools.goal_drive import AgentGoal
 
@@ -226,22 +226,16 @@ def main(args=None):
         return
     node = None
     try:
-        rclpy.init(args=argv)
-        agent = AGENT_FLAG in remove_ros_args(argv)[1:]
-        node = AgentGoal(GoalController.parameter) if agent else GoalController()
-        # Short waits, as the world node does: a shut-down context ends the loop within
-        # 0.1 s even if the wake-up of a signal that shut it down was missed.
-        while rclpy.ok():
-            rclpy.spin_once(node, timeout_sec=0.1)
+        with stopped_by_signal():
+            rclpy.init(args=argv)
+            agent = AGENT_FLAG in remove_ros_args(argv)[1:]
+            node = AgentGoal(GoalController.parameter) if agent else GoalController()
+            # Short waits, as the world node does: a shut-down context ends the loop within
+            # 0.1 s even if the wake-up of a signal that shut it down was missed.
+            while rclpy.ok():
+                rclpy.spin_once(node, timeout_sec=0.1)
     except ParameterError as error:
         fail(error)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass  # Ctrl-C or SIGTERM: a normal way to stop
-    except Exception:  # noqa: B902
-        # A signal that lands while rclpy takes a message surfaces as whatever that call
-        # raises (a RuntimeError from its conversion): a stop too, once the context is down.
-        if rclpy.ok():
-            raise
     finally:
         if node is not None:
             node.destroy_node()

@@ -32,6 +32,7 @@ from ball_world.msgs.definitions import message_definition
 from ball_world.recording.mcap_reader import load_untrusted, MAX_SMALL_TEXT, RecordingError
 from ball_world.recording.mcap_writer import CLOCK_TOPIC
 from ball_world.recording.recording_set import open_recording
+from ball_world.ros.stopping import stopped_by_signal
 
 DEFAULT_DEPTH = 10
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
@@ -228,29 +229,25 @@ def main(argv=None):
     node = executor = None
     finished = False
     try:
-        node = rclpy.create_node('ball_world_replay')
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        player = Player(node, executor, recording, played_topics(args, recording),
-                        rate=args.rate, start_offset=args.start_offset, clock=args.clock,
-                        prefix=args.remap_prefix.rstrip('/'))
-        if args.wait_for_subscribers:
-            player.wait_for_subscribers()
-        player.sleep_until(time.monotonic() + args.delay)
-        while True:
-            count = player.play_once()
-            if not args.loop or count == 0:
-                break
-        player.wait_for_acks()
-        finished = True
+        with stopped_by_signal():
+            node = rclpy.create_node('ball_world_replay')
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+            player = Player(node, executor, recording, played_topics(args, recording),
+                            rate=args.rate, start_offset=args.start_offset, clock=args.clock,
+                            prefix=args.remap_prefix.rstrip('/'))
+            if args.wait_for_subscribers:
+                player.wait_for_subscribers()
+            player.sleep_until(time.monotonic() + args.delay)
+            while True:
+                count = player.play_once()
+                if not args.loop or count == 0:
+                    break
+            player.wait_for_acks()
+            finished = True
     except RecordingError as error:
         print(f'ball_world_replay: {args.file}: {error}', file=sys.stderr)
         return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass  # Ctrl-C or SIGTERM: a normal way to stop a replay
-    except Exception:  # noqa: B902 - any rcl call fails once a signal shut the context down
-        if rclpy.ok():
-            raise
     finally:
         if executor is not None:
             executor.shutdown(timeout_sec=0)

@@ -536,8 +536,9 @@ def _node_class():
 
 def main(args=None):
     import rclpy
-    from rclpy.executors import ExternalShutdownException
     from rclpy.utilities import remove_ros_args
+
+    from ball_world.ros.stopping import stopped_by_signal
     argv = sys.argv if args is None else args
     try:
         own = remove_ros_args(argv)[1:]
@@ -554,14 +555,13 @@ def main(args=None):
         fail(f'a message package is missing: {error}')
     node = None
     try:
-        rclpy.init(args=argv)
-        node = node_class()
-        while rclpy.ok():
-            rclpy.spin_once(node, timeout_sec=0.1)
+        with stopped_by_signal():
+            rclpy.init(args=argv)
+            node = node_class()
+            while rclpy.ok():
+                rclpy.spin_once(node, timeout_sec=0.1)
     except ParameterError as error:
         fail(error)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass  # Ctrl-C or SIGTERM: a normal way to stop
     finally:
         if node is not None:
             node.destroy_node()
