@@ -151,16 +151,18 @@ class Simulation:
 
         state: recording.resume.ResumeState, the world at the end of step state.step. Walls,
         backend and mode come from the parameters; the balls, their names and the agents
-        (headings, last commands) from the state, so that seed-mode steps from here are bit
-        for bit the recorded run's. (Exact mode carries predictions from step to step that
-        a state cannot hold: see docs/reliability.md.) Meant for a Simulation without
-        sinks.
+        (headings, last commands) from the state, and in exact mode the predictions step
+        state.step handed the next (state.exact), so that the steps from here are bit for
+        bit the recorded run's. Raises ValueError for balls or an exact-mode state the
+        World refuses. Meant for a Simulation without sinks.
         """
         built = build(parameters)
         base = built.world
         world = World(state.positions.copy(), state.velocities.copy(), state.radii.copy(),
                       state.masses.copy(), walls=base.walls.segments, backend=base.backend,
                       mode=base.mode)
+        if state.exact is not None:
+            world.restore_carried_state(state.exact)
         # The agents are the state's (the parameters name those the segment began with).
         self.reset({**built.parameters, 'agents': []},
                    BuiltWorld({**built.parameters, 'agents': []}, world, built.dt_ns))
@@ -554,7 +556,7 @@ class Simulation:
             edits=tuple(self._edits), names=self._names, radii=world.radii,
             masses=world.masses, world_changed=self._world_changed,
             agents=self._agent_frame(positions, velocities, stamp_ns),
-            commands=tuple(self._commands))
+            commands=tuple(self._commands), exact=self._carried_state())
         self._commands = []
         self._applied = []
         self._edits = []
@@ -563,6 +565,15 @@ class Simulation:
         self.last_record = record
         self._each_sink(lambda sink: sink.write_step(record))
         return record
+
+    def _carried_state(self):
+        """Exact mode's state for the next step (core.exact_carry), when a sink wants it: a
+        split recording starts each file with it. Taken every step (a file may start after
+        any), only then: about 0.1 ms at 10,000 balls."""
+        if self.world.mode != 'exact' or not any(
+                getattr(sink, 'wants_carried_state', False) for sink in self.sinks):
+            return None
+        return self.world.carried_state()
 
     def _agent_frame(self, positions, velocities, stamp_ns):
         """The agents now (rows, headings, odom and /tf bytes), or None without agents.

@@ -148,6 +148,9 @@ class StepRecord:
     world_changed: bool = False
     # Agents (core.agents): None in a world without agents, so its records are as before.
     agents: Optional[AgentFrame] = None
+    # Exact mode, for a sink that asks (wants_carried_state, a split recording): what this
+    # step hands the next (core.exact_carry.CarriedState), so a file may resume after it.
+    exact: Optional[object] = None
     commands: tuple = field(default_factory=tuple)  # AppliedCommand taken before this step
 
 

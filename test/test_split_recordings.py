@@ -182,21 +182,117 @@ def test_resim_across_the_splits_and_of_each_file_alone(by_time, capsys):
         assert 'bit-identically' in capsys.readouterr().out
 
 
-def test_exact_mode_resims_across_the_splits_and_refuses_a_lone_later_file(tmp_path, capsys):
-    directory = tmp_path / 'exact'
+#: A dense exact-mode gas of two radius classes (radii 0.05 to 0.3 m): about 0.2 of the
+#: arena covered, a collision per ball every few steps.
+EXACT = {'rate_hz': RATE, 'random.count': 120, 'random.seed': 5, 'random.radius': [0.05, 0.3],
+         'arena': [0.0, 0.0, 6.0, 6.0], 'physics.mode': 'exact'}
+
+
+@pytest.fixture(scope='module')
+def exact_split(tmp_path_factory):
+    """An exact-mode run split every second (20 steps) into three files, with impulses and a
+    set_state and a delete made just before a later file's first step."""
+    directory = tmp_path_factory.mktemp('exact') / 'exact'
     sink = SplitMcapSink(directory, max_seconds=1.0)
-    simulation = Simulation({**PARAMS, 'physics.mode': 'exact'}, sinks=[sink])
-    run(simulation, 45)
+    truth = Truth()
+    simulation = Simulation(EXACT, sinks=[sink, truth])
+    for _ in range(55):
+        k = simulation.step_index + 1
+        if k % 7 == 0 or k == 40:
+            simulation.queue_impulse(f'ball_{k % 11}', 0.05, -0.03)
+        if k == 40:
+            x, y = simulation.world.positions[simulation.index_of['ball_3']]
+            simulation.set_state('ball_3', x, y, 0.4, 0.1)  # where it is: nothing overlaps
+            simulation.delete('ball_8')
+        simulation.step()
     simulation.close()
+    return directory, truth
+
+
+def test_exact_mode_resims_across_the_splits_and_each_later_file_alone(exact_split, capsys):
+    directory, truth = exact_split
+    names = metadata(directory)['relative_file_paths']
+    assert names == ['exact_0.mcap', 'exact_1.mcap', 'exact_2.mcap']
+    assert sum(record.ball_ball for record in truth.records) > 400
     assert resim.main([str(directory)]) == 0
-    assert 'all 46 recorded steps re-simulate bit-identically' in capsys.readouterr().out
-    assert resim.main([str(directory / 'exact_0.mcap')]) == 0
-    capsys.readouterr()
-    # the predictions exact mode carries between steps are in no file: refused, not compared
-    assert resim.main([str(directory / 'exact_1.mcap')]) == 2
+    assert 'all 56 recorded steps re-simulate bit-identically' in capsys.readouterr().out
+    for name, steps, last in zip(names, (20, 20, 16), (19, 39, 55)):
+        # each file from its first step: the later ones from the predictions they carry
+        assert resim.main([str(directory / name)]) == 0, name
+        out = capsys.readouterr().out
+        assert f'segment 0: {steps} steps compared (last step {last})' in out, out
+        assert 'bit-identically' in out
+
+
+def test_exact_file_without_predictions_differs_or_is_refused(exact_split, tmp_path, capsys):
+    directory, _ = exact_split
+    # told that the world kept no predictions there, the file re-simulates from the balls
+    # alone: the run is dense enough that this shows in the bits
+    emptied = rewrite_recording(directory / 'exact_1.mcap', tmp_path / 'emptied.mcap',
+                                metadata=lambda values: {**values, 'resume_exact': '{}'}
+                                if 'resume_exact' in values else values)
+    assert resim.main([str(emptied)]) == 1
+    assert 'first difference: segment 0 step ' in capsys.readouterr().out
+    # without the value (an older writer), refused in one line rather than compared
+    older = rewrite_recording(directory / 'exact_1.mcap', tmp_path / 'older.mcap',
+                              metadata=lambda values: {key: value for key, value in
+                                                       values.items() if key != 'resume_exact'})
+    assert resim.main([str(older)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and 'segment 0 is picked up at step 20 (a split file) in exact ' \
-        'mode' in err[0]
+        'mode, but the file does not carry the collision predictions' in err[0], err
+
+
+def crafted_exact(change):
+    """A change to resume_exact, given its decoded JSON object (returns the new object)."""
+    def rewrite(values):
+        if 'resume_exact' in values:
+            values['resume_exact'] = json.dumps(change(json.loads(values['resume_exact'])))
+        return values
+    return rewrite
+
+
+def recoded(key, dtype, edit):
+    """A change to one base64 array of resume_exact: edit(array) gives the new array."""
+    def change(document):
+        array = np.frombuffer(base64.b64decode(document[key]), dtype=dtype).copy()
+        document[key] = base64.b64encode(edit(array).astype(dtype).tobytes()).decode()
+        return document
+    return change
+
+
+def pointing_at(partner):
+    """Every ball's predicted impact made a pair impact with `partner` (the codes say PAIR)."""
+    def change(document):
+        document = recoded('hit_partner', '<i4', lambda a: np.full_like(a, partner))(document)
+        pair = np.array([0, 1, 1, 0]), np.array([0, 0, 0, 1])  # kinds PAIR, current
+        return recoded('codes', 'u1', lambda c: c.reshape(-1, 4) * pair[0] + pair[1])(document)
+    return change
+
+
+@pytest.mark.parametrize('change, words', [
+    (lambda d: 'not an object', "'resume_exact' is neither {} nor exactly"),
+    (lambda d: {**d, 'extra': 1}, "'resume_exact' is neither {} nor exactly"),
+    (lambda d: {**d, 'cells': '***'}, 'resume_exact cells is not base64 text'),
+    (recoded('hit_time', '<f8', lambda a: a[:-1]), 'resume_exact hit_time holds'),
+    (recoded('tori', '<i8', lambda a: np.tile(a, 40)), 'resume_exact tori holds'),
+    (recoded('codes', 'u1', lambda a: a + 9), 'resume_exact codes holds a value that is no code'),
+    (pointing_at(10**6), 'exact state: ball 0: its impact names no other ball'),
+    (recoded('cells', '<i8', lambda a: a + 10**15), 'exact state: ball 0 is in cell'),
+    (recoded('tori', '<i8', lambda a: a + 2**40), 'is not a power-of-two table'),
+    (recoded('unit', '<f8', lambda a: a * np.nan), 'cell width nan'),
+    (recoded('exit_time', '<f8', lambda a: -a), 'exact state: ball 0: an event time is '
+                                                'negative or NaN'),
+])
+def test_a_crafted_exact_mode_state_is_refused_in_one_line(exact_split, tmp_path, capsys,
+                                                           change, words):
+    directory, _ = exact_split
+    crafted = rewrite_recording(directory / 'exact_2.mcap', tmp_path / 'crafted.mcap',
+                                metadata=crafted_exact(change))
+    assert resim.main([str(crafted)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f'ball_world_resim: {crafted}: segment 0') \
+        and words in err[0], err
 
 
 def test_info_sums_the_files(by_time, capsys):

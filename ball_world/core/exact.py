@@ -17,7 +17,9 @@ of edits between steps: bit-identical trajectories. The state is kept beside the
 in it, and follows edits by itself: a ball whose position or velocity differs from what the
 last step left (an impulse, a set-state) is predicted again; a change in the number of
 balls, a radius or a wall rebuilds everything. `invalidate(world)` drops the state, so the
-next step starts from the world's arrays alone.
+next step starts from the world's arrays alone. `carried(world)` gives the state as plain
+arrays and `restore(world, carried)` takes it back (core.exact_carry), so a World rebuilt
+from a recording's arrays and the carried state steps bit for bit as the original did.
 
 Bounded work: a step processes at most `event_budget(n)` events, then raises
 EventBudgetExceeded instead of going on (the balls are left where they were at that moment,
@@ -65,6 +67,33 @@ def event_budget(n):
 def invalidate(world):
     """Forget the predictions kept for `world`: the next step rebuilds them from its arrays."""
     _states.pop(world, None)
+
+
+def carried(world):
+    """What `world`'s next step takes over from its last (core.exact_carry.CarriedState):
+    NOTHING_KEPT when it keeps no predictions (never stepped, dropped, or built for other
+    radii or walls), so the next step builds them from the world's arrays."""
+    from ball_world.core import exact_carry
+    from ball_world.core import exact_kernel as kernel
+
+    state = _states.get(world)
+    walls = world.walls
+    if state is None or not kernel.matches(state, world.radii, walls.segments):
+        return exact_carry.NOTHING_KEPT
+    return exact_carry.export(state, world)
+
+
+def restore(world, carried):
+    """Make `carried` (from carried(), maybe of another World) what `world`'s next step
+    takes over, so its steps are bit for bit those of the World it came from, given the same
+    arrays. Raises ValueError, naming what is wrong, for a state that is not one of this
+    world's (checked fully first: it may come from a file)."""
+    from ball_world.core import exact_carry
+
+    if not carried.kept and not len(carried):
+        invalidate(world)
+        return
+    _states[world] = exact_carry.restore(world, carried)
 
 
 def step(world, dt, per_ball=None):

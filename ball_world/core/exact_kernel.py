@@ -43,7 +43,8 @@ Robustness near contact (why rounding cannot creep into overlap or loop):
 State lives across steps (the lists, the predictions, the tree): at the start of each step
 the kernel compares the world's positions and velocities with the values it left, and
 predicts again for any ball an impulse or a set-state changed; a change of ball count,
-radii or walls rebuilds everything (exact.py decides).
+radii or walls rebuilds everything (exact.py decides). Between two steps the state can be
+taken out as plain arrays and put into another world (exact_carry.py, `restore` here).
 """
 import collections
 import math
@@ -669,35 +670,65 @@ def _grids(x, radii, classes, count):
     ball would each search a whole grid of small ones. With one class this is the single
     grid of equal radii, cells exactly _cell_width's.
     """
-    largest = np.zeros(count)
-    members = np.zeros(count, dtype=np.int64)
-    for i in range(x.shape[0]):
-        c = classes[i]
-        largest[c] = max(largest[c], radii[i])
-        members[c] += 1
-    wanted = np.empty(count)
+    largest, members = _class_sizes(radii, classes, count)
     extents = np.empty((count, 4))
+    unit = 0.0
     for c in range(count):
         own = x if count == 1 else x[np.flatnonzero(classes == c)]
         extent = _extent(own)
         extents[c, 0], extents[c, 1], extents[c, 2], extents[c, 3] = extent
+        if c == 0:
+            unit = _cell_width(own, extent, 2.0 * largest[c] * CELL_MARGIN)
+    tori = np.zeros((count, 2), dtype=np.int64)
+    for c in range(count):
+        width = unit * (1 << cell_shift(unit, largest, c))
+        extent = (extents[c, 0], extents[c, 1], extents[c, 2], extents[c, 3])
+        tori[c, 0], tori[c, 1] = _torus(members[c], extent, width)
+    return unit, _lay_out(unit, tori, largest)
+
+
+@compile_kernel
+def _class_sizes(radii, classes, count):
+    """Each class's largest radius and number of balls."""
+    largest = np.zeros(count)
+    members = np.zeros(count, dtype=np.int64)
+    for i in range(radii.shape[0]):
+        c = classes[i]
+        largest[c] = max(largest[c], radii[i])
+        members[c] += 1
+    return largest, members
+
+
+@compile_kernel
+def cell_shift(unit, largest, c):
+    """Class c's cells are unit * 2 ** shift wide: the smallest class's the unit, any other's
+    the unit doubled until a little over its largest diameter."""
+    shift = 0
+    if c > 0:
+        width = unit
         narrowest = 2.0 * largest[c] * CELL_MARGIN
-        wanted[c] = _cell_width(own, extent, narrowest) if c == 0 else narrowest
-    unit = wanted[0]
+        while width < narrowest:
+            width *= 2.0
+            shift += 1
+    return shift
+
+
+@compile_kernel
+def _lay_out(unit, tori, largest):
+    """grids of State (GLOBALS not yet filled in) for the unit, each class's torus
+    (column_mask, row_bits) and each class's largest radius."""
+    count = largest.shape[0]
     grids = np.zeros((count + 1, REACH + count), dtype=np.int64)
     for c in range(count):
-        width = unit
-        while width < wanted[c]:
-            width *= 2.0
-            grids[c, SHIFT] += 1
-        extent = (extents[c, 0], extents[c, 1], extents[c, 2], extents[c, 3])
-        grids[c, COLUMN_MASK], grids[c, ROW_BITS] = _torus(members[c], extent, width)
+        grids[c, SHIFT] = cell_shift(unit, largest, c)
+        grids[c, COLUMN_MASK] = tori[c, 0]
+        grids[c, ROW_BITS] = tori[c, 1]
         grids[c + 1, BUCKETS] = grids[c, BUCKETS] + ((grids[c, COLUMN_MASK] + 1)
                                                      << grids[c, ROW_BITS])
         for b in range(count):
             units = math.ceil((largest[c] + largest[b]) * CELL_MARGIN / unit)
             grids[c, REACH + b] = max(1, int(units))
-    return unit, grids
+    return grids
 
 
 @compile_kernel
@@ -770,7 +801,51 @@ def build(x, v, radii, segments, starts, ends, directions, lengths, class_ratio=
 
 
 @compile_kernel
-def _matches(state, radii, segments):
+def class_sizes(radii):
+    """Each ball's radius class, and each class's largest radius and number of balls, as
+    build makes them (core.exact_carry checks a carried state against these)."""
+    classes, count = _classes(radii, CLASS_RATIO)
+    largest, members = _class_sizes(radii, classes, count)
+    return classes, largest, members
+
+
+@compile_kernel
+def restore(x, v, radii, segments, starts, directions, lengths, unit, tori, largest, balls,
+            hit_time, exit_time, event_time, edited):
+    """The state another World kept at the end of a step, carried over (core.exact_carry,
+    which checked every value against this world): build's, with the cells, predictions and
+    partners given instead of found. `balls` has every column but NEXT and PREVIOUS filled
+    in; `edited` lists the balls changed since that step, which the next step predicts
+    again (their seen position is NaN, so it differs from any).
+
+    Balls are linked into their buckets in index order, as build links them; the order
+    within a bucket never changes an outcome (_scan_balls takes the first candidate in a
+    total order, whichever order they come in), so it is not carried.
+    """
+    n = x.shape[0]
+    grids = _lay_out(unit, tori, largest)
+    leaves = 1
+    while leaves < n:
+        leaves *= 2
+    wall_first, wall_items, global_walls = _class_walls(unit, grids, starts, directions,
+                                                        lengths)
+    seen_x = x.copy()
+    for e in range(edited.shape[0]):
+        seen_x[edited[e], 0] = math.nan
+    state = State(unit, grids, leaves, np.zeros(n), hit_time, exit_time, event_time, balls,
+                  np.full(grids[grids.shape[0] - 1, BUCKETS], NO_BALL, np.int64),
+                  wall_first, wall_items, global_walls,
+                  np.full(2 * leaves, NO_BALL, np.int64), seen_x, v.copy(), radii.copy(),
+                  segments.copy())
+    for i in range(n):
+        _link(balls, state.heads, i, _home(state, balls[i, CLASS], balls[i, CELL_X],
+                                           balls[i, CELL_Y]))
+    _build_tree(state.tree, leaves, event_time, balls, n)
+    return state
+
+
+@compile_kernel
+def matches(state, radii, segments):
     """Whether the state was built for these radii and walls (else it must be rebuilt)."""
     seen_radii = state.seen_radii
     seen_walls = state.seen_walls
@@ -835,7 +910,7 @@ def advance(state, x, v, radii, masses, segments, starts, ends, directions, leng
     one; nothing moved); NOT_FINITE (an edited ball is not finite; nothing moved); or
     OVER_BUDGET (more than `budget` events: the balls are left at the time reached).
     """
-    if not _matches(state, radii, segments):
+    if not matches(state, radii, segments):
         return STALE_STATE
     status = _absorb_edits(state, x, v, radii, starts, ends, directions, lengths)
     if status != DONE:

@@ -294,6 +294,25 @@ class World:
         # into the tuple without NamedTuple's argument handling.
         return _make_tuple(StepStats, totals.tolist())
 
+    def carried_state(self):
+        """Exact mode: what the next step takes over from the last, as plain arrays
+        (core.exact_carry.CarriedState; see core.exact.carried). Seed mode carries nothing
+        between steps: None."""
+        if self.mode != 'exact':
+            return None
+        from ball_world.core import exact
+        return exact.carried(self)
+
+    def restore_carried_state(self, carried):
+        """Exact mode: take over `carried` (from carried_state(), maybe of another World with
+        these arrays), so the steps from here are bit for bit that World's. ValueError,
+        naming what is wrong, for a state that does not fit this world."""
+        if self.mode != 'exact':
+            raise ValueError('seed mode carries no state between steps: an exact-mode state '
+                             'cannot be taken over')
+        from ball_world.core import exact
+        exact.restore(self, carried)
+
     def _exact_step(self, dt):
         """The exact-mode step (core.exact): every collision at its time of impact."""
         from ball_world.core import exact  # numba: imported only by worlds that use it

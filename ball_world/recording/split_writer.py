@@ -10,7 +10,8 @@ the writer's memory is bounded by one file.
 Every file stands alone: a file begun inside a segment starts with that segment's
 'ball_world' metadata record (parameters, topics) plus the state it continues from
 (recording.resume: the step before its first, with every ball's name, position, velocity,
-radius and mass; with agents, their headings and the commands in force), then the
+radius and mass; with agents, their headings and the commands in force; in exact mode the
+predictions that step hands the next, core.exact_carry), then the
 markers of that world (and whatever else McapSink writes at a segment start); its first
 step carries the segment's /tf_static when there are agents. A reset starts the next
 segment in whichever file is open (a due split is made first, so the new file begins with
@@ -76,6 +77,10 @@ class SplitMcapSink:
     The directory is claimed at once (recording.bag.claim_directory: an existing one is
     refused unless overwrite). Other keyword arguments go to each McapSink.
     """
+
+    #: Each file after the first starts with the state of the step it follows, which in exact
+    #: mode includes what that step hands the next: the Simulation puts it in every record.
+    wants_carried_state = True
 
     def __init__(self, directory, max_bytes=0, max_seconds=0.0, max_files=0, overwrite=False,
                  report=None, **options):

@@ -31,6 +31,11 @@ class BackgroundSink:
             target=self._work, name=f'{type(sink).__name__}-writer', daemon=True)
         self._thread.start()
 
+    @property
+    def wants_carried_state(self):
+        """Whether the wrapped sink wants exact mode's carried state in each record."""
+        return getattr(self.sink, 'wants_carried_state', False)
+
     def _work(self):
         while True:
             call, args = self._queue.get()

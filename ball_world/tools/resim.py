@@ -14,6 +14,11 @@ or a spawn that gets another name, is a difference too. Exit status: 0 all ident
 difference, 2 an unreadable recording or parameters that no longer build a world (one line
 on stderr).
 
+A split file (a bag directory's later file, or one given alone) that starts inside a
+segment is picked up from the state it resumes from (recording.resume): the balls, agents
+and names at the step before its first, and in exact mode the collision predictions that
+step handed the next (core.exact_carry), so each file alone re-simulates bit for bit too.
+
 The recording is untrusted: its parameters were checked by the reader as the node checks
 them, and a segment whose first recorded step has another ball count than its parameters
 make is refused before its world is built.
@@ -136,13 +141,17 @@ def _rebuild(segment, first_step):
 def _resume(segment):
     """The segment's Simulation at the step a split file continues from (its resume state).
 
-    Exact mode keeps its collision predictions from step to step (core.exact), and a state
-    cannot hold them: from a resume state its steps differ in the last bits. Refused.
+    Exact mode keeps its collision predictions from step to step (core.exact): the file's
+    resume state carries them (recording.resume's resume_exact, core.exact_carry), and the
+    world takes them over, so its steps are the recorded ones bit for bit. A file in exact
+    mode without them (written before they were) is refused: from positions and velocities
+    alone its steps would differ in the last bits.
     """
-    if segment.parameters['physics.mode'] == 'exact':
+    if segment.parameters['physics.mode'] == 'exact' and segment.resume.exact is None:
         raise RecordingError(f'segment {segment.index} is picked up at step '
-                             f'{segment.resume.step + 1} (a split file) in exact mode, whose '
-                             'collision predictions carry over from step to step: it '
+                             f'{segment.resume.step + 1} (a split file) in exact mode, but the '
+                             'file does not carry the collision predictions of the step before '
+                             '(resume_exact; an older ball_world wrote it without them): it '
                              're-simulates bit for bit only from its first step (give the bag '
                              'directory with the file where it starts)')
     simulation = Simulation(segment.parameters, sinks=())
