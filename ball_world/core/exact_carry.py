@@ -97,24 +97,25 @@ def export(state, world):
     """The CarriedState of the kernel State `state`, which is `world`'s (core.exact)."""
     from ball_world.core import exact_kernel as kernel
 
-    balls = state.balls
-    kind = balls[:, kernel.HIT_KIND].astype(np.int8)
-    partner = balls[:, kernel.HIT_PARTNER].copy()
-    pair = kind == PAIR
-    stamps = balls[np.where(pair, partner, 0), kernel.COUNTER]
-    edited = ((world.positions != state.seen_positions).any(axis=1)
-              | (world.velocities != state.seen_velocities).any(axis=1))
+    n = len(world.positions)
+    cells = np.empty((n, 2), dtype=np.int64)
+    last = np.empty(n, dtype=np.int64)
+    hit_kind = np.empty(n, dtype=np.int8)
+    hit_partner = np.empty(n, dtype=np.int64)
+    hit_current = np.empty(n, dtype=bool)
+    exit_side = np.empty(n, dtype=np.int8)
+    next_kind = np.empty(n, dtype=np.int8)
+    edited = np.empty(n, dtype=np.int64)
+    count = kernel.export(state, world.positions, world.velocities, cells, last, hit_kind,
+                          hit_partner, hit_current, exit_side, next_kind, edited)
     grids = state.grids
-    count = len(grids) - 1
+    classes = len(grids) - 1
     return CarriedState(
         unit=float(state.unit),
-        tori=grids[:count, [kernel.COLUMN_MASK, kernel.ROW_BITS]].copy(),
-        cells=balls[:, [kernel.CELL_X, kernel.CELL_Y]].copy(),
-        last=balls[:, kernel.LAST].copy(), hit_kind=kind, hit_partner=partner,
-        hit_current=pair & (stamps == balls[:, kernel.HIT_STAMP]),
-        hit_time=state.hit_time.copy(), exit_side=balls[:, kernel.EXIT].astype(np.int8),
-        exit_time=state.exit_time.copy(), next_kind=balls[:, kernel.KIND].astype(np.int8),
-        edited=np.flatnonzero(edited).astype(np.int64))
+        tori=grids[:classes, [kernel.COLUMN_MASK, kernel.ROW_BITS]].copy(), cells=cells,
+        last=last, hit_kind=hit_kind, hit_partner=hit_partner, hit_current=hit_current,
+        hit_time=state.hit_time.copy(), exit_side=exit_side, exit_time=state.exit_time.copy(),
+        next_kind=next_kind, edited=edited[:count].copy())
 
 
 def restore(world, carried):
