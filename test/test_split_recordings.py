@@ -32,6 +32,7 @@ from ball_world.recording.bag import claim_directory
 from ball_world.recording.files import FileRefused
 from ball_world.recording.recording_set import open_recording, RecordingSet
 from ball_world.recording.split_writer import SplitMcapSink
+from ball_world.recording.writer_thread import BackgroundSink
 from ball_world.simulation import Simulation, SpawnRequest
 from ball_world.tools import info, repair, resim, to_rrd
 
@@ -222,6 +223,23 @@ def test_exact_mode_resims_across_the_splits_and_each_later_file_alone(exact_spl
         out = capsys.readouterr().out
         assert f'segment 0: {steps} steps compared (last step {last})' in out, out
         assert 'bit-identically' in out
+
+
+def test_exact_mode_split_by_size_through_the_writer_thread_resims_file_by_file(tmp_path,
+                                                                                capsys):
+    """As the node records: BackgroundSink(SplitMcapSink), rolled by bytes on its thread."""
+    directory = tmp_path / 'sized'
+    sink = BackgroundSink(SplitMcapSink(directory, max_bytes=60_000))
+    assert sink.wants_carried_state
+    simulation = Simulation({**EXACT, 'physics.backend': 'numpy'}, sinks=[sink])
+    for _ in range(60):
+        simulation.step()
+    simulation.close()
+    names = metadata(directory)['relative_file_paths']
+    assert len(names) >= 3
+    for name in names:
+        assert resim.main([str(directory / name)]) == 0, (name, capsys.readouterr())
+        assert 'bit-identically' in capsys.readouterr().out
 
 
 def test_exact_file_without_predictions_differs_or_is_refused(exact_split, tmp_path, capsys):

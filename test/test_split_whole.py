@@ -164,8 +164,10 @@ def first_messages(path):
 
 
 @pytest.mark.parametrize('overrides', [{}, {'agent.cmd_timeout': 0.0},
-                                       {'physics.backend': 'numpy'}],
-                         ids=['timeout', 'hold', 'numpy'])
+                                       {'physics.backend': 'numpy'},
+                                       {'physics.mode': 'exact'},
+                                       {'physics.mode': 'exact', 'physics.backend': 'numpy'}],
+                         ids=['timeout', 'hold', 'numpy', 'exact', 'exact-numpy'])
 def test_each_file_of_a_split_run_with_agents_resimulates_alone(tmp_path, capsys, overrides):
     directory = tmp_path / 'agents'
     names = agents_run(directory, **overrides)
