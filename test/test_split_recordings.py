@@ -242,6 +242,23 @@ def test_exact_mode_split_by_size_through_the_writer_thread_resims_file_by_file(
         assert 'bit-identically' in capsys.readouterr().out
 
 
+def test_exact_mode_files_of_one_step_each_resim_alone(tmp_path, capsys):
+    """A file after every step, the first after step 0 (whose world kept no predictions yet:
+    resume_exact {}), each re-simulated alone."""
+    directory = tmp_path / 'single'
+    simulation = Simulation(EXACT, sinks=[SplitMcapSink(directory, max_bytes=1)])
+    for _ in range(8):
+        simulation.step()
+    simulation.close()
+    names = metadata(directory)['relative_file_paths']
+    assert len(names) == 9
+    assert open_recording(directory / names[1]).segments[0].resume.exact.kept is False
+    assert open_recording(directory / names[2]).segments[0].resume.exact.kept
+    for name in names:
+        assert resim.main([str(directory / name)]) == 0, (name, capsys.readouterr())
+        assert 'bit-identically' in capsys.readouterr().out
+
+
 def test_exact_file_without_predictions_differs_or_is_refused(exact_split, tmp_path, capsys):
     directory, _ = exact_split
     # told that the world kept no predictions there, the file re-simulates from the balls
