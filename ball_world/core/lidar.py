@@ -7,9 +7,10 @@ sensor_msgs/LaserScan: +inf when nothing lies within range_max, -inf when the fi
 closer than range_min. Then, if asked, Gaussian noise on the ranges that are neither.
 
 Two backends, one answer: `numpy` is the reference, every beam against every ball that can
-be within range_max (vectorised, in chunks); `numba` walks each beam through a grid
-(`lidar_kernel.scan_grid`). They evaluate the same closed forms and keep the smallest, so
-they agree bit for bit, as the step's backends do; `test/test_lidar.py` checks it.
+be within range_max (vectorised, in chunks); `numba` tests each ball only against the beams
+of its sector (`lidar_kernel.scan_sectors`). They evaluate the same closed forms and keep the
+smallest, so they agree bit for bit, as the step's backends do; `test/test_lidar.py` checks
+it.
 
 Noise is reproducible: its generator is seeded by the world's `random.seed`, a stable hash
 of the scanner's entity name (SHA-256, not Python's salted hash()) and the step number,
@@ -133,11 +134,11 @@ def distances_numpy(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exc
 
 def distances_numba(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude,
                     range_min, range_max):
-    """The compiled walk through a grid: the same ranges as distances_numpy."""
+    """The compiled scan by sectors: the same ranges as distances_numpy."""
     out = np.empty(len(body[0]))
-    lidar_kernel.scan_grid(positions, radii, walls, float(origin[0]), float(origin[1]),
-                           cos_yaw, sin_yaw, body[0], body[1], int(exclude), range_min,
-                           range_max, out)
+    lidar_kernel.scan_sectors(positions, radii, walls, float(origin[0]), float(origin[1]),
+                              cos_yaw, sin_yaw, body[0], body[1], body[2], body[3],
+                              int(exclude), range_min, range_max, out)
     return out
 
 
@@ -155,7 +156,9 @@ class Scanner:
         self.fan = fan.check()
         self.backend = resolve_backend(backend)
         self._distances = _DISTANCES[self.backend]
-        self.body = body_directions(fan)
+        # (x, y, angle_min, increment): the beams' body directions and the angles they were
+        # made from (the numba scan picks each object's beams by angle).
+        self.body = body_directions(fan) + (float(fan.angle_min), float(fan.angle_increment))
         self.seed = int(seed)
         self.key = name_key(name)
 
