@@ -301,6 +301,28 @@ def test_noise_is_reproducible_and_leaves_infinities_alone():
     assert int(child.stdout) == lidar.name_key('ball_0')
 
 
+def test_noise_seeds_draw_what_default_rng_draws():
+    # Recordings hold noise drawn from np.random.default_rng([seed, key, step]); the cheaper
+    # seeding must give the very same numbers, for seeds, keys and steps of one 32-bit word
+    # and of two (SeedSequence takes an int as its words), and for one Generator reseeded
+    # step after step.
+    from ball_world.core.noise_seed import NoiseSeeds
+    rng = np.random.default_rng(11)
+    cases = [(0, 0, 0), (2**63 - 1, 2**64 - 1, 2**63 - 1), (5, 2**32, 2**32 - 1),
+             (1, 7, 2**32), (0, lidar.name_key('ball_0'), 1)]
+    cases += [(int(rng.integers(2**63)), int(rng.integers(2**63)), int(rng.integers(2**40)))
+              for _ in range(60)]
+    cases += [(int(rng.integers(2**31)), int(rng.integers(2**31)), int(rng.integers(10**6)))
+              for _ in range(60)]
+    for seed, key, step in cases:
+        seeds = NoiseSeeds(seed, key)
+        for at in (step, step + 1, step):
+            expected = np.random.default_rng([seed, key, at]).normal(0.0, 0.01, 40)
+            assert seeds.generator(at).normal(0.0, 0.01, 40).tobytes() == expected.tobytes()
+    with pytest.raises(ValueError, match='non-negative'):
+        NoiseSeeds(0, 1).generator(-1)
+
+
 def test_hit_points_lie_on_what_was_hit():
     beams = Fan.full_turn(36)
     walls = box(0.0, 0.0, 10.0, 10.0)
