@@ -55,7 +55,7 @@ ATAN_COEFFICIENTS = (0.9999798340122587, -0.3326554827323513, 0.1936703161404223
 WALL_DEGENERATE = 1e-6
 #: Beams closer than this (rad) are one direction to the scan: each object meets all of them.
 MIN_INCREMENT = 1e-12
-#: A wall further than range_max times (1 + this) cannot be hit within range_max.
+#: A ball or wall further than range_max times (1 + this) cannot be hit within range_max.
 REACH_SLACK = 1e-6
 
 
@@ -144,40 +144,48 @@ def bearing(y, x):
     return angle
 
 
-def fan_window(centre, half, angle_min, increment):
-    """Where a sector of bearings centre -+ (half + SECTOR_SLACK) (rad, from the heading)
-    lies along a fan whose beam k points at angle_min + k * increment (|increment| at least
-    MIN_INCREMENT): (low, high) in beams from beam 0, low + half-width in [0, one turn).
-    Beam k can point into the sector only if k lies in [low, high] shifted by a whole
-    number of turns (2 pi / |increment| beams each; `fan_span` clips one shift to the fan)."""
-    full = 2.0 * math.pi
-    offset = centre - angle_min if increment > 0.0 else angle_min - centre
-    offset -= full * math.floor(offset / full)
-    step = abs(increment)
-    return (offset - half - SECTOR_SLACK) / step, (offset + half + SECTOR_SLACK) / step
+def fan_window(direction, half, origin, sign, per_radian):
+    """Where the sector of bearings direction -+ (half + SECTOR_SLACK) (rad, world frame)
+    lies along a fan whose beam k points at origin + sign * k / per_radian (origin: the
+    heading plus angle_min; sign that of the increment; per_radian: beams per radian):
+    (low, high) in beams from beam 0, with low + half-width in [0, one turn). Beam k can
+    point into the sector only if k lies in [low, high] shifted by a whole number of turns
+    (2 pi per_radian beams each; `fan_span` clips one shift to the fan). Multiplications,
+    not divisions: the slack dwarfs their rounding."""
+    offset = sign * (direction - origin)
+    offset -= 2.0 * math.pi * math.floor(offset * (0.5 / math.pi))
+    return ((offset - half - SECTOR_SLACK) * per_radian,
+            (offset + half + SECTOR_SLACK) * per_radian)
 
 
 def fan_span(low, high, shift, samples):
     """Beams [first, last) of [low, high] + shift (in beams) that the fan has; first >= last
     for none."""
-    first = int(math.floor(min(max(low + shift, 0.0), float(samples))))
-    last = int(math.ceil(min(max(high + shift, -1.0), float(samples - 1)))) + 1
+    first = int(math.ceil(min(max(low + shift, 0.0), float(samples))))
+    last = int(math.floor(min(max(high + shift, -1.0), float(samples - 1)))) + 1
     return first, last
 
 
 def ball_beams(px, py, ux, uy, cx, cy, radius, first, last, best):
     """Beams first..last-1 against one ball the scanner is outside of: the nearer hit kept."""
-    for k in range(first, last):  # branch-free, so the compiler can vectorise it
-        near, ahead, _ = circle_terms(px, py, ux[k], uy[k], cx, cy, radius)
-        best[k] = min(best[k], near if ahead else np.inf)
+    # Views from 0 and a branch-free minimum: a loop the compiler vectorises (twice as fast
+    # as indexing first..last with an `if`, measured).
+    dx = ux[first:last]
+    dy = uy[first:last]
+    out = best[first:last]
+    for k in range(last - first):
+        near, ahead, _ = circle_terms(px, py, dx[k], dy[k], cx, cy, radius)
+        out[k] = min(out[k], near if ahead else np.inf)
 
 
 def wall_beams(px, py, ux, uy, ax, ay, bx, by, first, last, best):
     """Beams first..last-1 against one wall: the nearer hit kept."""
-    for k in range(first, last):
-        t, hit = segment_terms(px, py, ux[k], uy[k], ax, ay, bx, by)
-        if hit and t < best[k]:
-            best[k] = t
+    dx = ux[first:last]
+    dy = uy[first:last]
+    out = best[first:last]
+    for k in range(last - first):  # as ball_beams
+        t, hit = segment_terms(px, py, dx[k], dy[k], ax, ay, bx, by)
+        out[k] = min(out[k], t if hit else np.inf)
 
 
 def _compile(function):
@@ -245,20 +253,25 @@ def scan_sectors(positions, radii, walls, px, py, cos_yaw, sin_yaw, bx, by, angl
     # Beams per turn of the circle: a sector is looked for on the turns the fan spans. A fan
     # of (nearly) one direction has every beam tested against everything.
     every = not abs(increment) >= MIN_INCREMENT
-    turn = 2.0 * math.pi / max(abs(increment), MIN_INCREMENT)
+    per_radian = 1.0 / max(abs(increment), MIN_INCREMENT)
+    turn = 2.0 * math.pi * per_radian
+    origin = heading + angle_min
+    sign = 1.0 if increment > 0.0 else -1.0
     for i in range(positions.shape[0]):
         cx = positions[i, 0]
         cy = positions[i, 1]
         radius = radii[i]
         mx = cx - px
         my = cy - py
-        if i == exclude or abs(mx) > reach + radius or abs(my) > reach + radius:
+        d2 = mx * mx + my * my
+        # Nothing on a ball whose disk lies beyond reach is nearer than reach (+inf anyway).
+        limit = (reach + radius) * (1.0 + REACH_SLACK)
+        if d2 > limit * limit or i == exclude:
             continue
-        if mx * mx + my * my <= radius * radius:  # circle_terms' `inside`: every range 0
+        if d2 <= radius * radius:  # circle_terms' `inside`: every range 0
             for k in range(samples):
                 out[k] = 0.0
             continue
-        d2 = mx * mx + my * my
         if d2 <= 4.0 * radius * radius:
             ball_beams(px, py, ux, uy, cx, cy, radius, 0, samples, out)
             continue
@@ -266,7 +279,7 @@ def scan_sectors(positions, radii, walls, px, py, cos_yaw, sin_yaw, bx, by, angl
         if every:
             ball_beams(px, py, ux, uy, cx, cy, radius, 0, samples, out)
             continue
-        low, high = fan_window(bearing(my, mx) - heading, half, angle_min, increment)
+        low, high = fan_window(bearing(my, mx), half, origin, sign, per_radian)
         shift = -turn if high >= turn else 0.0
         while low + shift <= samples - 1:
             first, last = fan_span(low, high, shift, samples)
@@ -283,7 +296,7 @@ def scan_sectors(positions, radii, walls, px, py, cos_yaw, sin_yaw, bx, by, angl
         if half >= math.pi or every:
             wall_beams(px, py, ux, uy, ax, ay, bx_, by_, 0, samples, out)
             continue
-        low, high = fan_window(centre - heading, half, angle_min, increment)
+        low, high = fan_window(centre, half, origin, sign, per_radian)
         shift = -turn if high >= turn else 0.0
         while low + shift <= samples - 1:
             first, last = fan_span(low, high, shift, samples)
