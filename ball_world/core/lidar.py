@@ -201,8 +201,7 @@ def add_noise(ranges, stddev, rng):
     """
     if stddev > 0.0:
         noise = rng.normal(0.0, stddev, len(ranges))
-        finite = np.isfinite(ranges)
-        ranges[finite] += noise[finite]
+        np.add(ranges, noise, out=ranges, where=np.isfinite(ranges))  # no masked copies
     return ranges
 
 
