@@ -263,6 +263,8 @@ def scan_sectors(positions, radii, walls, px, py, cos_yaw, sin_yaw, bx, by, angl
         radius = radii[i]
         mx = cx - px
         my = cy - py
+        if abs(mx) > reach + radius or abs(my) > reach + radius:  # (the cheapest test first)
+            continue
         d2 = mx * mx + my * my
         # Nothing on a ball whose disk lies beyond reach is nearer than reach (+inf anyway).
         limit = (reach + radius) * (1.0 + REACH_SLACK)
