@@ -10,13 +10,13 @@ comparisons, `&`, `np.sqrt`, `np.minimum` and `np.maximum` in the shared formula
 
 Why it is fast: the beams' sectors are a polar grid around the scanner, one cell per beam,
 and each object goes only into the cells it can be seen in. A scan only sees what lies
-within range_max, so one pass over the balls keeps those whose disks meet the square of
-half-width range_max around the scanner (four comparisons each). A ball at distance d of
-radius r subtends at most atan(r / sqrt(d^2 - r^2)) either side of its bearing, so it is
-tested against the few beams of that sector (all beams when it is within 2 r); a wall
-against the beams between its ends' bearings, when it comes within range_max. Nothing is
-built per scan (no grid to sort the balls into, no walk of its cells): at 1,000 balls that
-halved a scan's cost against the square grid walk this replaced (docs/performance.md).
+within range_max, so one pass over the balls keeps those whose disks come within range_max
+of the scanner (a square test first: one comparison rejects most). A ball at distance d of
+radius r subtends asin(r / d) either side of its bearing, at most atan(r / sqrt(d^2 - r^2))
+and pi / 2, so it is tested against the few beams of that sector; a wall against the beams
+between its ends' bearings, when it comes within range_max. Nothing is built per scan (no
+grid to sort the balls into, no walk of its cells): at 1,000 balls a scan costs half of
+what the square grid walk it replaced did (docs/performance.md).
 
 Sectors are widened by SECTOR_SLACK on each side, far above the error of the cheap `bearing`
 (BEARING_ERROR), the rounding of a beam's direction and the TANGENT band, so a beam that
@@ -274,10 +274,9 @@ def scan_sectors(positions, radii, walls, px, py, cos_yaw, sin_yaw, bx, by, angl
             for k in range(samples):
                 out[k] = 0.0
             continue
-        if d2 <= 4.0 * radius * radius:
-            ball_beams(px, py, ux, uy, cx, cy, radius, 0, samples, out)
-            continue
-        half = radius / math.sqrt(d2 - radius * radius)
+        # The ball subtends asin(r / d) either side of its bearing: at most its tangent, and
+        # at most pi / 2 (a beam meets a ball it is outside of only going towards it).
+        half = min(radius / math.sqrt(d2 - radius * radius), 0.5 * math.pi)
         if every:
             ball_beams(px, py, ux, uy, cx, cy, radius, 0, samples, out)
             continue
