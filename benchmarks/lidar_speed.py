@@ -3,8 +3,11 @@
 Why beside a step: a scanner rides on an agent inside a world the node steps at its rate,
 so what matters is what a scan adds to a step, at every N. Both are timed in the same
 process and in alternating rounds (so a busy core slows both alike), and reported with
-their ratio. The scanner is the ball nearest the box's centre, with the issue's defaults:
-360 beams over a full turn, range 0.1-12 m, no noise (noise is one draw per beam).
+their ratio. Times are the thread's CPU time (time.thread_time; the step and the scan
+each run on one thread): on the shared machine a round's wall time also held the time the
+thread waited for a core, which made tens-of-microsecond scans read 2-10x slower at random.
+The scanner is the ball nearest the box's centre, with the issue's defaults: 360 beams over
+a full turn, range 0.1-12 m, no noise (noise is one draw per beam).
 
 `python -m benchmarks.lidar_speed` prints the table; `make bench` includes it.
 """
@@ -22,20 +25,22 @@ HEADER = ('| N | balls within range | physics step, ms | scan (numba), ms | scan
           'scan / step (numba) |\n|---:|---:|---:|---:|---:|---:|')
 NOTE = ('The scanner is the ball nearest the box centre (360 beams over a full turn, 0.1-12 m, '
         'no noise); the physics step is the default backend seed-mode step of the scene '
-        'above (dt 1/240 s). Both timed in alternating rounds of 5 calls in one process; the '
-        'ratio is what one scan adds to one step. A node scans at agent.scan.rate_hz (10 Hz) '
-        'of simulated time, so per step it adds ratio x 10 Hz / (steps per simulated second).')
+        'above (dt 1/240 s). Both timed in CPU time of the thread, in alternating rounds of '
+        '5 calls in one process (the numpy reference in rounds of its own after them); the '
+        'ratio is what one scan adds to one step. A node scans at '
+        'agent.scan.rate_hz (10 Hz) of simulated time, so per step it adds ratio x 10 Hz / '
+        '(steps per simulated second).')
 FAN = lidar.Fan.full_turn(360, range_min=0.1, range_max=12.0)
 
 
 def _median_seconds(call, repeats, inner):
-    """Median over `repeats` rounds of the mean time of `inner` calls."""
+    """Median over `repeats` rounds of the mean CPU time (this thread's) of `inner` calls."""
     samples = []
     for _ in range(repeats):
-        began = time.perf_counter()
+        began = time.thread_time()
         for _ in range(inner):
             call()
-        samples.append((time.perf_counter() - began) / inner)
+        samples.append((time.thread_time() - began) / inner)
     return statistics.median(samples)
 
 
@@ -63,10 +68,15 @@ def measure(n, repeats, seed=1, warmup_steps=20):
     for backend in backends:
         scan(backend)  # compiled or loaded before timing
     times = {backend: [] for backend in backends + ['step']}
-    for _ in range(repeats):  # alternate, so a busy core slows all alike
+    # The step and the compiled scan alternate (a scan follows a step, as in the node, and a
+    # busy core slows both alike); the numpy reference, which no node runs, is timed after
+    # them: its megabytes of temporaries evict the caches and doubled the time of the
+    # compiled scan that came after it.
+    for _ in range(repeats):
         times['step'].append(_median_seconds(lambda: world.step(DT), 1, 5))
-        for backend in backends:
-            times[backend].append(_median_seconds(lambda: scan(backend), 1, 5))
+        if 'numba' in scanners:
+            times['numba'].append(_median_seconds(lambda: scan('numba'), 1, 5))
+    times['numpy'] = [_median_seconds(lambda: scan('numpy'), 1, 5) for _ in range(repeats)]
     medians = {key: statistics.median(values) for key, values in times.items()}
     return within, medians['step'], medians.get('numba'), medians['numpy']
 

@@ -218,6 +218,47 @@ def test_backends_agree_bit_for_bit_and_match_brute_force(seed):
         assert np.max(np.abs(reference[finite] - numba_ranges[finite]), initial=0.0) < EXACT
 
 
+def test_bearing_is_within_its_bound_of_atan2():
+    # The numba scan picks each object's beams with this cheap atan2; its sectors are widened
+    # by SECTOR_SLACK, which must stay far above the error (here against numpy's arctan2).
+    from ball_world.core.lidar_kernel import BEARING_ERROR, bearing, SECTOR_SLACK
+    angles = np.linspace(-math.pi, math.pi, 20001)
+    for length in (1e-6, 1.0, 1e6):
+        x = length * np.cos(angles)
+        y = length * np.sin(angles)
+        got = np.array([bearing(b, a) for a, b in zip(x, y)])
+        error = np.abs(np.angle(np.exp(1j * (got - np.arctan2(y, x)))))
+        assert error.max() < BEARING_ERROR
+    assert 10.0 * BEARING_ERROR < SECTOR_SLACK
+
+
+@pytest.mark.parametrize('increment, samples', [
+    (0.0, 7), (1e-13, 5), (2.0 * math.pi / 360, 360), (-0.3, 40), (2.9, 9), (7.0, 3)])
+def test_odd_fans_and_scanners_on_walls_agree_with_the_reference(increment, samples):
+    # The numba scan tests each ball and wall against the beams of its sector, looked for on
+    # every turn the fan makes; a fan of one direction (increment 0 or nearly), fans over
+    # several turns, and scanners on a wall's line, at a wall's end or inside a wall's corner
+    # take its other paths. The reference tests everything. (A scanner exactly on a wall
+    # with range_min 0 sees range 0, whose sign the two may write differently: compared as
+    # numbers.)
+    rng = np.random.default_rng(samples)
+    positions, radii, walls = random_world(rng, 300)
+    ends = walls[:4, :2]
+    on_line = walls[4, :2] + 1.7 * (walls[4, 2:] - walls[4, :2])
+    on_wall = walls[5, :2] + 0.5 * (walls[5, 2:] - walls[5, :2])
+    for origin in (*ends, on_line, on_wall, positions[0], np.array([15.0, 15.0])):
+        for range_min in (0.0, 0.2):
+            beams = Fan(float(rng.uniform(-4.0, 4.0)), increment, samples, range_min, 20.0)
+            yaw = float(rng.uniform(-10.0, 10.0))
+            numpy_ranges = lidar.distances(positions, radii, walls, origin, yaw, beams, 0,
+                                           'numpy')
+            numba_ranges = lidar.distances(positions, radii, walls, origin, yaw, beams, 0,
+                                           'numba')
+            assert np.array_equal(numpy_ranges, numba_ranges)
+            if range_min > 0.0:
+                assert numpy_ranges.tobytes() == numba_ranges.tobytes()
+
+
 def test_noise_has_the_asked_mean_and_spread():
     # In the box [0, 10]^2 from its centre, the true ranges are known (5 / max(|cos|, |sin|));
     # 400 scans of 360 beams: 144,000 draws. The mean error is within 4 standard errors of 0
@@ -258,6 +299,28 @@ def test_noise_is_reproducible_and_leaves_infinities_alone():
          'print(lidar.name_key("ball_0"))'], capture_output=True, text=True, check=True,
         env={**os.environ, 'PYTHONHASHSEED': '12345'})
     assert int(child.stdout) == lidar.name_key('ball_0')
+
+
+def test_noise_seeds_draw_what_default_rng_draws():
+    # Recordings hold noise drawn from np.random.default_rng([seed, key, step]); the cheaper
+    # seeding must give the very same numbers, for seeds, keys and steps of one 32-bit word
+    # and of two (SeedSequence takes an int as its words), and for one Generator reseeded
+    # step after step.
+    from ball_world.core.noise_seed import NoiseSeeds
+    rng = np.random.default_rng(11)
+    cases = [(0, 0, 0), (2**63 - 1, 2**64 - 1, 2**63 - 1), (5, 2**32, 2**32 - 1),
+             (1, 7, 2**32), (0, lidar.name_key('ball_0'), 1)]
+    cases += [(int(rng.integers(2**63)), int(rng.integers(2**63)), int(rng.integers(2**40)))
+              for _ in range(60)]
+    cases += [(int(rng.integers(2**31)), int(rng.integers(2**31)), int(rng.integers(10**6)))
+              for _ in range(60)]
+    for seed, key, step in cases:
+        seeds = NoiseSeeds(seed, key)
+        for at in (step, step + 1, step):
+            expected = np.random.default_rng([seed, key, at]).normal(0.0, 0.01, 40)
+            assert seeds.generator(at).normal(0.0, 0.01, 40).tobytes() == expected.tobytes()
+    with pytest.raises(ValueError, match='non-negative'):
+        NoiseSeeds(0, 1).generator(-1)
 
 
 def test_hit_points_lie_on_what_was_hit():

@@ -1,25 +1,28 @@
-"""The scan's closed forms, written once, and the compiled walk of each beam through a grid.
+"""The scan's closed forms, written once, and the compiled scan that bins the balls by beam.
 
 Why one source: `core.lidar`'s numpy reference applies `circle_terms` and `segment_terms` to
-whole (beam, object) arrays, and `scan_grid` below compiles the very same functions and
+whole (beam, object) arrays, and `scan_sectors` below compiles the very same functions and
 applies them to one beam and one object at a time. Both evaluate the same IEEE operations in
 the same order (no fastmath, so no fused multiply-adds), and a minimum does not depend on
 the order it is taken in, so the two give the same ranges to the last bit although they look
 at different candidates. The rules of `core.rules` hold here too: only `+ - * /`,
 comparisons, `&`, `np.sqrt`, `np.minimum` and `np.maximum` in the shared formulas.
 
-The grid (why it is fast): a scan only sees what lies within range_max of the scanner, so
-`scan_grid` keeps the balls whose disks meet the square of half-width range_max around it
-(one pass over the balls, four comparisons each) and puts each into every cell of a uniform
-grid over that square that its bounding box touches; walls go into the cells their segment
-crosses, column by column (as `broadphase.LevelGrid.wall_cells` does). Each beam then walks
-the cells it crosses in order of distance (Amanatides and Woo's DDA, "A Fast Voxel
-Traversal Algorithm", 1987) and stops at the first cell it leaves after a hit: nothing in a
-later cell can be nearer. A 360-beam scan thus tests the objects along its beams, not all N.
+Why it is fast: the beams' sectors are a polar grid around the scanner, one cell per beam,
+and each object goes only into the cells it can be seen in. A scan only sees what lies
+within range_max, so one pass over the balls keeps those whose disks come within range_max
+of the scanner (a square test first: one comparison rejects most). A ball at distance d of
+radius r subtends asin(r / d) either side of its bearing, at most atan(r / sqrt(d^2 - r^2))
+and pi / 2, so it is tested against the few beams of that sector; a wall against the beams
+between its ends' bearings, when it comes within range_max. Nothing is built per scan (no
+grid to sort the balls into, no walk of its cells): at 1,000 balls a scan costs half of
+what the square grid walk it replaced did (docs/performance.md).
 
-Objects go into the cells they touch widened by SLACK, far above the rounding of the walk's
-boundary distances: a hit point within rounding of a cell boundary is in both cells' lists,
-so the early stop can never skip a nearer hit.
+Sectors are widened by SECTOR_SLACK on each side, far above the error of the cheap `bearing`
+(BEARING_ERROR), the rounding of a beam's direction and the TANGENT band, so a beam that
+the closed forms say hits an object is always among those tested. Where a sector is
+ill-conditioned (a scanner on a wall's line, or at a wall's end) the wall is tested against
+every beam, as the reference does.
 """
 import math
 
@@ -31,8 +34,6 @@ try:
 except ImportError:  # core.lidar's numpy reference needs nothing more
     njit = None
 
-#: Relative widening of what goes into a cell, of the cell width plus the coordinates' scale.
-SLACK = 1e-9
 #: A beam within this part of its distance of a circle's tangent is that tangent (see
 #: circle_terms): a hundred times the rounding of a beam's direction. Worst case, a range
 #: then differs from its beam's own closed form by sqrt(2 r TANGENT (distance + r)), 0.5 um
@@ -41,8 +42,21 @@ TANGENT = 1e-14
 #: A beam passing a wall segment's end by less than this part of the wall's length hits it:
 #: a beam aimed into the corner of two walls must not slip between them through rounding.
 GRAZE = 1e-12
-#: Most cells along one side of a scan's grid (so at most this squared cells in all).
-MAX_CELLS_PER_SIDE = 256
+#: Radians added on each side of an object's sector (see the module's docstring).
+SECTOR_SLACK = 1e-4
+#: Largest error of `bearing` against atan2, rad (test_lidar checks it on a dense sample).
+BEARING_ERROR = 2e-6
+#: atan(a) ~ a (c0 + c1 a^2 + ... + c5 a^10) on [0, 1]: fitted by least squares on Chebyshev
+#: nodes for this module (max error 1.8e-6 rad); it only chooses beams, never a range.
+ATAN_COEFFICIENTS = (0.9999798340122587, -0.3326554827323513, 0.19367031614042238,
+                     -0.11665111632321898, 0.052823487849912906, -0.011770499896159683)
+#: A wall whose line passes within this part of the scanner's distance to its ends (or whose
+#: nearer end is within this part of its length) is tested against every beam.
+WALL_DEGENERATE = 1e-6
+#: Beams closer than this (rad) are one direction to the scan: each object meets all of them.
+MIN_INCREMENT = 1e-12
+#: A ball or wall further than range_max times (1 + this) cannot be hit within range_max.
+REACH_SLACK = 1e-6
 
 
 def available():
@@ -109,43 +123,69 @@ def rep117(distance, range_min, range_max):
     return distance
 
 
-def grid_side(count, mean_radius, reach):
-    """Cells along one side of a scan's grid over the square of half-width `reach`.
+def bearing(y, x):
+    """atan2(y, x) within BEARING_ERROR, in [-pi, pi]: an odd polynomial on the octant, a
+    few multiplies where atan2 costs a library call per ball. Chooses beams, never a range."""
+    ax = abs(x)
+    ay = abs(y)
+    big = max(ax, ay)
+    if big == 0.0:
+        return 0.0
+    a = min(ax, ay) / big
+    s = a * a
+    c0, c1, c2, c3, c4, c5 = ATAN_COEFFICIENTS
+    angle = a * (c0 + s * (c1 + s * (c2 + s * (c3 + s * (c4 + s * c5)))))
+    if ay > ax:
+        angle = 0.5 * math.pi - angle
+    if x < 0.0:
+        angle = math.pi - angle
+    if y < 0.0:
+        angle = -angle
+    return angle
 
-    About four cells per ball kept, but cells no narrower than a mean radius (so a ball
-    lands in a few cells, not dozens), and at most MAX_CELLS_PER_SIDE per side. Measured on
-    the benchmark's gas (benchmarks/lidar_speed.py): one cell per ball, or cells of a
-    diameter, cost 1.5x as much per scan; sixteen per ball 2x.
-    """
-    side = 2.0 * reach
-    width = max(side / math.sqrt(4.0 * count + 1.0), mean_radius)
-    return int(min(max(side / width, 1.0), float(MAX_CELLS_PER_SIDE)))
+
+def fan_window(direction, half, origin, sign, per_radian):
+    """Where the sector of bearings direction -+ (half + SECTOR_SLACK) (rad, world frame)
+    lies along a fan whose beam k points at origin + sign * k / per_radian (origin: the
+    heading plus angle_min; sign that of the increment; per_radian: beams per radian):
+    (low, high) in beams from beam 0, with low + half-width in [0, one turn). Beam k can
+    point into the sector only if k lies in [low, high] shifted by a whole number of turns
+    (2 pi per_radian beams each; `fan_span` clips one shift to the fan). Multiplications,
+    not divisions: the slack dwarfs their rounding."""
+    offset = sign * (direction - origin)
+    offset -= 2.0 * math.pi * math.floor(offset * (0.5 / math.pi))
+    return ((offset - half - SECTOR_SLACK) * per_radian,
+            (offset + half + SECTOR_SLACK) * per_radian)
 
 
-def cell_span(low, high, origin, width, cells):
-    """First and last cell (ints) of one axis that the interval [low, high] touches, clipped
-    to the grid; first > last when the interval lies outside it."""
-    first = math.floor(min(max((low - origin) / width, -1.0), float(cells)))
-    last = math.floor(min(max((high - origin) / width, -1.0), float(cells)))
-    return max(first, 0), min(last, cells - 1)
+def fan_span(low, high, shift, samples):
+    """Beams [first, last) of [low, high] + shift (in beams) that the fan has; first >= last
+    for none."""
+    first = int(math.ceil(min(max(low + shift, 0.0), float(samples))))
+    last = int(math.floor(min(max(high + shift, -1.0), float(samples - 1)))) + 1
+    return first, last
 
 
-def wall_rows(ax, ay, bx, by, column, gx, gy, width, cells, slack):
-    """Rows of the cells in `column` that the segment a-b crosses (widened by slack)."""
-    ex = bx - ax
-    ey = by - ay
-    left = gx + column * width - slack
-    right = gx + (column + 1) * width + slack
-    low = 0.0
-    high = 1.0
-    if ex != 0.0:
-        ta = (left - ax) / ex
-        tb = (right - ax) / ex
-        low = min(max(min(ta, tb), 0.0), 1.0)
-        high = min(max(max(ta, tb), 0.0), 1.0)
-    ya = ay + low * ey
-    yb = ay + high * ey
-    return cell_span(min(ya, yb) - slack, max(ya, yb) + slack, gy, width, cells)
+def ball_beams(px, py, ux, uy, cx, cy, radius, first, last, best):
+    """Beams first..last-1 against one ball the scanner is outside of: the nearer hit kept."""
+    # Views from 0 and a branch-free minimum: a loop the compiler vectorises (twice as fast
+    # as indexing first..last with an `if`, measured).
+    dx = ux[first:last]
+    dy = uy[first:last]
+    out = best[first:last]
+    for k in range(last - first):
+        near, ahead, _ = circle_terms(px, py, dx[k], dy[k], cx, cy, radius)
+        out[k] = min(out[k], near if ahead else np.inf)
+
+
+def wall_beams(px, py, ux, uy, ax, ay, bx, by, first, last, best):
+    """Beams first..last-1 against one wall: the nearer hit kept."""
+    dx = ux[first:last]
+    dy = uy[first:last]
+    out = best[first:last]
+    for k in range(last - first):  # as ball_beams
+        t, hit = segment_terms(px, py, dx[k], dy[k], ax, ay, bx, by)
+        out[k] = min(out[k], t if hit else np.inf)
 
 
 def _compile(function):
@@ -156,161 +196,121 @@ def _compile(function):
 
 
 if njit is not None:
-    for _function in (circle_terms, segment_terms, rotate, rep117, grid_side, cell_span,
-                      wall_rows):
+    for _function in (circle_terms, segment_terms, rotate, rep117, bearing, fan_window,
+                      fan_span, ball_beams, wall_beams):
         register_jitable(error_model='numpy')(_function)
 
 
 @_compile
-def _fill_walls(walls, gx, gy, width, cells, slack, starts, items, fill):
-    """Count (fill False) or list (fill True) each wall in the cells it crosses.
-
-    Counting adds to starts[cell + 1]; listing writes at starts[cell] and advances it.
-    """
-    for j in range(walls.shape[0]):
-        ax = walls[j, 0]
-        ay = walls[j, 1]
-        bx = walls[j, 2]
-        by = walls[j, 3]
-        first, last = cell_span(min(ax, bx) - slack, max(ax, bx) + slack, gx, width, cells)
-        for column in range(first, last + 1):
-            low, high = wall_rows(ax, ay, bx, by, column, gx, gy, width, cells, slack)
-            for row in range(low, high + 1):
-                cell = column * cells + row
-                if fill:
-                    items[starts[cell]] = j
-                    starts[cell] += 1
-                else:
-                    starts[cell + 1] += 1
-
-
-@_compile
-def _fill_balls(x, y, r, gx, gy, width, cells, slack, starts, items, fill):
-    """Count or list each ball (by its row in x, y, r) in the cells its bounding box touches,
-    as _fill_walls does."""
-    for k in range(x.shape[0]):
-        reach = r[k] + slack
-        first_x, last_x = cell_span(x[k] - reach, x[k] + reach, gx, width, cells)
-        first_y, last_y = cell_span(y[k] - reach, y[k] + reach, gy, width, cells)
-        for column in range(first_x, last_x + 1):
-            for row in range(first_y, last_y + 1):
-                cell = column * cells + row
-                if fill:
-                    items[starts[cell]] = k
-                    starts[cell] += 1
-                else:
-                    starts[cell + 1] += 1
+def _wall_sector(px, py, ax, ay, bx, by, reach):
+    """(centre, half) of the bearings (world frame) a wall can be hit in; half >= pi when it
+    must be tested against every beam, and (0, -1) when it lies beyond reach."""
+    qx = ax - px
+    qy = ay - py
+    ex = bx - ax
+    ey = by - ay
+    length2 = ex * ex + ey * ey
+    if length2 == 0.0:  # never hit (segment_terms' denominator is 0)
+        return 0.0, -1.0
+    along = min(max(-(qx * ex + qy * ey) / length2, 0.0), 1.0)
+    nx = qx + along * ex
+    ny = qy + along * ey
+    near_a = math.sqrt(qx * qx + qy * qy)
+    near_b = math.sqrt((qx + ex) * (qx + ex) + (qy + ey) * (qy + ey))
+    cross = qx * ey - qy * ex
+    length = math.sqrt(length2)
+    if (abs(cross) <= WALL_DEGENERATE * length * max(near_a, near_b)
+            or min(near_a, near_b) <= WALL_DEGENERATE * length):
+        return 0.0, math.pi
+    if math.sqrt(nx * nx + ny * ny) > reach * (1.0 + REACH_SLACK):
+        return 0.0, -1.0
+    width = bearing(abs(cross), qx * (qx + ex) + qy * (qy + ey))
+    if cross >= 0.0:
+        start = bearing(qy, qx)
+    else:
+        start = bearing(qy + ey, qx + ex)
+    return start + 0.5 * width, 0.5 * width
 
 
 @_compile
-def scan_grid(positions, radii, walls, px, py, cos_yaw, sin_yaw, bx, by, exclude, range_min,
-              reach, out):
+def scan_sectors(positions, radii, walls, px, py, cos_yaw, sin_yaw, bx, by, angle_min,
+                 increment, exclude, range_min, reach, out):
     """out[k]: distance along beam k from (px, py) to the first ball or wall it meets, as
     REP 117 has it: +inf when that is further than `reach` (range_max) or there is none,
     -inf when it is closer than range_min.
 
-    Beam k's direction is the body direction (bx[k], by[k]) turned by the heading whose cos
-    and sin are given (`rotate`). Ball `exclude` (the scanner's own, or -1) is not seen.
-    Walls are rows x1, y1, x2, y2.
+    Beam k's direction is the body direction (bx[k], by[k]), at angle_min + k * increment,
+    turned by the heading whose cos and sin are given (`rotate`). Ball `exclude` (the
+    scanner's own, or -1) is not seen. Walls are rows x1, y1, x2, y2.
     """
-    n = positions.shape[0]
-    x = np.empty(n)
-    y = np.empty(n)
-    r = np.empty(n)
-    count = 0
-    for i in range(n):
+    samples = bx.shape[0]
+    ux = np.empty(samples)
+    uy = np.empty(samples)
+    for k in range(samples):
+        ux[k], uy[k] = rotate(cos_yaw, sin_yaw, bx[k], by[k])
+        out[k] = np.inf
+    heading = math.atan2(sin_yaw, cos_yaw)
+    # Beams per turn of the circle: a sector is looked for on the turns the fan spans. A fan
+    # of (nearly) one direction has every beam tested against everything.
+    every = not abs(increment) >= MIN_INCREMENT
+    per_radian = 1.0 / max(abs(increment), MIN_INCREMENT)
+    turn = 2.0 * math.pi * per_radian
+    origin = heading + angle_min
+    sign = 1.0 if increment > 0.0 else -1.0
+    for i in range(positions.shape[0]):
+        cx = positions[i, 0]
+        cy = positions[i, 1]
         radius = radii[i]
-        if (i != exclude and abs(positions[i, 0] - px) <= reach + radius
-                and abs(positions[i, 1] - py) <= reach + radius):
-            x[count] = positions[i, 0]
-            y[count] = positions[i, 1]
-            r[count] = radius
-            count += 1
-    x = x[:count]
-    y = y[:count]
-    r = r[:count]
-    radius_sum = 0.0
-    for k in range(count):
-        radius_sum += r[k]
-    cells = grid_side(count, radius_sum / max(count, 1), reach)
-    width = 2.0 * reach / cells
-    gx = px - reach
-    gy = py - reach
-    slack = SLACK * (width + abs(px) + abs(py) + reach)
-    ball_starts = np.zeros(cells * cells + 1, dtype=np.int64)
-    wall_starts = np.zeros(cells * cells + 1, dtype=np.int64)
-    _fill_balls(x, y, r, gx, gy, width, cells, slack, ball_starts, ball_starts, False)
-    _fill_walls(walls, gx, gy, width, cells, slack, wall_starts, wall_starts, False)
-    for cell in range(cells * cells):
-        ball_starts[cell + 1] += ball_starts[cell]
-        wall_starts[cell + 1] += wall_starts[cell]
-    ball_items = np.empty(ball_starts[-1], dtype=np.int64)
-    wall_items = np.empty(wall_starts[-1], dtype=np.int64)
-    # The fill passes advance each start to the next cell's; shifted back afterwards.
-    _fill_balls(x, y, r, gx, gy, width, cells, slack, ball_starts, ball_items, True)
-    _fill_walls(walls, gx, gy, width, cells, slack, wall_starts, wall_items, True)
-    for cell in range(cells * cells, 0, -1):
-        ball_starts[cell] = ball_starts[cell - 1]
-        wall_starts[cell] = wall_starts[cell - 1]
-    ball_starts[0] = 0
-    wall_starts[0] = 0
-    # The last beam that tested each ball: a ball in several cells of a beam is tested once.
-    tested = np.full(count, -1, dtype=np.int64)
-    home_x = min(max(int(math.floor((px - gx) / width)), 0), cells - 1)
-    home_y = min(max(int(math.floor((py - gy) / width)), 0), cells - 1)
-    for k in range(bx.shape[0]):
-        ux, uy = rotate(cos_yaw, sin_yaw, bx[k], by[k])
-        ix = home_x
-        iy = home_y
-        step_x, next_x, delta_x = _axis(ux, px, gx, ix, width)
-        step_y, next_y, delta_y = _axis(uy, py, gy, iy, width)
-        best = np.inf
-        while True:
-            cell = ix * cells + iy
-            for e in range(ball_starts[cell], ball_starts[cell + 1]):
-                i = ball_items[e]
-                if tested[i] == k:
-                    continue
-                tested[i] = k
-                near, ahead, inside = circle_terms(px, py, ux, uy, x[i], y[i], r[i])
-                if inside:
-                    best = 0.0
-                elif ahead and near < best:
-                    best = near
-            for e in range(wall_starts[cell], wall_starts[cell + 1]):
-                j = wall_items[e]
-                t, hit = segment_terms(px, py, ux, uy, walls[j, 0], walls[j, 1], walls[j, 2],
-                                       walls[j, 3])
-                if hit and t < best:
-                    best = t
-            leave = min(next_x, next_y)
-            if best < leave or leave > reach:
-                break
-            if next_x < next_y:
-                ix += step_x
-                next_x += delta_x
-            else:
-                iy += step_y
-                next_y += delta_y
-            if ix < 0 or ix >= cells or iy < 0 or iy >= cells:
-                break
-        out[k] = rep117(best, range_min, reach)
-
-
-@_compile
-def _axis(u, p, origin, index, width):
-    """The DDA along one axis: (step, distance to the first boundary, distance per cell)."""
-    if u > 0.0:
-        return 1, (origin + (index + 1) * width - p) / u, width / u
-    if u < 0.0:
-        return -1, (origin + index * width - p) / u, -width / u
-    return 0, np.inf, np.inf
+        mx = cx - px
+        my = cy - py
+        if abs(mx) > reach + radius or abs(my) > reach + radius:  # (the cheapest test first)
+            continue
+        d2 = mx * mx + my * my
+        # Nothing on a ball whose disk lies beyond reach is nearer than reach (+inf anyway).
+        limit = (reach + radius) * (1.0 + REACH_SLACK)
+        if d2 > limit * limit or i == exclude:
+            continue
+        if d2 <= radius * radius:  # circle_terms' `inside`: every range 0
+            for k in range(samples):
+                out[k] = 0.0
+            continue
+        # The ball subtends asin(r / d) either side of its bearing: at most its tangent, and
+        # at most pi / 2 (a beam meets a ball it is outside of only going towards it).
+        half = min(radius / math.sqrt(d2 - radius * radius), 0.5 * math.pi)
+        if every:
+            ball_beams(px, py, ux, uy, cx, cy, radius, 0, samples, out)
+            continue
+        low, high = fan_window(bearing(my, mx), half, origin, sign, per_radian)
+        shift = -turn if high >= turn else 0.0
+        while low + shift <= samples - 1:
+            first, last = fan_span(low, high, shift, samples)
+            ball_beams(px, py, ux, uy, cx, cy, radius, first, last, out)
+            shift += turn
+    for j in range(walls.shape[0]):
+        ax = walls[j, 0]
+        ay = walls[j, 1]
+        bx_ = walls[j, 2]
+        by_ = walls[j, 3]
+        centre, half = _wall_sector(px, py, ax, ay, bx_, by_, reach)
+        if half < 0.0:
+            continue
+        if half >= math.pi or every:
+            wall_beams(px, py, ux, uy, ax, ay, bx_, by_, 0, samples, out)
+            continue
+        low, high = fan_window(centre, half, origin, sign, per_radian)
+        shift = -turn if high >= turn else 0.0
+        while low + shift <= samples - 1:
+            first, last = fan_span(low, high, shift, samples)
+            wall_beams(px, py, ux, uy, ax, ay, bx_, by_, first, last, out)
+            shift += turn
+    for k in range(samples):
+        out[k] = rep117(out[k], range_min, reach)
 
 
 def warm():
     """Compile (or load from numba's cache) the scan kernel with a tiny scene."""
     out = np.empty(2)
-    scan_grid(np.array([[0.0, 0.0], [2.0, 0.0]]), np.array([0.3, 0.4]),
-              np.array([[3.0, -1.0, 3.0, 1.0]]), 0.0, 0.0, 1.0, 0.0, np.array([1.0, 0.0]),
-              np.array([0.0, 1.0]), 0, 0.1, 5.0, out)
+    scan_sectors(np.array([[0.0, 0.0], [2.0, 0.0]]), np.array([0.3, 0.4]),
+                 np.array([[3.0, -1.0, 3.0, 1.0]]), 0.0, 0.0, 1.0, 0.0, np.array([1.0, 0.0]),
+                 np.array([0.0, 1.0]), 0.0, 0.5 * math.pi, 0, 0.1, 5.0, out)
     return out
