@@ -1,15 +1,22 @@
 """One rule for every spin loop of the package: a signal is a normal way to stop.
 
 Ctrl-C or SIGTERM reaches a spinning rclpy program as KeyboardInterrupt or
-ExternalShutdownException, but also as whatever the call in progress raises once the context
-is gone: a publish fails with RCLError, a message being taken with a RuntimeError from its
-conversion. Those are stops too, once rclpy says the context is down; with the context still
-valid they are real errors and go on up.
+ExternalShutdownException, but also as whatever the call in progress raises: a publish fails
+with RCLError once the context is gone, and a message being taken fails with pybind11's
+RuntimeError ("Unable to convert call argument '0'") when the interrupt lands inside the
+message's Python constructor. rclpy shuts its contexts down on a thread of its own after the
+signal, so at that instant `rclpy.ok()` may still say True: such an error counts as a stop if
+the context goes down within a short grace; with the context still valid after it, it is a
+real error and goes on up.
 """
 import contextlib
+import time
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
+
+#: Seconds an error waits for rclpy to finish a signal's shutdown before it counts as real.
+SHUTDOWN_GRACE = 1.0
 
 
 @contextlib.contextmanager
@@ -20,5 +27,15 @@ def stopped_by_signal():
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:  # noqa: B902 - whatever the interrupted call raises
-        if rclpy.ok():
+        if not _shutting_down(SHUTDOWN_GRACE):
             raise
+
+
+def _shutting_down(grace):
+    """Whether rclpy's context is down, or goes down within `grace` seconds."""
+    deadline = time.monotonic() + grace
+    while rclpy.ok():
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(0.01)
+    return True
