@@ -26,10 +26,11 @@ from ball_world.recording import rerun_log, rerun_outlet
 from ball_world.recording.mcap_writer import McapSink
 from ball_world.recording.rerun_log import (ARENA, ARROW_MAX_FRACTION, ARROW_MIN_FRACTION,
                                             ARROW_SECONDS, ball_color, BALLS, clip_arrow,
-                                            COLLISIONS, ENERGY, IMPULSE_COLOR, IMPULSES,
-                                            LABEL_GAP, LABEL_LIMIT, LABELS, MOMENTUM,
-                                            REAL_TIME_FACTOR, RealTimeFactor, RerunSink,
-                                            scene_bounds, SIM_TIME, STEP, TRAILS,
+                                            COLLISIONS, ENERGY, IMPULSE_COLOR,
+                                            IMPULSE_LABELS, IMPULSES, LABEL_GAP,
+                                            LABEL_LIMIT, LABELS, MOMENTUM, REAL_TIME_FACTOR,
+                                            RealTimeFactor, RerunSink, scene_bounds, SIM_TIME,
+                                            STEP, TRAILS,
                                             VELOCITIES, VELOCITY_SECONDS, VIEW_FPS,
                                             VIEW_TRAIL_SPACING, WALL_COLOR, WALLS)
 from ball_world.recording.rerun_outlet import Outlet, OutletFailed, parse_view
@@ -256,8 +257,11 @@ def test_impulse_stays_half_a_second_in_its_colour_with_the_ball_name(tmp_path):
     _, content, _, _ = read(path)
     vectors = content[(f'/{IMPULSES}', 'Arrows2D:vectors')]
     origins = content[(f'/{IMPULSES}', 'Arrows2D:origins')]
-    labels = content[(f'/{IMPULSES}', 'Arrows2D:labels')]
+    labels = content[(f'/{IMPULSE_LABELS}', 'Points2D:labels')]
+    places = content[(f'/{IMPULSE_LABELS}', 'Points2D:positions')]
     colors = content[(f'/{IMPULSES}', 'Arrows2D:colors')]
+    # The arrows carry no labels of their own (only the cleared, empty ones).
+    assert not any(content.get((f'/{IMPULSES}', 'Arrows2D:labels'), {}).values())
 
     def arrow(step, ball, jx, jy):
         kick = np.array([jx, jy]) / world.masses[ball] * ARROW_SECONDS
@@ -272,9 +276,20 @@ def test_impulse_stays_half_a_second_in_its_colour_with_the_ball_name(tmp_path):
         assert shown_at(vectors, step) == [arrow(*e) for e in expected], step
         assert shown_at(origins, step) == [as_float32(records[k].positions[ball])
                                            for k, ball, _, _ in expected], step
-        if expected:
-            assert shown_at(labels, step) == [
-                f'ball_{ball}: J = ({jx:.3g}, {jy:.3g}) N s' for _, ball, jx, jy in expected]
+        assert shown_at(labels, step) == [
+            f'ball_{ball}: J = ({jx:.3g}, {jy:.3g}) N s' for _, ball, jx, jy in expected]
+        # Each label under its arrow, never over it (Rerun draws a label below its point).
+        assert len(shown_at(places, step)) == len(expected)
+        for (k, ball, jx, jy), (x, y) in zip(expected, shown_at(places, step)):
+            x0, y0 = records[k].positions[ball]
+            vector = arrow(k, ball, jx, jy)
+            lowest = min(y0, y0 + vector[1])
+            assert y < lowest - 0.005 * span
+            if vector[1] < 0.0:  # pointing down: under the head
+                assert x == pytest.approx(x0 + vector[0], abs=1e-5)
+            else:  # under the tail: under the pushed ball's own label as well
+                assert x == pytest.approx(x0, abs=1e-5)
+                assert y < y0 - world.radii[ball] * (1.0 + LABEL_GAP)
     packed = int.from_bytes(bytes((*IMPULSE_COLOR, 255)), 'big')
     assert {tuple(color) for color in colors.values()} == {(packed,), ()}  # () = cleared
     # 0.1 N s on a ball of ~0.1 kg is a small push: its arrow is lifted to the floor.

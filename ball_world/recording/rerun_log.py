@@ -18,10 +18,13 @@ Layout of the recording (application id 'ball_world'):
   because a reset may change the walls and static data would rewrite the earlier segments.
 - `arena/impulses` (Arrows2D): each applied impulse for IMPULSE_SECONDS of simulated time,
   in IMPULSE_COLOR (no ball has it; readable on the viewer's light and dark themes), at the
-  point where it was applied, pointing along the velocity change, labelled with the ball's
-  name and J. Its length is the velocity change times ARROW_SECONDS, kept between a floor
-  (a tiny push is still seen) and a ceiling (a huge one stays on screen) set by the size of
-  the scene, and shortened where it would leave the scene, so its head is always seen.
+  point where it was applied, pointing along the velocity change. Its length is the
+  velocity change times ARROW_SECONDS, kept between a floor (a tiny push is still seen) and
+  a ceiling (a huge one stays on screen) set by the size of the scene, and shortened where
+  it would leave the scene, so its head is always seen.
+- `arena/impulses/labels` (Points2D): each shown arrow's ball name and J, under the arrow
+  (Rerun draws an arrow's own label over the middle of its shaft): under its lowest end,
+  and when that is the tail, where the ball was, under the ball's label too.
 - `arena/velocities` (Arrows2D, optional): each ball's velocity times VELOCITY_SECONDS.
 - `arena/trails` (LineStrips2D, optional): each ball's path over the last trail seconds.
 - `arena/agents` (Arrows2D): each agent's heading, labelled with its name (rerun_agents).
@@ -87,6 +90,7 @@ ARENA = 'arena'
 BALLS = 'arena/balls'
 WALLS = 'arena/walls'
 IMPULSES = 'arena/impulses'
+IMPULSE_LABELS = 'arena/impulses/labels'
 VELOCITIES = 'arena/velocities'
 TRAILS = 'arena/trails'
 LABELS = 'arena/labels'
@@ -109,6 +113,10 @@ LABEL_LIMIT = 30
 #: A ball's label point lies this fraction of its radius below its bottom edge: the viewer
 #: draws the label's top a few pixels below the point, so the name sits just under the ball.
 LABEL_GAP = 0.1
+#: A line of label text is about this fraction of the scene's larger side in the fitted view:
+#: an impulse's label below the tail of its arrow goes a line further down, under the label
+#: of the ball it pushed.
+LABEL_LINE_FRACTION = 0.03
 
 #: A file's buffered steps are sent once this many are pending, or this many positions.
 MAX_PENDING_STEPS = 64
@@ -542,7 +550,8 @@ class _Feed:
         self._energy0 = None
         self._shown_names = None
         self._label_drop = None  # (n, 2) float32 from each ball to its label, if shown
-        self._impulses = []  # (expires log ns, origin, vector, label) on screen or due
+        self._impulses = []  # (expires log ns, origin, vector, label, label point) on screen
+        #                      or due
         self._impulses_changed = False
         self._trail = deque()  # (log ns, positions) of the trail's steps
         self._closed = False
@@ -570,6 +579,7 @@ class _Feed:
             strips, radii=rr.Radius.ui_points(1.5), colors=WALL_COLOR, draw_order=20.0),
             static=self.live)
         self._emit('log', IMPULSES, rr.Arrows2D.cleared())
+        self._emit('log', IMPULSE_LABELS, rr.Points2D.cleared())
         self._log_ruler(world)
 
     def _log_ruler(self, world):
@@ -798,6 +808,7 @@ class _Feed:
         """Put the step's impulses on screen for IMPULSE_SECONDS from the step on."""
         names = names_of(record)
         masses = getattr(record, 'masses', None)
+        radii = getattr(record, 'radii', None)
         index_of = None
         now = record.log_time_ns
         for impulse in record.impulses:
@@ -809,12 +820,27 @@ class _Feed:
                 if ball is None:
                     continue
             name = names[ball]
-            mass = masses[ball] if masses is not None else self._segment.mass[name]
+            segment = self._segment
+            mass = masses[ball] if masses is not None else segment.mass[name]
+            radius = (float(radii[ball]) if radii is not None
+                      else segment.radius.get(name, segment.smallest))
             origin = np.asarray(record.positions[ball], dtype=np.float64)
-            self._impulses.append((now + round(IMPULSE_SECONDS * 1e9), origin,
-                                   self._arrow(origin, impulse.jx / mass, impulse.jy / mass),
-                                   f'{name}: J = ({impulse.jx:.3g}, {impulse.jy:.3g}) N s'))
+            vector = self._arrow(origin, impulse.jx / mass, impulse.jy / mass)
+            self._impulses.append((now + round(IMPULSE_SECONDS * 1e9), origin, vector,
+                                   f'{name}: J = ({impulse.jx:.3g}, {impulse.jy:.3g}) N s',
+                                   self._impulse_label_point(origin, vector, radius)))
             self._impulses_changed = True
+
+    def _impulse_label_point(self, origin, vector, radius):
+        """Where an arrow's label goes: under the arrow's lowest end (the view has +y up and
+        draws a label below its point), a line lower still when that end is the tail, where
+        the pushed ball's own label is."""
+        gap = ARROW_INSET_FRACTION * self._segment.span
+        tip = (origin[0] + vector[0], origin[1] + vector[1])
+        if tip[1] < origin[1]:
+            return (tip[0], tip[1] - gap)
+        below_ball = radius * (1.0 + LABEL_GAP) + LABEL_LINE_FRACTION * self._segment.span
+        return (origin[0], origin[1] - max(gap, below_ball))
 
     def _show_impulses(self, step, now):
         """Re-log the arrows when one came or went since the last logged step."""
@@ -827,11 +853,14 @@ class _Feed:
         self._set_time(step, now)
         if not shown:
             self._emit('log', IMPULSES, rr.Arrows2D.cleared())
+            self._emit('log', IMPULSE_LABELS, rr.Points2D.cleared())
             return
         self._emit('log', IMPULSES, rr.Arrows2D(
             origins=[i[1] for i in shown], vectors=[i[2] for i in shown],
-            labels=[i[3] for i in shown], show_labels=True, colors=IMPULSE_COLOR,
-            radii=rr.Radius.ui_points(3.0), draw_order=40.0))
+            colors=IMPULSE_COLOR, radii=rr.Radius.ui_points(3.0), draw_order=40.0))
+        self._emit('log', IMPULSE_LABELS, rr.Points2D(
+            [i[4] for i in shown], radii=0.0, labels=[i[3] for i in shown], show_labels=True,
+            colors=IMPULSE_COLOR))
 
     def _log_scans(self, record, agents, step):
         """Each scan's hit points (finite ranges, noise included) where they fall in the arena."""
