@@ -27,7 +27,7 @@ from ball_world.recording.mcap_writer import McapSink
 from ball_world.recording.rerun_log import (ARENA, ARROW_MAX_FRACTION, ARROW_MIN_FRACTION,
                                             ARROW_SECONDS, ball_color, BALLS, clip_arrow,
                                             COLLISIONS, ENERGY, IMPULSE_COLOR,
-                                            IMPULSE_LABELS, IMPULSES, LABEL_GAP,
+                                            IMPULSES, LABEL_GAP,
                                             LABEL_LIMIT, LABELS, MOMENTUM, REAL_TIME_FACTOR,
                                             RealTimeFactor, RerunSink, scene_bounds, SIM_TIME,
                                             STEP, TRAILS,
@@ -257,8 +257,8 @@ def test_impulse_stays_half_a_second_in_its_colour_with_the_ball_name(tmp_path):
     _, content, _, _ = read(path)
     vectors = content[(f'/{IMPULSES}', 'Arrows2D:vectors')]
     origins = content[(f'/{IMPULSES}', 'Arrows2D:origins')]
-    labels = content[(f'/{IMPULSE_LABELS}', 'Points2D:labels')]
-    places = content[(f'/{IMPULSE_LABELS}', 'Points2D:positions')]
+    labels = content[(f'/{IMPULSES}', 'Points2D:labels')]
+    places = content[(f'/{IMPULSES}', 'Points2D:positions')]
     colors = content[(f'/{IMPULSES}', 'Arrows2D:colors')]
     # The arrows carry no labels of their own (only the cleared, empty ones).
     assert not any(content.get((f'/{IMPULSES}', 'Arrows2D:labels'), {}).values())

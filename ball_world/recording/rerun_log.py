@@ -22,9 +22,10 @@ Layout of the recording (application id 'ball_world'):
   velocity change times ARROW_SECONDS, kept between a floor (a tiny push is still seen) and
   a ceiling (a huge one stays on screen) set by the size of the scene, and shortened where
   it would leave the scene, so its head is always seen.
-- `arena/impulses/labels` (Points2D): each shown arrow's ball name and J, under the arrow
-  (Rerun draws an arrow's own label over the middle of its shaft): under its lowest end,
-  and when that is the tail, where the ball was, under the ball's label too.
+  Its label (the ball's name and J) is a Points2D of the same entity and row, so a viewer
+  never draws an arrow with another one's label: Rerun draws an arrow's own label over the
+  middle of its shaft, so the label point lies under the arrow's lowest end instead, and
+  when that is the tail, where the ball was, under the ball's label too.
 - `arena/velocities` (Arrows2D, optional): each ball's velocity times VELOCITY_SECONDS.
 - `arena/trails` (LineStrips2D, optional): each ball's path over the last trail seconds.
 - `arena/agents` (Arrows2D): each agent's heading, labelled with its name (rerun_agents).
@@ -90,7 +91,6 @@ ARENA = 'arena'
 BALLS = 'arena/balls'
 WALLS = 'arena/walls'
 IMPULSES = 'arena/impulses'
-IMPULSE_LABELS = 'arena/impulses/labels'
 VELOCITIES = 'arena/velocities'
 TRAILS = 'arena/trails'
 LABELS = 'arena/labels'
@@ -578,8 +578,7 @@ class _Feed:
         self._emit('log', WALLS, rr.LineStrips2D(
             strips, radii=rr.Radius.ui_points(1.5), colors=WALL_COLOR, draw_order=20.0),
             static=self.live)
-        self._emit('log', IMPULSES, rr.Arrows2D.cleared())
-        self._emit('log', IMPULSE_LABELS, rr.Points2D.cleared())
+        self._emit('log', IMPULSES, rr.Arrows2D.cleared(), rr.Points2D.cleared())
         self._log_ruler(world)
 
     def _log_ruler(self, world):
@@ -852,15 +851,15 @@ class _Feed:
             return
         self._set_time(step, now)
         if not shown:
-            self._emit('log', IMPULSES, rr.Arrows2D.cleared())
-            self._emit('log', IMPULSE_LABELS, rr.Points2D.cleared())
+            self._emit('log', IMPULSES, rr.Arrows2D.cleared(), rr.Points2D.cleared())
             return
-        self._emit('log', IMPULSES, rr.Arrows2D(
+        arrows = rr.Arrows2D(
             origins=[i[1] for i in shown], vectors=[i[2] for i in shown],
-            colors=IMPULSE_COLOR, radii=rr.Radius.ui_points(3.0), draw_order=40.0))
-        self._emit('log', IMPULSE_LABELS, rr.Points2D(
+            colors=IMPULSE_COLOR, radii=rr.Radius.ui_points(3.0), draw_order=40.0)
+        labels = rr.Points2D(
             [i[4] for i in shown], radii=0.0, labels=[i[3] for i in shown], show_labels=True,
-            colors=IMPULSE_COLOR))
+            colors=IMPULSE_COLOR)
+        self._emit('log', IMPULSES, arrows, labels)
 
     def _log_scans(self, record, agents, step):
         """Each scan's hit points (finite ranges, noise included) where they fall in the arena."""
