@@ -742,12 +742,17 @@ def test_live_view_gets_frames_at_its_rate_with_balls_trails_and_pushes_in_step(
         assert all(strip[-1] == point for strip, point in zip(trails[k], positions[k]))
         assert 1 <= len(trails[k][0]) <= len(kept) + 1
         assert len(trails[k][0]) - 1 <= 0.1 / VIEW_TRAIL_SPACING + 1
-    # The labels move with the balls, in the same frames, under each ball.
-    labels = content_view[(f'/{LABELS}', 'Points2D:positions')]
+    # The labels move with the balls, in the balls' rows (arrows of length 0, drawn as
+    # their labels alone), under each ball: no frame's names under another frame's balls.
+    labels = content_view[(f'/{BALLS}', 'Arrows2D:origins')]
     assert set(labels) == frames
     radii = collector.segments[0][0].radii
     assert all(np.allclose(labels[k], below_each_ball(positions[k], radii), rtol=0.0,
                            atol=1e-5) for k in frames)
+    assert content_view[(f'/{BALLS}', 'Arrows2D:labels')] == {
+        None: [f'ball_{i}' for i in range(len(radii))]}
+    assert content_view[(f'/{BALLS}', 'Arrows2D:vectors')] == {None: [[0.0, 0.0]] * len(radii)}
+    assert not [key for key in content_view if key[0] == f'/{LABELS}']
     assert set(scalars(content_view, COLLISIONS)) == frames
     assert scalars(content_view, COLLISIONS)[90] == scalars(content_file, COLLISIONS)[90]
     # The push of step 10 (between frames) is drawn at the next frame, from where it was
@@ -758,8 +763,7 @@ def test_live_view_gets_frames_at_its_rate_with_balls_trails_and_pushes_in_step(
     assert not shown_at(origins, 90)
     # What a page opened late needs is static: it outlives the frames a server drops.
     for key in ((f'/{WALLS}', 'LineStrips2D:strips'), (f'/{BALLS}', 'Points2D:radii'),
-                (f'/{BALLS}', 'Points2D:colors'), (f'/{LABELS}', 'Points2D:labels'),
-                (f'/{LABELS}', 'Points2D:colors'),
+                (f'/{BALLS}', 'Points2D:colors'), (f'/{BALLS}', 'Arrows2D:colors'),
                 (f'/{ARENA}', 'Transform3D:rotation_axis_angle')):
         assert list(content_view[key]) == [None], key
 
@@ -854,6 +858,10 @@ def test_node_streams_to_a_viewer_and_records_one_recording(tmp_path, listener):
     assert set(content_view[(f'/{BALLS}', 'LineStrips2D:strips')]) == set(shown)
     assert set(content_view[(f'/{BALLS}', 'Arrows2D:vectors')]) == set(shown)
     assert (f'/{VELOCITIES}', 'Arrows2D:vectors') in content_file
+    # The row's arrows are the velocities: the labels are points of their own, per frame.
+    assert set(content_view[(f'/{LABELS}', 'Points2D:positions')]) == set(shown)
+    assert list(content_view[(f'/{LABELS}', 'Points2D:labels')]) == [None]
+    assert not [key for key in content_view if key == (f'/{BALLS}', 'Arrows2D:labels')]
     assert (f'/{TRAILS}', 'LineStrips2D:strips') in content_file
     rtf = scalars(content_file, REAL_TIME_FACTOR)
     # From the first step half a second after step 1 (RealTimeFactor) to the last, every step.

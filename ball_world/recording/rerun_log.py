@@ -14,6 +14,8 @@ Layout of the recording (application id 'ball_world'):
   ball (below it in the view, +y up), so the label is drawn under the ball. Names and
   colours are logged when the balls change, like the radii; the points move with the balls
   (a second small float32 array per step). Beyond LABEL_LIMIT balls nothing is logged here.
+  A live view without velocities gets them in `arena/balls` instead, in the frame's row, as
+  Arrows2D of length 0 at the same points (see _Feed._log_balls).
 - `arena/walls` (LineStrips2D), once per segment at its first step: not static in a file,
   because a reset may change the walls and static data would rewrite the earlier segments.
 - `arena/impulses` (Arrows2D): each applied impulse for IMPULSE_SECONDS of simulated time,
@@ -550,6 +552,9 @@ class _Feed:
         self._energy0 = None
         self._shown_names = None
         self._label_drop = None  # (n, 2) float32 from each ball to its label, if shown
+        # A live view's labels are arrows of length 0 in the balls' row, unless the row's
+        # arrows are the velocities (_log_balls).
+        self._labels_in_row = self.live and not velocities
         self._impulses = []  # (expires log ns, origin, vector, label, label point) on screen
         #                      or due
         self._impulses_changed = False
@@ -755,9 +760,11 @@ class _Feed:
             frame.append(rr.Arrows2D.from_fields(
                 origins=positions, vectors=np.asarray(record.velocities, dtype=np.float32)
                 * np.float32(VELOCITY_SECONDS)))
-        self._emit('log', BALLS, *frame)
         labels = self._label_points(positions)
-        if labels is not None:
+        if labels is not None and self._labels_in_row:
+            frame.append(rr.Arrows2D.from_fields(origins=labels))
+        self._emit('log', BALLS, *frame)
+        if labels is not None and not self._labels_in_row:
             self._emit('log', LABELS, rr.Points2D.from_fields(positions=labels))
         self._buffer_plots(record, rtf, step)
         now = self._frame_clock()
@@ -768,8 +775,11 @@ class _Feed:
     def _log_balls(self, record, names, step):
         """Radii, colours and labels of the balls as they are now, in pose order.
 
-        The labels are an entity of their own (LABELS), placed by each step's positions
-        (_label_points) LABEL_GAP below each ball, up to LABEL_LIMIT balls.
+        The labels go under the balls, LABEL_GAP radii below each, up to LABEL_LIMIT balls,
+        placed by each step's positions (_label_points). In a file they are an entity of
+        their own (LABELS). A live view without velocities gets them in the balls' own row,
+        as arrows of length 0 (drawn as nothing but their labels), so no viewer draws names
+        of one moment under balls of another, and a frame stays one message.
         """
         segment = self._segment
         radii = getattr(record, 'radii', None)
@@ -780,26 +790,34 @@ class _Feed:
         self._set_time(step, record.log_time_ns)
         colors = np.array([ball_color(name) for name in names], dtype=np.uint8).reshape(-1, 3)
         radii = np.asarray(radii, dtype=np.float32).reshape(-1)
+        labelled = len(names) <= LABEL_LIMIT
         looks = [rr.Points2D.from_fields(radii=radii, colors=colors, draw_order=30.0)]
         if self.live and self.trail_seconds:
             looks.append(rr.LineStrips2D.from_fields(
                 colors=colors, radii=rr.Radius.ui_points(1.0), draw_order=10.0))
         if self.live and self.velocities:
             looks.append(rr.Arrows2D.from_fields(colors=colors, draw_order=35.0))
+        if self._labels_in_row:
+            looks.append(rr.Arrows2D.from_fields(
+                vectors=np.zeros((len(names), 2), dtype=np.float32), radii=0.0, colors=colors,
+                labels=list(names), show_labels=True) if labelled else rr.Arrows2D.cleared())
         self._emit('log', BALLS, *looks, static=self.live)
-        self._log_labels(names, radii, colors)
-
-    def _log_labels(self, names, radii, colors):
-        """The labels' names and colours, and how far below each ball they go; when there
-        are too many balls, no more label points (an empty set hides the last ones)."""
-        if len(names) <= LABEL_LIMIT:
+        if not self._labels_in_row:
+            self._log_labels(names, colors, labelled)
+        if labelled:
             self._label_drop = np.zeros((len(names), 2), dtype=np.float32)
             self._label_drop[:, 1] = radii * np.float32(1.0 + LABEL_GAP)
+        else:
+            self._label_drop = None
+
+    def _log_labels(self, names, colors, labelled):
+        """The labels' names and colours (LABELS); when there are too many balls, no more
+        label points (an empty set hides the last ones)."""
+        if labelled:
             self._emit('log', LABELS, rr.Points2D.from_fields(
                 radii=0.0, colors=colors, labels=list(names), show_labels=True),
                 static=self.live)
         elif self._label_drop is not None:
-            self._label_drop = None
             self._emit('log', LABELS, rr.Points2D.from_fields(
                 positions=np.zeros((0, 2), dtype=np.float32)))
 
