@@ -208,6 +208,58 @@ def test_beyond_the_label_limit_no_label_points_are_logged(tmp_path):
     assert len(content[(f'/{BALLS}', 'Points2D:positions')][1]) == count
 
 
+def test_a_live_view_hides_its_labels_when_the_world_grows_past_the_limit():
+    """A live feed's calls, recorded instead of sent: the labels ride in the balls' row (as
+    arrows of length 0) and go when the balls outnumber LABEL_LIMIT."""
+    calls = []
+
+    class Recorder:
+        def call(self, name, *args, **kwargs):
+            calls.append((name, args, kwargs))
+
+        def flush(self):
+            pass
+
+        def close(self):
+            pass
+
+    clock = FakeClock()
+    feed = rerun_log._Feed(lambda stream, plan: Recorder(), frame_period=0.1, frame_clock=clock)
+    collector = Truth()
+    Simulation({'random.count': 3}, sinks=[collector])
+    world, _ = collector.segments[0]
+    feed.start_segment(world, SimpleNamespace(parameters={}, log_offset_ns=0))
+    first = collector.records[0]
+    count = LABEL_LIMIT + 1
+    grown = SimpleNamespace(**{**vars(replace(first)), 'step': 1, 'log_time_ns': 10**7,
+                               'positions': np.column_stack((np.arange(count) * 0.3 + 0.2,
+                                                             np.full(count, 5.0))),
+                               'velocities': np.zeros((count, 2)),
+                               'names': tuple(f'ball_{i}' for i in range(count)),
+                               'radii': np.full(count, 0.1), 'masses': np.ones(count)})
+
+    def arrows_logged(record):
+        """(static looks, frame) arrows of the balls when the feed logs `record`."""
+        del calls[:]
+        clock.now += 1.0
+        feed.write_step(record)
+        logged = [(kwargs.get('static', False), archetype) for name, args, kwargs in calls
+                  if name == 'log' and args[0] == BALLS for archetype in args[1:]
+                  if isinstance(archetype, rr.Arrows2D)]
+        assert not [args for name, args, _ in calls if name == 'log' and args[0] == LABELS]
+        return ([a for static, a in logged if static], [a for static, a in logged if not static])
+
+    (looks,), (frame,) = arrows_logged(first)
+    assert looks.labels.as_arrow_array().to_pylist() == ['ball_0', 'ball_1', 'ball_2']
+    assert np.allclose(frame.origins.as_arrow_array().to_pylist(),
+                       below_each_ball(as_float32(first.positions), world.radii), atol=1e-5)
+    (looks,), frames = arrows_logged(grown)
+    assert looks.labels.as_arrow_array().to_pylist() == []  # cleared: no names left
+    assert looks.vectors.as_arrow_array().to_pylist() == []
+    assert frames == []  # and no label points in the frame
+    feed.close()
+
+
 def test_energy_is_the_change_from_step_0_and_reads_zero_when_conserved(tmp_path):
     path = tmp_path / 'run.rrd'
     collected = run([RerunSink(path)], steps=300, impulses={200: (2, 0.3, 0.1)})
