@@ -29,7 +29,7 @@ from ball_world.core.edits import Ball
 from ball_world.msgs.cdr import decode_string, encode_string
 from ball_world.recording.mcap_reader import feed_sinks, MAX_EDIT_TEXT, Recording
 from ball_world.recording.mcap_writer import McapSink
-from ball_world.recording.rerun_log import BALLS, IMPULSES, STEP
+from ball_world.recording.rerun_log import BALLS, IMPULSES, LABELS, STEP
 from ball_world.simulation import Simulation, SpawnRequest
 from ball_world.tools import info, resim, to_rrd
 
@@ -281,11 +281,11 @@ def test_to_rrd_shows_balls_come_and_go_with_their_names_and_radii(recorded, tmp
             shown = record.names
             expected_labels[base + record.step] = list(record.names)
             expected_radii[base + record.step] = record.radii.astype(np.float32).tolist()
-    assert content[(f'/{BALLS}', 'Points2D:labels')] == expected_labels
+    assert content[(f'/{LABELS}', 'Points2D:labels')] == expected_labels
     assert content[(f'/{BALLS}', 'Points2D:radii')] == expected_radii
     assert sorted(expected_labels) == [0, 4, 5, 6, 11, 16, 17, 22]
     # At step 5 ball_3 was pushed before and after ball_0 went: both arrows name ball_3.
-    arrows = content[(f'/{IMPULSES}', 'Arrows2D:labels')][5]
+    arrows = content[(f'/{IMPULSES}', 'Points2D:labels')][5]
     assert [label.split(':')[0] for label in arrows] == ['ball_1', 'probe', 'ball_3', 'ball_3',
                                                          'ball_2']
 

@@ -26,9 +26,11 @@ from ball_world.recording import rerun_log, rerun_outlet
 from ball_world.recording.mcap_writer import McapSink
 from ball_world.recording.rerun_log import (ARENA, ARROW_MAX_FRACTION, ARROW_MIN_FRACTION,
                                             ARROW_SECONDS, ball_color, BALLS, clip_arrow,
-                                            COLLISIONS, ENERGY, IMPULSE_COLOR, IMPULSES,
-                                            MOMENTUM, REAL_TIME_FACTOR, RealTimeFactor,
-                                            RerunSink, scene_bounds, SIM_TIME, STEP, TRAILS,
+                                            COLLISIONS, ENERGY, IMPULSE_COLOR,
+                                            IMPULSES, LABEL_GAP,
+                                            LABEL_LIMIT, LABELS, MOMENTUM, REAL_TIME_FACTOR,
+                                            RealTimeFactor, RerunSink, scene_bounds, SIM_TIME,
+                                            STEP, TRAILS,
                                             VELOCITIES, VELOCITY_SECONDS, VIEW_FPS,
                                             VIEW_TRAIL_SPACING, WALL_COLOR, WALLS)
 from ball_world.recording.rerun_outlet import Outlet, OutletFailed, parse_view
@@ -133,12 +135,129 @@ def test_recording_verifies_and_reads_back_exactly(tmp_path):
     walls = content[(f'/{WALLS}', 'LineStrips2D:strips')]
     assert walls == {0: world.walls.reshape(-1, 2, 2).tolist()}
     assert content[(f'/{BALLS}', 'Points2D:radii')] == {0: as_float32(world.radii)}
-    labels = content[(f'/{BALLS}', 'Points2D:labels')][0]
+    labels = content[(f'/{LABELS}', 'Points2D:labels')][0]
     assert labels == [f'ball_{i}' for i in range(len(world.radii))]
     assert (f'/{ARENA}', 'Transform3D:rotation_axis_angle') in content
     momentum = scalars(content, MOMENTUM)
     assert momentum == {r.step: r.momentum.tolist() for r in records}
     assert not any(entity in (f'/{VELOCITIES}', f'/{TRAILS}') for entity, _ in content)
+
+
+def below_each_ball(positions, radii):
+    """The closed form of the label points: under each ball (+y up), LABEL_GAP radii below
+    its bottom edge, in float32 as Rerun stores them."""
+    centres = np.asarray(positions, dtype=np.float64)
+    radii = np.asarray(radii, dtype=np.float64)
+    return np.column_stack((centres[:, 0], centres[:, 1] - radii * (1.0 + LABEL_GAP)))
+
+
+def test_labels_are_their_own_points_under_each_ball_and_the_balls_have_none(tmp_path):
+    """Rerun draws a label just below its point: on the ball's centre it covered the ball's
+    lower half. A point under each ball puts the name under the ball."""
+    path = tmp_path / 'run.rrd'
+    collected = run([RerunSink(path)], steps=10)
+    _, content, _, _ = read(path)
+    world = collected.segments[0][0]
+    assert not [component for entity, component in content
+                if entity == f'/{BALLS}' and component.endswith(':labels')]
+    assert content[(f'/{LABELS}', 'Points2D:labels')] == {
+        0: [f'ball_{i}' for i in range(len(world.radii))]}
+    assert content[(f'/{LABELS}', 'Points2D:show_labels')] == {0: [True]}
+    assert content[(f'/{LABELS}', 'Points2D:colors')] == content[(f'/{BALLS}', 'Points2D:colors')]
+    points = content[(f'/{LABELS}', 'Points2D:positions')]
+    assert sorted(points) == list(range(11))
+    for record in collected.records:
+        shown = np.asarray(points[record.step], dtype=np.float64)
+        expected = below_each_ball(as_float32(record.positions), world.radii)
+        assert shown.shape == expected.shape
+        assert np.array_equal(shown[:, 0], expected[:, 0])  # straight below
+        assert np.allclose(shown[:, 1], expected[:, 1], rtol=0.0, atol=1e-5)
+        # Below the ball's edge, not on it (the arena's view has +y up).
+        assert np.all(shown[:, 1] < np.asarray(record.positions)[:, 1] - world.radii)
+
+
+def test_beyond_the_label_limit_no_label_points_are_logged(tmp_path):
+    """A world past LABEL_LIMIT balls costs one positions array per step, not two; a world
+    that grows past it hides the labels it had."""
+    path = tmp_path / 'many.rrd'
+    run([RerunSink(path)], steps=3, parameters={'random.count': LABEL_LIMIT + 1}, impulses={})
+    _, content, _, _ = read(path)
+    assert not [key for key in content if key[0] == f'/{LABELS}']
+    assert sorted(content[(f'/{BALLS}', 'Points2D:positions')]) == [0, 1, 2, 3]
+
+    path = tmp_path / 'grows.rrd'
+    sink = RerunSink(path)
+    collector = Truth()
+    Simulation({'random.count': 3}, sinks=[collector])
+    world, _ = collector.segments[0]
+    sink.start_segment(world, SimpleNamespace(parameters={}, log_offset_ns=0))
+    first = collector.records[0]
+    sink.write_step(first)
+    count = LABEL_LIMIT + 1
+    grown = SimpleNamespace(**{**vars(replace(first)), 'step': 1, 'log_time_ns': 10**7,
+                               'positions': np.column_stack((np.arange(count) * 0.3 + 0.2,
+                                                             np.full(count, 5.0))),
+                               'velocities': np.zeros((count, 2)),
+                               'names': tuple(f'ball_{i}' for i in range(count)),
+                               'radii': np.full(count, 0.1), 'masses': np.ones(count)})
+    sink.write_step(grown)
+    sink.close()
+    _, content, _, _ = read(path)
+    points = content[(f'/{LABELS}', 'Points2D:positions')]
+    assert len(points[0]) == 3 and points[1] == []  # nothing left on screen at step 1
+    assert len(content[(f'/{BALLS}', 'Points2D:positions')][1]) == count
+
+
+def test_a_live_view_hides_its_labels_when_the_world_grows_past_the_limit():
+    """A live feed's calls, recorded instead of sent: the labels ride in the balls' row (as
+    arrows of length 0) and go when the balls outnumber LABEL_LIMIT."""
+    calls = []
+
+    class Recorder:
+        def call(self, name, *args, **kwargs):
+            calls.append((name, args, kwargs))
+
+        def flush(self):
+            pass
+
+        def close(self):
+            pass
+
+    clock = FakeClock()
+    feed = rerun_log._Feed(lambda stream, plan: Recorder(), frame_period=0.1, frame_clock=clock)
+    collector = Truth()
+    Simulation({'random.count': 3}, sinks=[collector])
+    world, _ = collector.segments[0]
+    feed.start_segment(world, SimpleNamespace(parameters={}, log_offset_ns=0))
+    first = collector.records[0]
+    count = LABEL_LIMIT + 1
+    grown = SimpleNamespace(**{**vars(replace(first)), 'step': 1, 'log_time_ns': 10**7,
+                               'positions': np.column_stack((np.arange(count) * 0.3 + 0.2,
+                                                             np.full(count, 5.0))),
+                               'velocities': np.zeros((count, 2)),
+                               'names': tuple(f'ball_{i}' for i in range(count)),
+                               'radii': np.full(count, 0.1), 'masses': np.ones(count)})
+
+    def arrows_logged(record):
+        """(static looks, frame) arrows of the balls when the feed logs `record`."""
+        del calls[:]
+        clock.now += 1.0
+        feed.write_step(record)
+        logged = [(kwargs.get('static', False), archetype) for name, args, kwargs in calls
+                  if name == 'log' and args[0] == BALLS for archetype in args[1:]
+                  if isinstance(archetype, rr.Arrows2D)]
+        assert not [args for name, args, _ in calls if name == 'log' and args[0] == LABELS]
+        return ([a for static, a in logged if static], [a for static, a in logged if not static])
+
+    (looks,), (frame,) = arrows_logged(first)
+    assert looks.labels.as_arrow_array().to_pylist() == ['ball_0', 'ball_1', 'ball_2']
+    assert np.allclose(frame.origins.as_arrow_array().to_pylist(),
+                       below_each_ball(as_float32(first.positions), world.radii), atol=1e-5)
+    (looks,), frames = arrows_logged(grown)
+    assert looks.labels.as_arrow_array().to_pylist() == []  # cleared: no names left
+    assert looks.vectors.as_arrow_array().to_pylist() == []
+    assert frames == []  # and no label points in the frame
+    feed.close()
 
 
 def test_energy_is_the_change_from_step_0_and_reads_zero_when_conserved(tmp_path):
@@ -190,8 +309,11 @@ def test_impulse_stays_half_a_second_in_its_colour_with_the_ball_name(tmp_path):
     _, content, _, _ = read(path)
     vectors = content[(f'/{IMPULSES}', 'Arrows2D:vectors')]
     origins = content[(f'/{IMPULSES}', 'Arrows2D:origins')]
-    labels = content[(f'/{IMPULSES}', 'Arrows2D:labels')]
+    labels = content[(f'/{IMPULSES}', 'Points2D:labels')]
+    places = content[(f'/{IMPULSES}', 'Points2D:positions')]
     colors = content[(f'/{IMPULSES}', 'Arrows2D:colors')]
+    # The arrows carry no labels of their own (only the cleared, empty ones).
+    assert not any(content.get((f'/{IMPULSES}', 'Arrows2D:labels'), {}).values())
 
     def arrow(step, ball, jx, jy):
         kick = np.array([jx, jy]) / world.masses[ball] * ARROW_SECONDS
@@ -206,9 +328,20 @@ def test_impulse_stays_half_a_second_in_its_colour_with_the_ball_name(tmp_path):
         assert shown_at(vectors, step) == [arrow(*e) for e in expected], step
         assert shown_at(origins, step) == [as_float32(records[k].positions[ball])
                                            for k, ball, _, _ in expected], step
-        if expected:
-            assert shown_at(labels, step) == [
-                f'ball_{ball}: J = ({jx:.3g}, {jy:.3g}) N s' for _, ball, jx, jy in expected]
+        assert shown_at(labels, step) == [
+            f'ball_{ball}: J = ({jx:.3g}, {jy:.3g}) N s' for _, ball, jx, jy in expected]
+        # Each label under its arrow, never over it (Rerun draws a label below its point).
+        assert len(shown_at(places, step)) == len(expected)
+        for (k, ball, jx, jy), (x, y) in zip(expected, shown_at(places, step)):
+            x0, y0 = records[k].positions[ball]
+            vector = arrow(k, ball, jx, jy)
+            lowest = min(y0, y0 + vector[1])
+            assert y < lowest - 0.005 * span
+            if vector[1] < 0.0:  # pointing down: under the head
+                assert x == pytest.approx(x0 + vector[0], abs=1e-5)
+            else:  # under the tail: under the pushed ball's own label as well
+                assert x == pytest.approx(x0, abs=1e-5)
+                assert y < y0 - world.radii[ball] * (1.0 + LABEL_GAP)
     packed = int.from_bytes(bytes((*IMPULSE_COLOR, 255)), 'big')
     assert {tuple(color) for color in colors.values()} == {(packed,), ()}  # () = cleared
     # 0.1 N s on a ball of ~0.1 kg is a small push: its arrow is lifted to the floor.
@@ -339,7 +472,7 @@ def test_balls_named_by_the_record_may_come_and_go(tmp_path):
     sink.write_step(arrived)
     sink.close()
     _, content, _, _ = read(path)
-    labels = content[(f'/{BALLS}', 'Points2D:labels')]
+    labels = content[(f'/{LABELS}', 'Points2D:labels')]
     radii = content[(f'/{BALLS}', 'Points2D:radii')]
     colors = content[(f'/{BALLS}', 'Points2D:colors')]
     assert labels == {0: ['ball_0', 'ball_1', 'ball_2'], 1: ['ball_0', 'ball_2'],
@@ -348,6 +481,10 @@ def test_balls_named_by_the_record_may_come_and_go(tmp_path):
     assert radii[2] == as_float32([*world.radii[[0, 2]], 0.5])
     assert colors[1] == [colors[0][0], colors[0][2]]  # a ball keeps its colour
     assert len(content[(f'/{BALLS}', 'Points2D:positions')][2]) == 3
+    # The label points follow the names too: 'red' is labelled under its own radius.
+    points = content[(f'/{LABELS}', 'Points2D:positions')]
+    assert np.allclose(points[2], below_each_ball(as_float32(arrived.positions),
+                                                  arrived.radii), rtol=0.0, atol=1e-5)
 
 
 def test_identical_runs_give_identical_content(tmp_path):
@@ -657,6 +794,17 @@ def test_live_view_gets_frames_at_its_rate_with_balls_trails_and_pushes_in_step(
         assert all(strip[-1] == point for strip, point in zip(trails[k], positions[k]))
         assert 1 <= len(trails[k][0]) <= len(kept) + 1
         assert len(trails[k][0]) - 1 <= 0.1 / VIEW_TRAIL_SPACING + 1
+    # The labels move with the balls, in the balls' rows (arrows of length 0, drawn as
+    # their labels alone), under each ball: no frame's names under another frame's balls.
+    labels = content_view[(f'/{BALLS}', 'Arrows2D:origins')]
+    assert set(labels) == frames
+    radii = collector.segments[0][0].radii
+    assert all(np.allclose(labels[k], below_each_ball(positions[k], radii), rtol=0.0,
+                           atol=1e-5) for k in frames)
+    assert content_view[(f'/{BALLS}', 'Arrows2D:labels')] == {
+        None: [f'ball_{i}' for i in range(len(radii))]}
+    assert content_view[(f'/{BALLS}', 'Arrows2D:vectors')] == {None: [[0.0, 0.0]] * len(radii)}
+    assert not [key for key in content_view if key[0] == f'/{LABELS}']
     assert set(scalars(content_view, COLLISIONS)) == frames
     assert scalars(content_view, COLLISIONS)[90] == scalars(content_file, COLLISIONS)[90]
     # The push of step 10 (between frames) is drawn at the next frame, from where it was
@@ -667,7 +815,7 @@ def test_live_view_gets_frames_at_its_rate_with_balls_trails_and_pushes_in_step(
     assert not shown_at(origins, 90)
     # What a page opened late needs is static: it outlives the frames a server drops.
     for key in ((f'/{WALLS}', 'LineStrips2D:strips'), (f'/{BALLS}', 'Points2D:radii'),
-                (f'/{BALLS}', 'Points2D:colors'), (f'/{BALLS}', 'Points2D:labels'),
+                (f'/{BALLS}', 'Points2D:colors'), (f'/{BALLS}', 'Arrows2D:colors'),
                 (f'/{ARENA}', 'Transform3D:rotation_axis_angle')):
         assert list(content_view[key]) == [None], key
 
@@ -762,6 +910,10 @@ def test_node_streams_to_a_viewer_and_records_one_recording(tmp_path, listener):
     assert set(content_view[(f'/{BALLS}', 'LineStrips2D:strips')]) == set(shown)
     assert set(content_view[(f'/{BALLS}', 'Arrows2D:vectors')]) == set(shown)
     assert (f'/{VELOCITIES}', 'Arrows2D:vectors') in content_file
+    # The row's arrows are the velocities: the labels are points of their own, per frame.
+    assert set(content_view[(f'/{LABELS}', 'Points2D:positions')]) == set(shown)
+    assert list(content_view[(f'/{LABELS}', 'Points2D:labels')]) == [None]
+    assert not [key for key in content_view if key == (f'/{BALLS}', 'Arrows2D:labels')]
     assert (f'/{TRAILS}', 'LineStrips2D:strips') in content_file
     rtf = scalars(content_file, REAL_TIME_FACTOR)
     # From the first step half a second after step 1 (RealTimeFactor) to the last, every step.

@@ -6,17 +6,28 @@ Layout of the recording (application id 'ball_world'):
   (the 2D view ignores ViewCoordinates), so the arena's children are logged in true world
   coordinates and this proper rotation turns them upside down for the view: +y points up as
   in RViz, and every logged position equals the simulated one.
-- `arena/balls` (Points2D): positions every logged step; radii, colours and name labels at
-  the first step of a segment and again whenever the balls (their names, in pose order)
-  change, so a step costs one float32 array.
+- `arena/balls` (Points2D): positions every logged step; radii and colours at the first
+  step of a segment and again whenever the balls (their names, in pose order) change, so a
+  step costs one float32 array. No labels: Rerun draws a point's label just below the point
+  itself, over the lower half of a ball, and has no label offset.
+- `arena/labels` (Points2D, up to LABEL_LIMIT balls): each ball's name, at the bottom of the
+  ball (below it in the view, +y up), so the label is drawn under the ball. Names and
+  colours are logged when the balls change, like the radii; the points move with the balls
+  (a second small float32 array per step). Beyond LABEL_LIMIT balls nothing is logged here.
+  A live view without velocities gets them in `arena/balls` instead, in the frame's row, as
+  Arrows2D of length 0 at the same points (see _Feed._log_balls).
 - `arena/walls` (LineStrips2D), once per segment at its first step: not static in a file,
   because a reset may change the walls and static data would rewrite the earlier segments.
 - `arena/impulses` (Arrows2D): each applied impulse for IMPULSE_SECONDS of simulated time,
   in IMPULSE_COLOR (no ball has it; readable on the viewer's light and dark themes), at the
-  point where it was applied, pointing along the velocity change, labelled with the ball's
-  name and J. Its length is the velocity change times ARROW_SECONDS, kept between a floor
-  (a tiny push is still seen) and a ceiling (a huge one stays on screen) set by the size of
-  the scene, and shortened where it would leave the scene, so its head is always seen.
+  point where it was applied, pointing along the velocity change. Its length is the
+  velocity change times ARROW_SECONDS, kept between a floor (a tiny push is still seen) and
+  a ceiling (a huge one stays on screen) set by the size of the scene, and shortened where
+  it would leave the scene, so its head is always seen.
+  Its label (the ball's name and J) is a Points2D of the same entity and row, so a viewer
+  never draws an arrow with another one's label: Rerun draws an arrow's own label over the
+  middle of its shaft, so the label point lies under the arrow's lowest end instead, and
+  when that is the tail, where the ball was, under the ball's label too.
 - `arena/velocities` (Arrows2D, optional): each ball's velocity times VELOCITY_SECONDS.
 - `arena/trails` (LineStrips2D, optional): each ball's path over the last trail seconds.
 - `arena/agents` (Arrows2D): each agent's heading, labelled with its name (rerun_agents).
@@ -84,6 +95,7 @@ WALLS = 'arena/walls'
 IMPULSES = 'arena/impulses'
 VELOCITIES = 'arena/velocities'
 TRAILS = 'arena/trails'
+LABELS = 'arena/labels'
 SCALE = 'arena/scale'
 SCALE_LABELS = 'arena/scale/labels'
 #: Each agent's latest scan, as its hit points in the arena: arena/scans/<name>.
@@ -97,8 +109,16 @@ REAL_TIME_FACTOR = 'plots/real_time_factor'
 SIM_TIME = 'sim_time'
 STEP = 'step'
 
-#: Labels are drawn by default up to this many balls; beyond, they only clutter the view.
+#: Labels are logged up to this many balls; beyond, they only clutter the view and would
+#: cost a second positions array per step.
 LABEL_LIMIT = 30
+#: A ball's label point lies this fraction of its radius below its bottom edge: the viewer
+#: draws the label's top a few pixels below the point, so the name sits just under the ball.
+LABEL_GAP = 0.1
+#: A line of label text is about this fraction of the scene's larger side in the fitted view:
+#: an impulse's label below the tail of its arrow goes a line further down, under the label
+#: of the ball it pushed.
+LABEL_LINE_FRACTION = 0.03
 
 #: A file's buffered steps are sent once this many are pending, or this many positions.
 MAX_PENDING_STEPS = 64
@@ -355,8 +375,8 @@ class _Pending:
     """
 
     def __init__(self):
-        self.rows = []  # (step, log ns, positions, velocities or None, energy, collisions,
-        #                  momentum, real-time factor or None)
+        self.rows = []  # (step, log ns, positions, velocities or None, label points or
+        #                  None, energy, collisions, momentum, real-time factor or None)
         self.position_count = 0  # a hint for when to send, never used to build a column
 
     def add(self, row):
@@ -370,17 +390,23 @@ class _Pending:
 
     def columns(self):
         """The rows as columns: steps, times, positions and velocities (of the rows that have
-        them: a file's), energy, collisions, momentum, and (steps, times, values) of the
-        real-time factor where it is known."""
-        steps, times, positions, velocities, energy, collisions, momentum, rtf = \
+        them: a file's), (steps, times, points) of the labels where they are shown, energy,
+        collisions, momentum, and (steps, times, values) of the real-time factor where it
+        is known."""
+        steps, times, positions, velocities, labels, energy, collisions, momentum, rtf = \
             zip(*self.rows)
-        known = [(s, t, f) for s, t, f in zip(steps, times, rtf) if f is not None]
         return (steps, times, [p for p in positions if p is not None],
-                [v for v in velocities if v is not None], energy, collisions, momentum,
-                tuple(zip(*known)) if known else ((), (), ()))
+                [v for v in velocities if v is not None], _where_known(steps, times, labels),
+                energy, collisions, momentum, _where_known(steps, times, rtf))
 
     def __len__(self):
         return len(self.rows)
+
+
+def _where_known(steps, times, values):
+    """(steps, times, values) of the rows whose value is not None."""
+    known = [(s, t, v) for s, t, v in zip(steps, times, values) if v is not None]
+    return tuple(zip(*known)) if known else ((), (), ())
 
 
 class _Segment:
@@ -525,7 +551,12 @@ class _Feed:
         self._totals = np.zeros(2, dtype=np.int64)  # collisions since step 0 of the segment
         self._energy0 = None
         self._shown_names = None
-        self._impulses = []  # (expires log ns, origin, vector, label) on screen or due
+        self._label_drop = None  # (n, 2) float32 from each ball to its label, if shown
+        # A live view's labels are arrows of length 0 in the balls' row, unless the row's
+        # arrows are the velocities (_log_balls).
+        self._labels_in_row = self.live and not velocities
+        self._impulses = []  # (expires log ns, origin, vector, label, label point) on screen
+        #                      or due
         self._impulses_changed = False
         self._trail = deque()  # (log ns, positions) of the trail's steps
         self._closed = False
@@ -552,7 +583,7 @@ class _Feed:
         self._emit('log', WALLS, rr.LineStrips2D(
             strips, radii=rr.Radius.ui_points(1.5), colors=WALL_COLOR, draw_order=20.0),
             static=self.live)
-        self._emit('log', IMPULSES, rr.Arrows2D.cleared())
+        self._emit('log', IMPULSES, rr.Arrows2D.cleared(), rr.Points2D.cleared())
         self._log_ruler(world)
 
     def _log_ruler(self, world):
@@ -692,15 +723,21 @@ class _Feed:
 
     def _buffer(self, record, rtf, step):
         """A file's step, sent later with others as columns (_send)."""
+        positions = np.asarray(record.positions, dtype=np.float32)
         self._buffer_plots(
-            record, rtf, step, np.asarray(record.positions, dtype=np.float32),
-            np.asarray(record.velocities, dtype=np.float32) if self.velocities else None)
+            record, rtf, step, positions,
+            np.asarray(record.velocities, dtype=np.float32) if self.velocities else None,
+            self._label_points(positions))
 
-    def _buffer_plots(self, record, rtf, step, positions=None, velocities=None):
+    def _label_points(self, positions):
+        """Where the balls' labels go (under each ball), or None when none are shown."""
+        return None if self._label_drop is None else positions - self._label_drop
+
+    def _buffer_plots(self, record, rtf, step, positions=None, velocities=None, labels=None):
         """The step's row (with its balls for a file; a view sends those in frames), added in
         one operation (_Pending)."""
         self._pending.add((
-            step, record.log_time_ns, positions, velocities,
+            step, record.log_time_ns, positions, velocities, labels,
             energy_change(record.kinetic_energy, self._energy0), self._totals.copy(),
             np.asarray(record.momentum, dtype=np.float64),
             rtf if rtf is not None and math.isfinite(rtf) else None))
@@ -723,7 +760,12 @@ class _Feed:
             frame.append(rr.Arrows2D.from_fields(
                 origins=positions, vectors=np.asarray(record.velocities, dtype=np.float32)
                 * np.float32(VELOCITY_SECONDS)))
+        labels = self._label_points(positions)
+        if labels is not None and self._labels_in_row:
+            frame.append(rr.Arrows2D.from_fields(origins=labels))
         self._emit('log', BALLS, *frame)
+        if labels is not None and not self._labels_in_row:
+            self._emit('log', LABELS, rr.Points2D.from_fields(positions=labels))
         self._buffer_plots(record, rtf, step)
         now = self._frame_clock()
         if self._plots_sent is None or now - self._plots_sent >= VIEW_PLOT_PERIOD:
@@ -731,7 +773,14 @@ class _Feed:
             self._send()
 
     def _log_balls(self, record, names, step):
-        """Radii, colours and labels of the balls as they are now, in pose order."""
+        """Radii, colours and labels of the balls as they are now, in pose order.
+
+        The labels go under the balls, LABEL_GAP radii below each, up to LABEL_LIMIT balls,
+        placed by each step's positions (_label_points). In a file they are an entity of
+        their own (LABELS). A live view without velocities gets them in the balls' own row,
+        as arrows of length 0 (drawn as nothing but their labels), so no viewer draws names
+        of one moment under balls of another, and a frame stays one message.
+        """
         segment = self._segment
         radii = getattr(record, 'radii', None)
         if radii is None:
@@ -740,20 +789,43 @@ class _Feed:
         self._trail.clear()  # a trail follows an index: start again when the balls change
         self._set_time(step, record.log_time_ns)
         colors = np.array([ball_color(name) for name in names], dtype=np.uint8).reshape(-1, 3)
-        looks = [rr.Points2D.from_fields(
-            radii=np.asarray(radii, dtype=np.float32), colors=colors, labels=list(names),
-            show_labels=len(names) <= LABEL_LIMIT, draw_order=30.0)]
+        radii = np.asarray(radii, dtype=np.float32).reshape(-1)
+        labelled = len(names) <= LABEL_LIMIT
+        looks = [rr.Points2D.from_fields(radii=radii, colors=colors, draw_order=30.0)]
         if self.live and self.trail_seconds:
             looks.append(rr.LineStrips2D.from_fields(
                 colors=colors, radii=rr.Radius.ui_points(1.0), draw_order=10.0))
         if self.live and self.velocities:
             looks.append(rr.Arrows2D.from_fields(colors=colors, draw_order=35.0))
+        if self._labels_in_row:
+            looks.append(rr.Arrows2D.from_fields(
+                vectors=np.zeros((len(names), 2), dtype=np.float32), radii=0.0, colors=colors,
+                labels=list(names), show_labels=True) if labelled else rr.Arrows2D.cleared())
         self._emit('log', BALLS, *looks, static=self.live)
+        if not self._labels_in_row:
+            self._log_labels(names, colors, labelled)
+        if labelled:
+            self._label_drop = np.zeros((len(names), 2), dtype=np.float32)
+            self._label_drop[:, 1] = radii * np.float32(1.0 + LABEL_GAP)
+        else:
+            self._label_drop = None
+
+    def _log_labels(self, names, colors, labelled):
+        """The labels' names and colours (LABELS); when there are too many balls, no more
+        label points (an empty set hides the last ones)."""
+        if labelled:
+            self._emit('log', LABELS, rr.Points2D.from_fields(
+                radii=0.0, colors=colors, labels=list(names), show_labels=True),
+                static=self.live)
+        elif self._label_drop is not None:
+            self._emit('log', LABELS, rr.Points2D.from_fields(
+                positions=np.zeros((0, 2), dtype=np.float32)))
 
     def _add_impulses(self, record):
         """Put the step's impulses on screen for IMPULSE_SECONDS from the step on."""
         names = names_of(record)
         masses = getattr(record, 'masses', None)
+        radii = getattr(record, 'radii', None)
         index_of = None
         now = record.log_time_ns
         for impulse in record.impulses:
@@ -765,12 +837,27 @@ class _Feed:
                 if ball is None:
                     continue
             name = names[ball]
-            mass = masses[ball] if masses is not None else self._segment.mass[name]
+            segment = self._segment
+            mass = masses[ball] if masses is not None else segment.mass[name]
+            radius = (float(radii[ball]) if radii is not None
+                      else segment.radius.get(name, segment.smallest))
             origin = np.asarray(record.positions[ball], dtype=np.float64)
-            self._impulses.append((now + round(IMPULSE_SECONDS * 1e9), origin,
-                                   self._arrow(origin, impulse.jx / mass, impulse.jy / mass),
-                                   f'{name}: J = ({impulse.jx:.3g}, {impulse.jy:.3g}) N s'))
+            vector = self._arrow(origin, impulse.jx / mass, impulse.jy / mass)
+            self._impulses.append((now + round(IMPULSE_SECONDS * 1e9), origin, vector,
+                                   f'{name}: J = ({impulse.jx:.3g}, {impulse.jy:.3g}) N s',
+                                   self._impulse_label_point(origin, vector, radius)))
             self._impulses_changed = True
+
+    def _impulse_label_point(self, origin, vector, radius):
+        """Where an arrow's label goes: under the arrow's lowest end (the view has +y up and
+        draws a label below its point), a line lower still when that end is the tail, where
+        the pushed ball's own label is."""
+        gap = ARROW_INSET_FRACTION * self._segment.span
+        tip = (origin[0] + vector[0], origin[1] + vector[1])
+        if tip[1] < origin[1]:
+            return (tip[0], tip[1] - gap)
+        below_ball = radius * (1.0 + LABEL_GAP) + LABEL_LINE_FRACTION * self._segment.span
+        return (origin[0], origin[1] - max(gap, below_ball))
 
     def _show_impulses(self, step, now):
         """Re-log the arrows when one came or went since the last logged step."""
@@ -782,12 +869,15 @@ class _Feed:
             return
         self._set_time(step, now)
         if not shown:
-            self._emit('log', IMPULSES, rr.Arrows2D.cleared())
+            self._emit('log', IMPULSES, rr.Arrows2D.cleared(), rr.Points2D.cleared())
             return
-        self._emit('log', IMPULSES, rr.Arrows2D(
+        arrows = rr.Arrows2D(
             origins=[i[1] for i in shown], vectors=[i[2] for i in shown],
-            labels=[i[3] for i in shown], show_labels=True, colors=IMPULSE_COLOR,
-            radii=rr.Radius.ui_points(3.0), draw_order=40.0))
+            colors=IMPULSE_COLOR, radii=rr.Radius.ui_points(3.0), draw_order=40.0)
+        labels = rr.Points2D(
+            [i[4] for i in shown], radii=0.0, labels=[i[3] for i in shown], show_labels=True,
+            colors=IMPULSE_COLOR)
+        self._emit('log', IMPULSES, arrows, labels)
 
     def _log_scans(self, record, agents, step):
         """Each scan's hit points (finite ranges, noise included) where they fall in the arena."""
@@ -839,7 +929,7 @@ class _Feed:
         pending = self._pending
         if not len(pending):
             return
-        steps, times, positions, velocities, energy, collisions, momentum, rtf = \
+        steps, times, positions, velocities, labels, energy, collisions, momentum, rtf = \
             pending.columns()
         index = self._index(steps, times)
         if positions:
@@ -855,6 +945,12 @@ class _Feed:
                                    rr.components.Position2DBatch(positions), lengths=sizes),
                 rr.ComponentColumn(rr.Arrows2D.descriptor_vectors(),
                                    rr.components.Vector2DBatch(vectors), lengths=sizes)])
+        label_steps, label_times, label_points = labels
+        if label_points:
+            self._emit('send_columns', LABELS, self._index(label_steps, label_times), [
+                rr.ComponentColumn(rr.Points2D.descriptor_positions(),
+                                   rr.components.Position2DBatch(np.concatenate(label_points)),
+                                   lengths=[len(p) for p in label_points])])
         self._emit('send_columns', ENERGY, index, rr.Scalars.columns(
             scalars=np.array(energy, dtype=np.float64)))
         self._emit('send_columns', COLLISIONS, index, rr.Scalars.columns(
