@@ -884,10 +884,14 @@ class InterruptAt:
 
 def test_an_interrupt_anywhere_in_logging_a_step_loses_no_buffered_step(tmp_path):
     """Every line of write_step (and what it calls in rerun_log) is interrupted in turn; the
-    buffered steps before it must all reach the file, in columns of one length."""
+    buffered steps before it must all reach the file, in columns of one length.
+
+    Three balls run every line a step of twenty does (each ball's colour, trail, arrow and
+    push), in a third of the lines: each interrupt costs a run and a read of its file."""
 
     def logged_until_interrupt(n, path):
-        simulation = Simulation({}, sinks=[RerunSink(path, velocities=True, trail_seconds=0.1)])
+        simulation = Simulation({'random.count': 3},
+                                sinks=[RerunSink(path, velocities=True, trail_seconds=0.1)])
         for _ in range(10):
             simulation.queue_impulse('ball_1', 0.01, 0.0)
             simulation.step(real_time_factor=1.0)
