@@ -1,6 +1,6 @@
 """ball_world_cli as a user runs it: the installed command against a real node process, each
 command a process of its own, checked by what the world then answers and does."""
-from ball_world_testing.harness import run_tool
+from ball_world_testing.harness import Children, run_tool
 import pytest
 
 NAMESPACE = '/sim2'
@@ -46,11 +46,18 @@ def ball_state(name):
     return (time, *map(float, words[2::2]))
 
 
+@pytest.fixture(scope='module')
+def shared_world():
+    """One world process for the file: each test leaves it as it found it (paused at step 0,
+    three balls, the parameters of WORLD), which the next one's first command shows."""
+    with Children() as children:
+        yield children.start_node(*WORLD, ros_args=['-r', f'__ns:={NAMESPACE}'])
+
+
 @pytest.fixture
-def world(processes):
-    node = processes.start_node(*WORLD, ros_args=['-r', f'__ns:={NAMESPACE}'])
-    yield node
-    assert node.poll() is None, node.communicate()
+def world(shared_world):
+    yield shared_world
+    assert shared_world.poll() is None, shared_world.communicate()
 
 
 def test_push_step_and_the_simulation_state(world):
@@ -119,7 +126,7 @@ def test_bad_usage_is_one_line_and_exit_2(args, problem):
     assert len(err.strip().splitlines()) == 1 and 'Traceback' not in err
 
 
-def test_parameters_are_set_and_read_as_ros2_param_would(world):
+def test_parameters_are_set_and_read_as_ros2_param_would(world, probe):
     assert ok('get-param', 'rate_hz') == ['50.0']
     assert ok('set-param', 'rate_hz', '30') == ['set rate_hz to 30']  # an integer, as typed
     assert ok('get-param', 'rate_hz') == ['30.0']  # the world keeps doubles double
@@ -130,3 +137,6 @@ def test_parameters_are_set_and_read_as_ros2_param_would(world):
     assert ok('get-param', 'rate_hz') == ['30.0']
     assert refused('get-param', 'rate') == (
         "ball_world_cli: get-param: the world has no parameter 'rate'")
+    # The world as the other tests expect it (a reset would build the 12 m arena).
+    probe.set_parameters(f'{NAMESPACE}/ball_world', {'rate_hz': 50.0,
+                                                     'arena': [0.0, 0.0, 10.0, 10.0]})
