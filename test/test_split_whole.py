@@ -8,6 +8,7 @@ takes the agents' headings and commands in force at the step it resumes from.
 import base64
 import json
 import math
+import re
 import struct
 
 from ball_world_testing.harness import (finish, node_command, rewrite_recording, run_tool,
@@ -17,7 +18,7 @@ from mcap.reader import make_reader
 from nav_msgs.msg import Odometry
 import pytest
 from rclpy.serialization import serialize_message
-from test_agents_node import twist, WORLD as AGENT_WORLD
+from test_agents_node import forward, publish_until, step_of, twist, WORLD as AGENT_WORLD
 from test_closing_edits import _node_edits_then_stops
 from test_edit_recordings import FIRST, SECOND, spawn
 from test_split_recordings import assert_resume_state_refused, crafted_resume, NODE_TIMEOUT
@@ -245,22 +246,30 @@ def test_a_node_run_with_agents_split_resimulates_file_by_file(probe, processes,
                                                                capsys):
     """The node, cmd_vel from another participant, files of 25 steps: each file alone."""
     directory = tmp_path / 'node'
-    process = processes.start(node_command(*AGENT_WORLD, 'max_steps:=150',
-                                           f'record.mcap:={directory}',
+    process = processes.start(node_command(*AGENT_WORLD, f'record.mcap:={directory}',
                                            'record.max_seconds:=0.5'))
     odom = probe.listen(Odometry, 'ball_1/odom')
     command = probe.node.create_publisher(Twist, 'ball_1/cmd_vel', 10)
     probe.spin_until(lambda: command.get_subscription_count() > 0 and odom,
                      'a reader of cmd_vel', process=process)
-    for k in range(25):  # a changing command every 0.1 s: one in force at most splits
+    # The first command until it shows (the node may not have matched us yet), then a
+    # changing one every 5 steps heard (0.1 s): one in force at most splits. No max_steps
+    # at start: a run of fixed length could end before a slow discovery.
+    publish_until(probe, command, twist(x=1.0, y=-0.5, wz=2.0),
+                  lambda: forward(odom[-1]) > 0.0, 'the command to be followed', process)
+    for k in range(1, 25):
+        heard = len(odom)
+        probe.spin_until(lambda: len(odom) >= heard + 5, 'five more steps', process=process)
         command.publish(twist(x=1.0 + 0.05 * k, y=-0.5, wz=2.0 - 0.2 * k))
-        probe.spin_for(0.1)
+    probe.set_parameters('/ball_world', {'max_steps': step_of(odom[-1]) + 5})
     code, _, err = finish(process, NODE_TIMEOUT)
     assert code == 0, err
-    names = metadata(directory)['relative_file_paths']
-    assert len(names) == 7  # steps 0-24, 25-49, ..., 125-149, then 150
     assert resim.main([str(directory)]) == 0
-    assert 'all 151 recorded steps re-simulate bit-identically' in capsys.readouterr().out
+    resimulated = re.search(r'all ([0-9]+) recorded steps re-simulate bit-identically',
+                            capsys.readouterr().out)
+    last = int(resimulated.group(1)) - 1
+    names = metadata(directory)['relative_file_paths']
+    assert len(names) == last // 25 + 1  # steps 0-24, 25-49, ..., then the last ones
     commanded = 0
     for name in names:
         assert resim.main([str(directory / name)]) == 0, (name, capsys.readouterr())
