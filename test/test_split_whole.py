@@ -280,11 +280,15 @@ def test_a_node_run_with_agents_split_resimulates_file_by_file(probe, processes,
 
 
 def test_the_node_records_a_closing_record_in_a_split_run(probe, processes, tmp_path):
-    """Pause, step, push, spawn, delete, Ctrl-C: through the node's writer thread too."""
+    """Pause, step, push, spawn, delete, Ctrl-C: through the node's writer thread too.
+
+    Started paused: a world running at 60 Hz until the probe finds it wrote a file every
+    step for as long as discovery took (hundreds on a busy machine), each then re-simulated.
+    """
     directory = _node_edits_then_stops(probe, processes, tmp_path, 'sigint',
-                                       'record.max_seconds:=0.02')
+                                       'record.max_seconds:=0.01', 'start_paused:=true')
     names = metadata(directory)['relative_file_paths']
-    assert len(names) >= 2  # a file every two steps (dt 1/60 s)
+    assert len(names) == 2  # a file every step (dt 1/60 s): steps 0 and 1, then the edits
     steps = list(open_recording(directory).steps())
     last = steps[-2].step
     assert [(s.step, len(s.impulses), len(s.edits)) for s in steps if s.closing] == [
