@@ -11,8 +11,7 @@ import math
 import re
 import struct
 
-from ball_world_testing.harness import (finish, node_command, rewrite_recording, run_tool,
-                                        start_node)
+from ball_world_testing.harness import finish, node_command, rewrite_recording, run_tool
 from geometry_msgs.msg import Twist
 from mcap.reader import make_reader
 from nav_msgs.msg import Odometry
@@ -223,11 +222,17 @@ def test_a_crafted_agent_resume_state_is_refused_in_one_line(tmp_path, capsys, s
     assert_resume_state_refused(crafted, words, capsys)
 
 
-def test_max_files_without_a_split_is_said_at_start(tmp_path):
+def test_max_files_without_a_split_is_said_at_start(tmp_path, processes):
     path = tmp_path / 'one.mcap'
-    code, out, err = finish(start_node('max_steps:=3', 'rate_hz:=0.0', 'dt:=0.05',
-                                       f'record.mcap:={path}', 'record.max_files:=2'),
-                            NODE_TIMEOUT)
+    bag = tmp_path / 'bag'
+    # The three runs at once (each is mostly its start-up), each in a namespace of its own.
+    runs = [processes.start_node('max_steps:=3', 'rate_hz:=0.0', 'dt:=0.05',
+                                 'record.max_files:=2', *parameters,
+                                 ros_args=['-r', f'__ns:=/run{k}'])
+            for k, parameters in enumerate(((f'record.mcap:={path}',),
+                                            ('record.max_seconds:=0.1', f'record.mcap:={bag}'),
+                                            ()))]
+    code, out, err = finish(runs[0], NODE_TIMEOUT)
     assert code == 0, err
     said = [line for line in (out + err).splitlines() if 'record.max_files' in line]
     assert len(said) == 1 and said[0].endswith(
@@ -235,10 +240,8 @@ def test_max_files_without_a_split_is_said_at_start(tmp_path):
         'record.max_bytes or record.max_seconds is set'), out + err
     assert path.is_file()  # recorded as one file, as asked
     # with a split, or with nothing recorded, nothing is said
-    bag = tmp_path / 'bag'
-    for parameters in (('record.max_seconds:=0.1', f'record.mcap:={bag}'), ()):
-        code, out, err = finish(start_node('max_steps:=3', 'rate_hz:=0.0', 'dt:=0.05',
-                                           'record.max_files:=2', *parameters), NODE_TIMEOUT)
+    for run in runs[1:]:
+        code, out, err = finish(run, NODE_TIMEOUT)
         assert code == 0 and 'has no effect' not in out + err, err
 
 
