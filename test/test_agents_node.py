@@ -61,7 +61,10 @@ def publish_until(probe, publisher, message, condition, what, process):
 
 
 def test_cmd_vel_reaches_the_speed_in_max_accel_time_holds_it_then_stops(probe, processes):
-    process = processes.start(node_command(*WORLD))
+    # A command in force for 2 s of simulated time, not WORLD's 0.5 s: the speed is checked
+    # held over steps in which this probe must send a command at least every cmd_timeout,
+    # which a busy machine may not let it do within 0.5 s of the node's steps.
+    process = processes.start(node_command(*WORLD, 'agent.cmd_timeout:=2.0'))
     odom = probe.listen(Odometry, 'ball_0/odom')
     other = probe.listen(Odometry, 'ball_1/odom')
     command = probe.node.create_publisher(Twist, 'ball_0/cmd_vel', 10)
