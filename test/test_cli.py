@@ -1,7 +1,9 @@
 """ball_world_cli as a user runs it: the installed command against a real node process, each
 command a process of its own, checked by what the world then answers and does."""
-from ball_world_testing.harness import run_tool
+from ball_world_testing.harness import Children, run_tool
 import pytest
+from simulation_interfaces.msg import Result
+from simulation_interfaces.srv import GetEntityState
 
 NAMESPACE = '/sim2'
 #: Three balls of 4 kg at rest, 3 m apart: an impulse J gives exactly v = J / 4 (a power of
@@ -46,20 +48,38 @@ def ball_state(name):
     return (time, *map(float, words[2::2]))
 
 
+def world_state(probe, name):
+    """(time in s, x, y, vx, vy) of a ball as the world answers a probe's GetEntityState: what
+    a command did, checked without a process of its own (the state command is checked too)."""
+    answer = probe.call(GetEntityState, f'{NAMESPACE}/ball_world/get_entity_state',
+                        GetEntityState.Request(entity=name))
+    assert answer.result.result == Result.RESULT_OK, answer.result.error_message
+    stamp, state = answer.state.header.stamp, answer.state
+    return (stamp.sec + stamp.nanosec * 1e-9, state.pose.position.x, state.pose.position.y,
+            state.twist.linear.x, state.twist.linear.y)
+
+
+@pytest.fixture(scope='module')
+def shared_world():
+    """One world process for the file: each test leaves it as it found it (paused at step 0,
+    three balls, the parameters of WORLD), which the next one's first command shows."""
+    with Children() as children:
+        yield children.start_node(*WORLD, ros_args=['-r', f'__ns:={NAMESPACE}'])
+
+
 @pytest.fixture
-def world(processes):
-    node = processes.start_node(*WORLD, ros_args=['-r', f'__ns:={NAMESPACE}'])
-    yield node
-    assert node.poll() is None, node.communicate()
+def world(shared_world):
+    yield shared_world
+    assert shared_world.poll() is None, shared_world.communicate()
 
 
-def test_push_step_and_the_simulation_state(world):
+def test_push_step_and_the_simulation_state(world, probe):
     assert ok('status') == ['stopped (paused at step 0)']
     t0, *_ = ball_state('ball_1')
     assert ok('push', 'ball_1', '0.5', '-0.25') == [
         f'pushed ball_1 by (0.5, -0.25) N s on {NAMESPACE}/impulse']
     assert ok('step') == ['stepped 1']
-    t1, _, _, vx, vy = ball_state('ball_1')
+    t1, _, _, vx, vy = world_state(probe, 'ball_1')
     # v = J / m exactly, one step of 1/50 s later than before (whatever step it was at).
     assert (vx, vy) == (0.125, -0.0625) and t1 == pytest.approx(t0 + 0.02, abs=1e-9)
     assert ok('pause') == ['already paused']
@@ -68,18 +88,18 @@ def test_push_step_and_the_simulation_state(world):
     assert ok('pause') == ['paused']
     assert ok('reset') == ['reset to step 0']
     assert ok('status') == ['stopped (paused at step 0)']
-    assert ball_state('ball_1') == (0.0, 5.0, 5.0, 0.0, 0.0)
+    assert world_state(probe, 'ball_1') == (0.0, 5.0, 5.0, 0.0, 0.0)
 
 
-def test_spawn_set_state_and_delete_through_simulation_interfaces(world):
+def test_spawn_set_state_and_delete_through_simulation_interfaces(world, probe):
     assert ok('spawn', 'red', '5', '8', '--radius', '0.25', '--mass', '2', '--vx', '1') == [
         'spawned red at (5, 8)']
     assert ok('info', 'red') == ['red: ball, radius 0.25 m, mass 2 kg']
     assert 'NAME_NOT_UNIQUE' in refused('spawn', 'red', '2', '8')
     assert ok('set-state', 'red', '2', '8') == ['set red: x 2.0  y 8.0  vx 1.0  vy 0.0']
-    assert ball_state('red')[1:] == (2.0, 8.0, 1.0, 0.0)  # the velocity kept
+    assert world_state(probe, 'red')[1:] == (2.0, 8.0, 1.0, 0.0)  # the velocity kept
     ok('set-state', 'red', '2', '8', '0', '-1')
-    assert ball_state('red')[1:] == (2.0, 8.0, 0.0, -1.0)
+    assert world_state(probe, 'red')[1:] == (2.0, 8.0, 0.0, -1.0)
     assert 'INVALID_POSE' in refused('set-state', 'red', '5', '5')  # on ball_1
     lines = ok('state')
     assert [line.split()[0] for line in lines[1:]] == ['ball_0', 'ball_1', 'ball_2', 'red']
@@ -119,7 +139,7 @@ def test_bad_usage_is_one_line_and_exit_2(args, problem):
     assert len(err.strip().splitlines()) == 1 and 'Traceback' not in err
 
 
-def test_parameters_are_set_and_read_as_ros2_param_would(world):
+def test_parameters_are_set_and_read_as_ros2_param_would(world, probe):
     assert ok('get-param', 'rate_hz') == ['50.0']
     assert ok('set-param', 'rate_hz', '30') == ['set rate_hz to 30']  # an integer, as typed
     assert ok('get-param', 'rate_hz') == ['30.0']  # the world keeps doubles double
@@ -130,3 +150,6 @@ def test_parameters_are_set_and_read_as_ros2_param_would(world):
     assert ok('get-param', 'rate_hz') == ['30.0']
     assert refused('get-param', 'rate') == (
         "ball_world_cli: get-param: the world has no parameter 'rate'")
+    # The world as the other tests expect it (a reset would build the 12 m arena).
+    probe.set_parameters(f'{NAMESPACE}/ball_world', {'rate_hz': 50.0,
+                                                     'arena': [0.0, 0.0, 10.0, 10.0]})

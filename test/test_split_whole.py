@@ -8,16 +8,16 @@ takes the agents' headings and commands in force at the step it resumes from.
 import base64
 import json
 import math
+import re
 import struct
 
-from ball_world_testing.harness import (finish, node_command, rewrite_recording, run_tool,
-                                        start_node)
+from ball_world_testing.harness import finish, node_command, rewrite_recording, run_tool
 from geometry_msgs.msg import Twist
 from mcap.reader import make_reader
 from nav_msgs.msg import Odometry
 import pytest
 from rclpy.serialization import serialize_message
-from test_agents_node import twist, WORLD as AGENT_WORLD
+from test_agents_node import forward, publish_until, step_of, twist, WORLD as AGENT_WORLD
 from test_closing_edits import _node_edits_then_stops
 from test_edit_recordings import FIRST, SECOND, spawn
 from test_split_recordings import assert_resume_state_refused, crafted_resume, NODE_TIMEOUT
@@ -224,11 +224,17 @@ def test_a_crafted_agent_resume_state_is_refused_in_one_line(tmp_path, capsys, s
     assert_resume_state_refused(crafted, words, capsys)
 
 
-def test_max_files_without_a_split_is_said_at_start(tmp_path):
+def test_max_files_without_a_split_is_said_at_start(tmp_path, processes):
     path = tmp_path / 'one.mcap'
-    code, out, err = finish(start_node('max_steps:=3', 'rate_hz:=0.0', 'dt:=0.05',
-                                       f'record.mcap:={path}', 'record.max_files:=2'),
-                            NODE_TIMEOUT)
+    bag = tmp_path / 'bag'
+    # The three runs at once (each is mostly its start-up), each in a namespace of its own.
+    runs = [processes.start_node('max_steps:=3', 'rate_hz:=0.0', 'dt:=0.05',
+                                 'record.max_files:=2', *parameters,
+                                 ros_args=['-r', f'__ns:=/run{k}'])
+            for k, parameters in enumerate(((f'record.mcap:={path}',),
+                                            ('record.max_seconds:=0.1', f'record.mcap:={bag}'),
+                                            ()))]
+    code, out, err = finish(runs[0], NODE_TIMEOUT)
     assert code == 0, err
     said = [line for line in (out + err).splitlines() if 'record.max_files' in line]
     assert len(said) == 1 and said[0].endswith(
@@ -236,10 +242,8 @@ def test_max_files_without_a_split_is_said_at_start(tmp_path):
         'record.max_bytes or record.max_seconds is set'), out + err
     assert path.is_file()  # recorded as one file, as asked
     # with a split, or with nothing recorded, nothing is said
-    bag = tmp_path / 'bag'
-    for parameters in (('record.max_seconds:=0.1', f'record.mcap:={bag}'), ()):
-        code, out, err = finish(start_node('max_steps:=3', 'rate_hz:=0.0', 'dt:=0.05',
-                                           'record.max_files:=2', *parameters), NODE_TIMEOUT)
+    for run in runs[1:]:
+        code, out, err = finish(run, NODE_TIMEOUT)
         assert code == 0 and 'has no effect' not in out + err, err
 
 
@@ -247,22 +251,30 @@ def test_a_node_run_with_agents_split_resimulates_file_by_file(probe, processes,
                                                                capsys):
     """The node, cmd_vel from another participant, files of 25 steps: each file alone."""
     directory = tmp_path / 'node'
-    process = processes.start(node_command(*AGENT_WORLD, 'max_steps:=150',
-                                           f'record.mcap:={directory}',
+    process = processes.start(node_command(*AGENT_WORLD, f'record.mcap:={directory}',
                                            'record.max_seconds:=0.5'))
     odom = probe.listen(Odometry, 'ball_1/odom')
     command = probe.node.create_publisher(Twist, 'ball_1/cmd_vel', 10)
     probe.spin_until(lambda: command.get_subscription_count() > 0 and odom,
                      'a reader of cmd_vel', process=process)
-    for k in range(25):  # a changing command every 0.1 s: one in force at most splits
+    # The first command until it shows (the node may not have matched us yet), then a
+    # changing one every 5 steps heard (0.1 s): one in force at most splits. No max_steps
+    # at start: a run of fixed length could end before a slow discovery.
+    publish_until(probe, command, twist(x=1.0, y=-0.5, wz=2.0),
+                  lambda: forward(odom[-1]) > 0.0, 'the command to be followed', process)
+    for k in range(1, 25):
+        heard = len(odom)
+        probe.spin_until(lambda: len(odom) >= heard + 5, 'five more steps', process=process)
         command.publish(twist(x=1.0 + 0.05 * k, y=-0.5, wz=2.0 - 0.2 * k))
-        probe.spin_for(0.1)
+    probe.set_parameters('/ball_world', {'max_steps': step_of(odom[-1]) + 5})
     code, _, err = finish(process, NODE_TIMEOUT)
     assert code == 0, err
-    names = metadata(directory)['relative_file_paths']
-    assert len(names) == 7  # steps 0-24, 25-49, ..., 125-149, then 150
     assert resim.main([str(directory)]) == 0
-    assert 'all 151 recorded steps re-simulate bit-identically' in capsys.readouterr().out
+    resimulated = re.search(r'all ([0-9]+) recorded steps re-simulate bit-identically',
+                            capsys.readouterr().out)
+    last = int(resimulated.group(1)) - 1
+    names = metadata(directory)['relative_file_paths']
+    assert len(names) == last // 25 + 1  # steps 0-24, 25-49, ..., then the last ones
     commanded = 0
     for name in names:
         assert resim.main([str(directory / name)]) == 0, (name, capsys.readouterr())
@@ -273,11 +285,15 @@ def test_a_node_run_with_agents_split_resimulates_file_by_file(probe, processes,
 
 
 def test_the_node_records_a_closing_record_in_a_split_run(probe, processes, tmp_path):
-    """Pause, step, push, spawn, delete, Ctrl-C: through the node's writer thread too."""
+    """Pause, step, push, spawn, delete, Ctrl-C: through the node's writer thread too.
+
+    Started paused: a world running at 60 Hz until the probe finds it wrote a file every
+    step for as long as discovery took (hundreds on a busy machine), each then re-simulated.
+    """
     directory = _node_edits_then_stops(probe, processes, tmp_path, 'sigint',
-                                       'record.max_seconds:=0.02')
+                                       'record.max_seconds:=0.01', 'start_paused:=true')
     names = metadata(directory)['relative_file_paths']
-    assert len(names) >= 2  # a file every two steps (dt 1/60 s)
+    assert len(names) == 2  # a file every step (dt 1/60 s): steps 0 and 1, then the edits
     steps = list(open_recording(directory).steps())
     last = steps[-2].step
     assert [(s.step, len(s.impulses), len(s.edits)) for s in steps if s.closing] == [
