@@ -2,7 +2,8 @@
 
 The replay runs as a child process in the test run's own DDS domain (conftest); this test
 subscribes in-process through a probe with an rclpy context of its own, and waits with
-deadlines, never fixed sleeps. Timing is checked loosely: median spacing within 0.5x-2x.
+deadlines, never fixed sleeps. Timing is checked from below only (a loaded machine can only
+make a replay later): the arrivals span at least half the recorded time.
 """
 import os
 from pathlib import Path
@@ -12,7 +13,6 @@ import sys
 import time
 
 from ball_world_testing.harness import finish
-import numpy as np
 import pytest
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
@@ -92,8 +92,9 @@ def test_replay_publishes_the_recording_in_order_with_its_timing_and_clock(
     assert clock == sorted(set(clock)) and len(clock) > len(recorded['/balls']) // 2
     assert set(clock) <= {m.log_time_ns for m in recorded['/balls']}
     assert clock[-1] == recorded['/balls'][-1].log_time_ns
-    spacing = np.median(np.diff([t for t, _ in received['/balls']]))
-    assert 0.5 * DT <= spacing <= 2 * DT, spacing
+    # Paced by log time: a replay that ignored it would send the 51 steps within milliseconds.
+    arrivals = [t for t, _ in received['/balls']]
+    assert arrivals[-1] - arrivals[0] >= 0.5 * 50 * DT, arrivals[-1] - arrivals[0]
 
 
 def test_replay_loops_filters_remaps_and_stops_cleanly_on_sigterm(recording_path, probe,

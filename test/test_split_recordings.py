@@ -590,9 +590,11 @@ def test_replay_plays_the_files_in_order_with_their_timing(by_time, probe, proce
     assert code == 0, err
     assert [data for _, data in received] == [rec.balls_cdr for rec in truth.records]
     # steps 50 ms of log time apart, across the files and the reset (its log time goes on
-    # at the next step): the median spacing within 0.5x-2x, as for a single file
-    spacing = np.median(np.diff([t for t, _ in received]))
-    assert 0.5 * DT_NS / 1e9 <= spacing <= 2 * DT_NS / 1e9, spacing
+    # at the next step): checked from below only, as for a single file (a loaded machine can
+    # only make a replay later): the arrivals span at least half the recorded time
+    arrivals = [t for t, _ in received]
+    recorded_span = (len(truth.records) - 1) * DT_NS / 1e9
+    assert arrivals[-1] - arrivals[0] >= 0.5 * recorded_span, arrivals[-1] - arrivals[0]
 
 
 def test_repair_removes_a_file_killed_as_it_began_and_keeps_the_rest(tmp_path, capsys):
