@@ -26,7 +26,7 @@ view: setup
 	@STEPS=$(VIEW_STEPS) scripts/view.sh
 
 test: setup
-	$(VENV)/bin/python -m pytest -q test
+	$(VENV)/bin/python -m pytest -q -n 2 test
 
 bench: setup
 	$(VENV)/bin/python -m benchmarks.bench $(ARGS)

@@ -11,8 +11,12 @@ from ball_world_testing.harness import Children, Probe
 import pytest
 
 if 'BALL_WORLD_TEST_DOMAIN' not in os.environ:
-    os.environ['BALL_WORLD_TEST_DOMAIN'] = str(1 + os.getpid() % 200)
-os.environ['ROS_DOMAIN_ID'] = os.environ['BALL_WORLD_TEST_DOMAIN']
+    os.environ['BALL_WORLD_TEST_DOMAIN'] = str(1 + os.getpid() % 50 * 4)
+# pytest-xdist's workers (gw0, gw1, ...) inherit the run's variables: each takes a domain of
+# its own next to the run's (ids up to 232 are valid on Linux).
+_worker = os.environ.get('PYTEST_XDIST_WORKER', 'gw0').removeprefix('gw')
+os.environ['ROS_DOMAIN_ID'] = str(
+    int(os.environ['BALL_WORLD_TEST_DOMAIN']) + (int(_worker) % 4 if _worker.isdigit() else 0))
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('RCUTILS_LOGGING_BUFFERED_STREAM', '0')
 # The Rerun SDK logs its own errors (a viewer a test left unreachable on purpose, retried
