@@ -69,6 +69,19 @@ def rss_mb(pid=None):
     return psutil.Process(pid).memory_info().rss / 2**20
 
 
+def writer_rss_mb(pid=None):
+    """Resident memory of the .rrd writer that a process started (recording.rerun_process),
+    MiB; 0 without one."""
+    import psutil
+    for child in psutil.Process(pid).children():
+        try:
+            if 'ball_world.recording.rerun_process' in child.cmdline():
+                return child.memory_info().rss / 2**20
+        except psutil.Error:
+            pass
+    return 0.0
+
+
 # The node as a subprocess ---------------------------------------------------------------------
 
 def _harness():
@@ -556,6 +569,7 @@ def run_memory(args, workdir):
                                                **recordings})
     listener = Listener(ns)
     samples = []
+    writer = []  # RSS of the node's .rrd writer process at each sample
     try:
         listener.spin_until(lambda: listener.heard > 0, 'the first step', node)
         began = time.monotonic()
@@ -566,8 +580,10 @@ def run_memory(args, workdir):
             listener.spin(0.1)
             if time.monotonic() >= next_sample:
                 samples.append((time.monotonic() - began, rss_mb(node.pid)))
+                writer.append(writer_rss_mb(node.pid))
                 next_sample += args.every
-                progress(f'memory: {samples[-1][0]:.0f} s, RSS {samples[-1][1]:.1f} MB, '
+                progress(f'memory: {samples[-1][0]:.0f} s, RSS {samples[-1][1]:.1f} MB '
+                         f'(.rrd writer {writer[-1]:.1f} MB), '
                          f'step {listener.last_step}, MCAP {_size_mb(mcap_path):.0f} MB, '
                          f'.rrd {_size_mb(rrd_path):.0f} MB')
         steps = listener.last_step
@@ -583,6 +599,9 @@ def run_memory(args, workdir):
     warm = min(60.0, times[-1] / 2)  # the first minute (or half) is warm-up
     later = times >= warm
     slope = np.polyfit(times[later] / 60.0, rss[later], 1)[0] if later.sum() >= 2 else 0.0
+    writer = np.array(writer)
+    writer_slope = (np.polyfit(times[later] / 60.0, writer[later], 1)[0]
+                    if later.sum() >= 2 else 0.0)
     checks = [f'SIGINT exit {code}']
     fine = code == 0
     if 'record.mcap' in recordings:
@@ -611,7 +630,9 @@ def run_memory(args, workdir):
     split = f' --split-seconds {args.split_seconds:g}' if args.split_seconds else ''
     row(f'memory --minutes {args.minutes:g} --record {args.record}{split}', what,
         f'RSS {rss[0]:.0f} MB at {times[0]:.0f} s -> {rss[-1]:.0f} MB at {times[-1]:.0f} s: '
-        f'{growth:+.1f}% ({slope:+.2f} MB/min fitted from {warm:.0f} s on)')
+        f'{growth:+.1f}% ({slope:+.2f} MB/min fitted from {warm:.0f} s on)'
+        + (f'; its .rrd writer process {writer[0]:.0f} -> {writer[-1]:.0f} MB '
+           f'({writer_slope:+.2f} MB/min)' if writer.any() else ''))
     return 0 if fine else 1
 
 
