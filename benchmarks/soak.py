@@ -639,9 +639,9 @@ def run_memory(args, workdir):
 def _sink_for_memory(args, path):
     """The sink the sinkmemory case records through, as the node wraps it."""
     from ball_world.recording.writer_thread import BackgroundSink
-    if args.sinks == 'rrd':
+    if args.sinks in ('rrd', 'rrd-process'):  # the SDK's stream here, or in a child
         from ball_world.recording.rerun_log import RerunSink
-        return RerunSink(path.with_suffix('.rrd'))
+        return RerunSink(path.with_suffix('.rrd'), file_process=args.sinks == 'rrd-process')
     if args.sinks == 'split':
         from ball_world.recording.split_writer import SplitMcapSink
         return BackgroundSink(SplitMcapSink(path, max_seconds=args.split_seconds,
@@ -666,13 +666,16 @@ def run_sink_memory(args, workdir):
                             sinks=[_sink_for_memory(args, path)])
     began = time.monotonic()
     samples = []
+    writer = []  # RSS of the .rrd writer process (rrd-process)
     for k in range(1, round(args.minutes * 6000) + 1):
         simulation.step()
         if k % 100 == 0:
             simulation.flush()
         if k % 6000 == 0:
             samples.append(rss_mb())
-            progress(f'sinkmemory: {k // 6000} simulated min, RSS {samples[-1]:.1f} MB')
+            writer.append(writer_rss_mb())
+            progress(f'sinkmemory: {k // 6000} simulated min, RSS {samples[-1]:.1f} MB '
+                     f'(.rrd writer {writer[-1]:.1f} MB)')
     simulation.close()
     elapsed = time.monotonic() - began
     for leftover in [] if args.keep else Path(workdir).glob('sinkmemory*'):
@@ -689,8 +692,12 @@ def run_sink_memory(args, workdir):
     row(f'sinkmemory --sinks {args.sinks}{split} --minutes {args.minutes:g}',
         f'Simulation of {args.balls} balls ({args.mode} mode), {len(samples) * 6000:,} steps '
         f'at 100 Hz in {elapsed:.0f} s; RSS per simulated minute '
-        + ' '.join(f'{value:.1f}' for value in samples) + ' MB',
-        f'{slope:+.2f} MB per simulated minute, fitted from minute 3 on')
+        + ' '.join(f'{value:.1f}' for value in samples) + ' MB'
+        + ('; its .rrd writer process ' + ' '.join(f'{value:.1f}' for value in writer) + ' MB'
+           if any(writer) else ''),
+        f'{slope:+.2f} MB per simulated minute, fitted from minute 3 on'
+        + (f'; the writer {np.polyfit(minutes[2:], np.array(writer[2:]), 1)[0]:+.2f}'
+           if any(writer) else ''))
     return 0
 
 
@@ -1296,7 +1303,8 @@ def main(argv=None):
     sinkmemory.add_argument('--minutes', type=float, default=10.0,
                             help='simulated minutes at 100 Hz (default 10)')
     sinkmemory.add_argument('--balls', type=int, default=1000)
-    sinkmemory.add_argument('--sinks', choices=('mcap', 'split', 'rrd'), default='split')
+    sinkmemory.add_argument('--sinks', choices=('mcap', 'split', 'rrd', 'rrd-process'),
+                            default='split')
     sinkmemory.add_argument('--split-seconds', type=float, default=10.0, metavar='S')
     sinkmemory.add_argument('--max-files', type=int, default=2, metavar='K')
     rtf = cases.add_parser('rtf', help='real-time factor of a 10,000-ball node at 100 Hz, '
