@@ -69,17 +69,26 @@ def rss_mb(pid=None):
     return psutil.Process(pid).memory_info().rss / 2**20
 
 
-def writer_rss_mb(pid=None):
-    """Resident memory of the .rrd writer that a process started (recording.rerun_process),
-    MiB; 0 without one."""
+def rrd_writers(pid=None):
+    """The .rrd writer processes (recording.rerun_process) that a process started."""
     import psutil
+    found = []
     for child in psutil.Process(pid).children():
         try:
             if 'ball_world.recording.rerun_process' in child.cmdline():
-                return child.memory_info().rss / 2**20
+                found.append(child)
         except psutil.Error:
             pass
-    return 0.0
+    return found
+
+
+def writer_rss_mb(pid=None):
+    """Resident memory of the .rrd writer that a process started, MiB; 0 without one."""
+    import psutil
+    try:
+        return sum(writer.memory_info().rss for writer in rrd_writers(pid)) / 2**20
+    except psutil.Error:
+        return 0.0
 
 
 # The node as a subprocess ---------------------------------------------------------------------
@@ -291,6 +300,9 @@ def run_kill(args, workdir):
             kill_at = listener.last_step + int(rng.integers(150, 450))  # 1.5-4.5 s on
             listener.spin_until(lambda: listener.last_step >= kill_at, f'step {kill_at}', node)
             time.sleep(rng.uniform(0.0, 1.0 / args.rate))  # anywhere within a step
+            for writer in rrd_writers(node.process.pid):
+                writer.kill()  # killed together, as a power cut does (alone, it would
+                #                finish the .rrd: nothing to repair)
             node.kill()
             listener.drain()
         finally:
