@@ -69,6 +69,28 @@ def rss_mb(pid=None):
     return psutil.Process(pid).memory_info().rss / 2**20
 
 
+def rrd_writers(pid=None):
+    """The .rrd writer processes (recording.rerun_process) that a process started."""
+    import psutil
+    found = []
+    for child in psutil.Process(pid).children():
+        try:
+            if 'ball_world.recording.rerun_process' in child.cmdline():
+                found.append(child)
+        except psutil.Error:
+            pass
+    return found
+
+
+def writer_rss_mb(pid=None):
+    """Resident memory of the .rrd writer that a process started, MiB; 0 without one."""
+    import psutil
+    try:
+        return sum(writer.memory_info().rss for writer in rrd_writers(pid)) / 2**20
+    except psutil.Error:
+        return 0.0
+
+
 # The node as a subprocess ---------------------------------------------------------------------
 
 def _harness():
@@ -278,6 +300,9 @@ def run_kill(args, workdir):
             kill_at = listener.last_step + int(rng.integers(150, 450))  # 1.5-4.5 s on
             listener.spin_until(lambda: listener.last_step >= kill_at, f'step {kill_at}', node)
             time.sleep(rng.uniform(0.0, 1.0 / args.rate))  # anywhere within a step
+            for writer in rrd_writers(node.process.pid):
+                writer.kill()  # killed together, as a power cut does (alone, it would
+                #                finish the .rrd: nothing to repair)
             node.kill()
             listener.drain()
         finally:
@@ -556,6 +581,7 @@ def run_memory(args, workdir):
                                                **recordings})
     listener = Listener(ns)
     samples = []
+    writer = []  # RSS of the node's .rrd writer process at each sample
     try:
         listener.spin_until(lambda: listener.heard > 0, 'the first step', node)
         began = time.monotonic()
@@ -566,8 +592,10 @@ def run_memory(args, workdir):
             listener.spin(0.1)
             if time.monotonic() >= next_sample:
                 samples.append((time.monotonic() - began, rss_mb(node.pid)))
+                writer.append(writer_rss_mb(node.pid))
                 next_sample += args.every
-                progress(f'memory: {samples[-1][0]:.0f} s, RSS {samples[-1][1]:.1f} MB, '
+                progress(f'memory: {samples[-1][0]:.0f} s, RSS {samples[-1][1]:.1f} MB '
+                         f'(.rrd writer {writer[-1]:.1f} MB), '
                          f'step {listener.last_step}, MCAP {_size_mb(mcap_path):.0f} MB, '
                          f'.rrd {_size_mb(rrd_path):.0f} MB')
         steps = listener.last_step
@@ -583,6 +611,9 @@ def run_memory(args, workdir):
     warm = min(60.0, times[-1] / 2)  # the first minute (or half) is warm-up
     later = times >= warm
     slope = np.polyfit(times[later] / 60.0, rss[later], 1)[0] if later.sum() >= 2 else 0.0
+    writer = np.array(writer)
+    writer_slope = (np.polyfit(times[later] / 60.0, writer[later], 1)[0]
+                    if later.sum() >= 2 else 0.0)
     checks = [f'SIGINT exit {code}']
     fine = code == 0
     if 'record.mcap' in recordings:
@@ -611,16 +642,18 @@ def run_memory(args, workdir):
     split = f' --split-seconds {args.split_seconds:g}' if args.split_seconds else ''
     row(f'memory --minutes {args.minutes:g} --record {args.record}{split}', what,
         f'RSS {rss[0]:.0f} MB at {times[0]:.0f} s -> {rss[-1]:.0f} MB at {times[-1]:.0f} s: '
-        f'{growth:+.1f}% ({slope:+.2f} MB/min fitted from {warm:.0f} s on)')
+        f'{growth:+.1f}% ({slope:+.2f} MB/min fitted from {warm:.0f} s on)'
+        + (f'; its .rrd writer process {writer[0]:.0f} -> {writer[-1]:.0f} MB '
+           f'({writer_slope:+.2f} MB/min)' if writer.any() else ''))
     return 0 if fine else 1
 
 
 def _sink_for_memory(args, path):
     """The sink the sinkmemory case records through, as the node wraps it."""
     from ball_world.recording.writer_thread import BackgroundSink
-    if args.sinks == 'rrd':
+    if args.sinks in ('rrd', 'rrd-process'):  # the SDK's stream here, or in a child
         from ball_world.recording.rerun_log import RerunSink
-        return RerunSink(path.with_suffix('.rrd'))
+        return RerunSink(path.with_suffix('.rrd'), file_process=args.sinks == 'rrd-process')
     if args.sinks == 'split':
         from ball_world.recording.split_writer import SplitMcapSink
         return BackgroundSink(SplitMcapSink(path, max_seconds=args.split_seconds,
@@ -645,13 +678,16 @@ def run_sink_memory(args, workdir):
                             sinks=[_sink_for_memory(args, path)])
     began = time.monotonic()
     samples = []
+    writer = []  # RSS of the .rrd writer process (rrd-process)
     for k in range(1, round(args.minutes * 6000) + 1):
         simulation.step()
         if k % 100 == 0:
             simulation.flush()
         if k % 6000 == 0:
             samples.append(rss_mb())
-            progress(f'sinkmemory: {k // 6000} simulated min, RSS {samples[-1]:.1f} MB')
+            writer.append(writer_rss_mb())
+            progress(f'sinkmemory: {k // 6000} simulated min, RSS {samples[-1]:.1f} MB '
+                     f'(.rrd writer {writer[-1]:.1f} MB)')
     simulation.close()
     elapsed = time.monotonic() - began
     for leftover in [] if args.keep else Path(workdir).glob('sinkmemory*'):
@@ -668,8 +704,12 @@ def run_sink_memory(args, workdir):
     row(f'sinkmemory --sinks {args.sinks}{split} --minutes {args.minutes:g}',
         f'Simulation of {args.balls} balls ({args.mode} mode), {len(samples) * 6000:,} steps '
         f'at 100 Hz in {elapsed:.0f} s; RSS per simulated minute '
-        + ' '.join(f'{value:.1f}' for value in samples) + ' MB',
-        f'{slope:+.2f} MB per simulated minute, fitted from minute 3 on')
+        + ' '.join(f'{value:.1f}' for value in samples) + ' MB'
+        + ('; its .rrd writer process ' + ' '.join(f'{value:.1f}' for value in writer) + ' MB'
+           if any(writer) else ''),
+        f'{slope:+.2f} MB per simulated minute, fitted from minute 3 on'
+        + (f'; the writer {np.polyfit(minutes[2:], np.array(writer[2:]), 1)[0]:+.2f}'
+           if any(writer) else ''))
     return 0
 
 
@@ -1275,7 +1315,8 @@ def main(argv=None):
     sinkmemory.add_argument('--minutes', type=float, default=10.0,
                             help='simulated minutes at 100 Hz (default 10)')
     sinkmemory.add_argument('--balls', type=int, default=1000)
-    sinkmemory.add_argument('--sinks', choices=('mcap', 'split', 'rrd'), default='split')
+    sinkmemory.add_argument('--sinks', choices=('mcap', 'split', 'rrd', 'rrd-process'),
+                            default='split')
     sinkmemory.add_argument('--split-seconds', type=float, default=10.0, metavar='S')
     sinkmemory.add_argument('--max-files', type=int, default=2, metavar='K')
     rtf = cases.add_parser('rtf', help='real-time factor of a 10,000-ball node at 100 Hz, '

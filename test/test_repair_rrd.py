@@ -1,6 +1,10 @@
-"""ball_world_repair on a Rerun .rrd that a SIGKILL cut short: a real node process recording
-.rrd is killed; the repaired copy must verify, and hold every step Rerun's reader finds in the
-killed file, from step 0 on without a gap."""
+"""ball_world_repair on a Rerun .rrd that a SIGKILL cut short: a real node recording .rrd is
+killed with its .rrd writer (a process of its own, recording.rerun_process), as a power cut
+does; the repaired copy must verify, and hold every step Rerun's reader
+finds in the killed file, from step 0 on without a gap. The node killed alone leaves its
+writer to finish the file."""
+import os
+from pathlib import Path
 import shutil
 import signal
 import time
@@ -15,8 +19,21 @@ KILL_AFTER_BYTES = 60_000
 
 @pytest.fixture(scope='module')
 def killed(tmp_path_factory):
-    """An .rrd whose node was SIGKILLed while it recorded."""
-    path = tmp_path_factory.mktemp('killed') / 'run.rrd'
+    """An .rrd whose node and writer were SIGKILLed together while it recorded."""
+    return killed_run(tmp_path_factory.mktemp('killed') / 'run.rrd', with_writer=True)
+
+
+def child_pids(pid):
+    """The processes that `pid` started (its .rrd writer), from /proc."""
+    found = []
+    for task in Path(f'/proc/{pid}/task').iterdir():
+        found += [int(child) for child in (task / 'children').read_text().split()]
+    return found
+
+
+def killed_run(path, with_writer):
+    """Record .rrd with a node; SIGKILL it (and first its writer, if with_writer) once the
+    file holds several flushes; the path."""
     with Children() as children:
         node = children.start_node('record.rerun:=' + str(path), 'rate_hz:=200.0',
                                    'markers.rate_hz:=0.0')
@@ -25,8 +42,11 @@ def killed(tmp_path_factory):
             assert node.poll() is None, node.communicate()
             assert time.monotonic() < deadline, 'the node wrote too little to its .rrd'
             time.sleep(0.1)
-        node.send_signal(signal.SIGKILL)
-        node.wait(timeout=DEADLINE)
+        writers = child_pids(node.pid)
+        assert len(writers) == 1, writers
+        for pid in (writers if with_writer else []) + [node.pid]:
+            os.kill(pid, signal.SIGKILL)
+        node.communicate(timeout=DEADLINE)  # its stderr ends when its writer has ended too
     return path
 
 
@@ -78,3 +98,13 @@ def test_what_is_not_a_ball_world_rrd_is_one_line_and_writes_nothing(tmp_path):
     assert err == (f"ball_world_repair: {junk}: no recording of 'ball_world' in it: not a "
                    'ball_world .rrd\n')
     assert sorted(p.name for p in tmp_path.iterdir()) == ['junk.rrd']
+
+
+def test_the_node_killed_alone_leaves_its_writer_to_finish_the_file(tmp_path):
+    """The writer reads the end of its input and closes the file, footer included: nothing
+    to repair, every step the node sent in it from step 0 on."""
+    path = killed_run(tmp_path / 'run.rrd', with_writer=False)
+    verified = run_rerun('rrd', 'verify', path)
+    assert verified.returncode == 0, verified.stderr
+    [steps] = rrd_ball_steps(path)
+    assert steps == list(range(len(steps))) and len(steps) > 1

@@ -435,11 +435,13 @@ class RerunSink:
     clock: a wall clock in seconds (time.monotonic) to measure the real-time factor over
     the last second; without it the record's value is logged. report: called with one line
     when one destination fails while another goes on (when the last one fails, the sink
-    raises instead, so its owner drops it and says so).
+    raises instead, so its owner drops it and says so). file_process: the file is written
+    by a child process (rerun_process), which keeps the SDK's per-chunk index of a long
+    recording out of this process's memory.
     """
 
     def __init__(self, path=None, every=1, view=None, velocities=False, trail_seconds=0.0,
-                 clock=None, report=None, view_fps=VIEW_FPS):
+                 clock=None, report=None, view_fps=VIEW_FPS, file_process=False):
         if isinstance(every, bool) or not isinstance(every, int) or every < 1:
             raise ValueError(f'every must be a whole number >= 1, got {every!r}')
         if not (isinstance(trail_seconds, (int, float)) and 0.0 <= trail_seconds < math.inf):
@@ -461,7 +463,8 @@ class RerunSink:
         if self.path is not None:
             path = self.path
             self._feeds.append(_Feed(lambda stream, plan: Outlet.file(path, stream, plan),
-                                     every=every, **layers))
+                                     every=every, stream_factory=_file_stream(file_process),
+                                     **layers))
         if view is not None:
             self._feeds.append(_Feed(lambda stream, plan: Outlet.view(view, stream, plan),
                                      frame_period=1.0 / view_fps,
@@ -530,8 +533,9 @@ class _Feed:
     """
 
     def __init__(self, open_outlet, every=1, velocities=False, trail_seconds=0.0, clock=None,
-                 frame_period=None, frame_clock=None):
+                 frame_period=None, frame_clock=None, stream_factory=new_stream):
         self._open_outlet = open_outlet
+        self._new_stream = stream_factory
         self.every = every
         self.velocities = velocities
         self.trail_seconds = trail_seconds
@@ -651,8 +655,8 @@ class _Feed:
         self._opened = True
         plan = None if world is None else blueprint(
             world, parameters, VIEW_PLOT_SECONDS if self.live else None)
-        stream = new_stream(APPLICATION_ID, recording_id(parameters),
-                            VIEW_FLUSH_SECONDS if self.live else None)
+        stream = self._new_stream(APPLICATION_ID, recording_id(parameters),
+                                  VIEW_FLUSH_SECONDS if self.live else None)
         self.outlet = self._open_outlet(stream, plan)
         self._emit('log', ARENA, rr.Transform3D(
             rotation=rr.RotationAxisAngle(axis=(1.0, 0.0, 0.0), degrees=180.0)), static=True)
@@ -967,6 +971,15 @@ class _Feed:
     def _index(steps, times_ns):
         return [rr.TimeColumn(STEP, sequence=np.array(steps, dtype=np.int64)),
                 rr.TimeColumn(SIM_TIME, duration=np.array(times_ns, dtype='timedelta64[ns]'))]
+
+
+def _file_stream(in_child):
+    """What makes a file's stream: the SDK's own, or its stand-in in a child process (which
+    starts now, so that it is ready by the first step)."""
+    if not in_child:
+        return new_stream
+    from ball_world.recording.rerun_process import ProcessStream
+    return ProcessStream().open
 
 
 def _probe_file(path):

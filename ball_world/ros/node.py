@@ -127,7 +127,8 @@ def open_sinks(values):
                 rerun_file.path if rerun_file else None, every=values['record.rerun_every'],
                 view=values['view.rerun'] or None, velocities=values['rerun.velocities'],
                 trail_seconds=values['rerun.trail_seconds'], clock=time.monotonic,
-                report=rclpy.logging.get_logger('ball_world').error)
+                report=rclpy.logging.get_logger('ball_world').error,
+                file_process=True)  # the SDK's index of a long file grows: not in the node
             sinks.append(ClaimedSink(sink, rerun_file) if rerun_file else sink)
     except ValueError as error:  # the only value a RerunSink checks is the view
         for sink in sinks:
