@@ -619,13 +619,23 @@ class Simulation:
                                    self.step_index, stamp_ns, self.dt_ns))
 
     def _each_sink(self, action):
-        """Run action on every sink; a sink that raises is dropped and reported once."""
+        """Run action on every sink; a sink that raises is dropped and reported once.
+
+        A Ctrl-C that lands inside one sink's call (most of a step's fan-out: queueing the
+        record for a writer thread) is raised only after the sinks after it had the action
+        too, so the MCAP and the .rrd end on the same step.
+        """
+        interrupted = None
         for sink in list(self.sinks):
             try:
                 action(sink)
+            except KeyboardInterrupt as stop:
+                interrupted = stop
             except Exception as error:  # noqa: B902 - any sink failure must not stop stepping
                 self.sinks.remove(sink)
                 if self.on_sink_failure is not None:
                     self.on_sink_failure(SinkFailure(sink, error))
                 else:
                     raise
+        if interrupted is not None:
+            raise interrupted

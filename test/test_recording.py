@@ -507,3 +507,34 @@ def test_a_reader_that_stops_early_is_no_error(recorded, tool):
     assert done.returncode == 0, done.stderr
     assert 'Traceback' not in done.stderr and 'Broken pipe' not in done.stderr
     assert len(done.stdout) == 1
+
+
+class _Interrupted:
+    """A sink whose queueing of one step is cut by Ctrl-C, as a signal can land there."""
+
+    def __init__(self, at_step):
+        self.at_step, self.steps = at_step, []
+
+    def start_segment(self, world, info):
+        pass
+
+    def write_step(self, record):
+        if record.step == self.at_step:
+            raise KeyboardInterrupt()
+        self.steps.append(record.step)
+
+    def flush(self):
+        pass
+
+    def close(self):
+        pass
+
+
+def test_a_ctrl_c_inside_one_sink_still_gives_the_step_to_the_sinks_after_it(tmp_path):
+    cut, after = _Interrupted(at_step=3), _Interrupted(at_step=None)
+    simulation = Simulation(PARAMS, sinks=[cut, after])
+    run(simulation, 2)
+    with pytest.raises(KeyboardInterrupt):
+        simulation.step()
+    assert after.steps == [0, 1, 2, 3] and cut.steps == [0, 1, 2]
+    assert simulation.sinks == [cut, after]  # an interrupt is no sink failure
