@@ -194,18 +194,24 @@ def test_beyond_the_label_limit_no_label_points_are_logged(tmp_path):
     first = collector.records[0]
     sink.write_step(first)
     count = LABEL_LIMIT + 1
-    grown = SimpleNamespace(**{**vars(replace(first)), 'step': 1, 'log_time_ns': 10**7,
-                               'positions': np.column_stack((np.arange(count) * 0.3 + 0.2,
-                                                             np.full(count, 5.0))),
-                               'velocities': np.zeros((count, 2)),
-                               'names': tuple(f'ball_{i}' for i in range(count)),
-                               'radii': np.full(count, 0.1), 'masses': np.ones(count)})
+    grown = grown_past_label_limit(first)
     sink.write_step(grown)
     sink.close()
     _, content, _, _ = read(path)
     points = content[(f'/{LABELS}', 'Points2D:positions')]
     assert len(points[0]) == 3 and points[1] == []  # nothing left on screen at step 1
     assert len(content[(f'/{BALLS}', 'Points2D:positions')][1]) == count
+
+
+def grown_past_label_limit(first):
+    """Step 1 after `first`, in a world grown to LABEL_LIMIT + 1 still balls in a row."""
+    count = LABEL_LIMIT + 1
+    return SimpleNamespace(**{**vars(replace(first)), 'step': 1, 'log_time_ns': 10**7,
+                              'positions': np.column_stack((np.arange(count) * 0.3 + 0.2,
+                                                            np.full(count, 5.0))),
+                              'velocities': np.zeros((count, 2)),
+                              'names': tuple(f'ball_{i}' for i in range(count)),
+                              'radii': np.full(count, 0.1), 'masses': np.ones(count)})
 
 
 def test_a_live_view_hides_its_labels_when_the_world_grows_past_the_limit():
@@ -230,13 +236,7 @@ def test_a_live_view_hides_its_labels_when_the_world_grows_past_the_limit():
     world, _ = collector.segments[0]
     feed.start_segment(world, SimpleNamespace(parameters={}, log_offset_ns=0))
     first = collector.records[0]
-    count = LABEL_LIMIT + 1
-    grown = SimpleNamespace(**{**vars(replace(first)), 'step': 1, 'log_time_ns': 10**7,
-                               'positions': np.column_stack((np.arange(count) * 0.3 + 0.2,
-                                                             np.full(count, 5.0))),
-                               'velocities': np.zeros((count, 2)),
-                               'names': tuple(f'ball_{i}' for i in range(count)),
-                               'radii': np.full(count, 0.1), 'masses': np.ones(count)})
+    grown = grown_past_label_limit(first)
 
     def arrows_logged(record):
         """(static looks, frame) arrows of the balls when the feed logs `record`."""
