@@ -308,6 +308,9 @@ PARAMETERS = (
               'rad/s.', ON_RESET, 0.0, 1000.0),
     Parameter('agent.cmd_timeout', DOUBLE, 0.5, 'Agents: simulated s without a command before '
               'an agent brakes to rest; 0 holds the last command.', ON_RESET, 0.0, 3600.0),
+    Parameter('agent.drive', STRING, 'omni', "Agents: 'omni' follows linear.x and linear.y "
+              "(holonomic); 'diff' is a differential drive (unicycle): linear.y ignored, the "
+              'velocity kept along the heading.', choices=('omni', 'diff')),
     Parameter('agent.cmd_vel_stamped', BOOL, False, 'Agents: take geometry_msgs/msg/'
               'TwistStamped on cmd_vel instead of Twist.', AT_START),
     Parameter('agent.scan.samples', INTEGER, 360, "Agents' lidar: beams per scan; 0: no "
