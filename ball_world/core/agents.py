@@ -128,6 +128,22 @@ def frames(prefix, name):
     return f'{prefix}{name}/odom', f'{prefix}{name}/base_link'
 
 
+def frame_clash(frame_id, prefix, names):
+    """Why frame_id cannot be the frame of the agents `names` under `prefix`, or None.
+
+    frame_id is the parent of every agent's odom frame (/tf_static); were it one of the
+    agents' own frames, tf2 would get a transform from a frame to itself, or a loop.
+    `names` is any collection of names (a set is fastest).
+    """
+    if not frame_id.startswith(prefix):
+        return None
+    name, _, kind = frame_id[len(prefix):].rpartition('/')
+    if kind in ('odom', 'base_link') and name in names:
+        return (f"'{frame_id[:64]}' is agent {name}'s own frame; frame_id must be a frame "
+                'above the agents (world, map)')
+    return None
+
+
 def agent_names(parameters, count):
     """The agents of a new world of `count` balls, checked (ParameterError naming `agents`).
 
@@ -146,6 +162,10 @@ def agent_names(parameters, count):
         if name in seen:
             raise ParameterError('agents', f"'{name}' is listed twice")
         seen.add(name)
+    clash = frame_clash(parameters.get('frame_id', 'world'),
+                        parameters.get('frame_prefix', ''), seen)
+    if clash:
+        raise ParameterError('frame_id', clash)
     return requested
 
 
@@ -165,6 +185,10 @@ class Agents:
         self._yaws = np.zeros(count)
         self._commands = np.zeros((count, 3))  # vx, vy, wz of the last command
         self._since = np.full(count, _NO_COMMAND, dtype=np.int64)
+        # Noisy odometry (core.odometry): each agent's odometry pose (x, y, yaw), NaN until it
+        # starts at the agent's true pose, and its covariance (odometry.COVARIANCE_ENTRIES).
+        self._odometry = np.full((count, 3), np.nan)
+        self._covariance = np.zeros((count, 6))
         self.commands_taken = 0
 
     def __len__(self):
@@ -192,6 +216,8 @@ class Agents:
         self._yaws = np.append(self._yaws, wrapped(float(yaw)))
         self._commands = np.vstack((self._commands, np.zeros((1, 3))))
         self._since = np.append(self._since, np.int64(_NO_COMMAND))
+        self._odometry = np.vstack((self._odometry, np.full((1, 3), np.nan)))
+        self._covariance = np.vstack((self._covariance, np.zeros((1, 6))))
 
     def remove(self, name):
         """Forget an agent (its ball was deleted); a name that is no agent is ignored."""
@@ -203,10 +229,13 @@ class Agents:
         self._yaws = np.delete(self._yaws, row)
         self._commands = np.delete(self._commands, row, axis=0)
         self._since = np.delete(self._since, row)
+        self._odometry = np.delete(self._odometry, row, axis=0)
+        self._covariance = np.delete(self._covariance, row, axis=0)
 
-    def restore(self, name, yaw, command=None):
+    def restore(self, name, yaw, command=None, odometry=None, covariance=None):
         """Make `name` an agent with heading yaw and its last Command, as they were at a
-        step of a recorded run (a split file resumes there): both kept bit for bit."""
+        step of a recorded run (a split file resumes there): both kept bit for bit, and so
+        are its noisy odometry's pose (x, y, yaw) and covariance when given."""
         if name not in self._row:
             self.add(name)
         row = self._row[name]
@@ -214,6 +243,26 @@ class Agents:
         if command is not None:
             self._commands[row] = (command.vx, command.vy, command.wz)
             self._since[row] = int(command.since_ns)
+        if odometry is not None:
+            self._odometry[row] = odometry
+            self._covariance[row] = covariance
+
+    def odometry(self):
+        """(poses (A, 3), covariances (A, 6)) of the noisy odometry, copies, agent order."""
+        return self._odometry.copy(), self._covariance.copy()
+
+    def start_odometry(self, true_poses):
+        """Agents whose odometry has not started (new ones) start at their true pose
+        (A, 3), with covariance 0: the odom frame is where the agent was then."""
+        fresh = np.isnan(self._odometry[:, 0])
+        if fresh.any():
+            self._odometry[fresh] = true_poses[fresh]
+            self._covariance[fresh] = 0.0
+
+    def set_odometry(self, poses, covariances):
+        """The odometry after a step (core.odometry.advance), agent order."""
+        self._odometry = poses
+        self._covariance = covariances
 
     def set_yaw(self, name, yaw):
         self._yaws[self._row[name]] = wrapped(float(yaw))
