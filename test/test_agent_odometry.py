@@ -223,8 +223,7 @@ def head_on(yaw, mode='seed', backend='numpy'):
 @pytest.mark.parametrize('mode, backend', [('seed', 'numpy'), ('seed', 'numba'),
                                            ('exact', 'numba')])
 @pytest.mark.parametrize('yaw', [0.0, 1.1, -2.7])
-def test_a_head_on_hit_gives_the_bumper_the_elastic_impulse_in_the_agents_frame(yaw, mode,
-                                                                               backend):
+def test_a_head_on_hit_gives_the_bumper_the_elastic_impulse_in_its_frame(yaw, mode, backend):
     simulation, yaw = head_on(yaw, mode, backend)
     x, y = simulation.world.positions[0].tolist()
     simulation.set_state('ball_0', x, y, 0.0, 0.0, yaw=yaw)
