@@ -47,6 +47,8 @@ CMD_VEL_DEPTH = 100
 WARN_PERIOD = 5.0
 #: Agents whose topics take long enough to make (or leave) that the node says so first.
 MANY_AGENTS = 200
+#: Wall seconds between two looks at the graph for cmd_vel of another type (check_types).
+TYPE_CHECK_PERIOD = 2.0
 #: Wall seconds the node spends leaving the graph entity by entity when it stops; what is
 #: left then goes with the process (see destroy).
 LEAVE_BUDGET = 5.0
@@ -87,6 +89,7 @@ class AgentTopics:
         self._tf = None
         self._tf_static = None
         self._warned_at = -WARN_PERIOD
+        self._hinted = set()  # (topic, type) pairs already named in a hint
         self.sync()
 
     @property
@@ -139,6 +142,34 @@ class AgentTopics:
             self._tf = self.node.create_publisher(TFMessage, '/tf', TF_QOS)
             self._tf_static = self.node.create_publisher(TFMessage, '/tf_static',
                                                          TF_STATIC_QOS)
+
+    def check_types(self):
+        """Say once, for each agent's cmd_vel and each other type seen on it, that commands
+        of that type never arrive, and which setting takes them.
+
+        Why: DDS matches a publisher only with subscriptions of its own type, so a
+        TwistStamped sent to a world that takes Twist (Jazzy's diff_drive_controller takes
+        only TwistStamped, Nav2 sends it with enable_stamped_cmd_vel, teleop_twist_keyboard
+        sends Twist) is dropped without a word on either side. One graph query a period
+        (all topics and their types) covers every agent.
+        """
+        if self._io is None:
+            return
+        expected = self._message_type.__module__.split('.')[0] + '/msg/' + \
+            self._message_type.__name__
+        wanted = {self._io.resolve_topic_name(f'{name}/cmd_vel'): name for name in self._topics}
+        for topic, types in self._io.get_topic_names_and_types():
+            if topic not in wanted:
+                continue
+            for other in types:
+                if other == expected or (topic, other) in self._hinted:
+                    continue
+                self._hinted.add((topic, other))
+                setting = 'true' if other.endswith('TwistStamped') else 'false'
+                self.node.get_logger().warning(
+                    f'{topic} has a {other} endpoint, but this world takes {expected} there: '
+                    f'those commands never reach agent {wanted[topic]} (start the world with '
+                    f'-p agent.cmd_vel_stamped:={setting} to take {other})')
 
     def _publisher(self, message_type, topic):
         return self._io.create_publisher(
