@@ -1,5 +1,5 @@
 """The agents' ROS topics: <name>/cmd_vel in; <name>/odom, <name>/ground_truth, <name>/bumper,
-<name>/scan, /tf, /tf_static out.
+<name>/scan, /tf, /tf_static out; and bumper_markers (RViz arrows of the hits).
 
 The node creates one AgentTopics and calls it at four points: sync() when the set of balls
 changes, drain() before each step, publish() after it, and report() for the progress line.
@@ -37,8 +37,10 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 from tf2_msgs.msg import TFMessage
+from visualization_msgs.msg import MarkerArray
 
 from ball_world.core.agents import CommandRejected
+from ball_world.msgs.bumper_markers import bumper_markers
 from ball_world.msgs.twist_cdr import decode_twist, decode_twist_stamped
 
 #: cmd_vel messages a subscription holds between two steps (the node drains them all).
@@ -139,6 +141,8 @@ class AgentTopics:
             self.node.get_logger().info(f'made the topics of {len(new):,} agents in '
                                         f'{time.monotonic() - started:.1f} s')
         if names and self._tf is None:
+            self._bumper_markers = self.node.create_publisher(MarkerArray, 'bumper_markers',
+                                                              ODOM_QOS)
             self._tf = self.node.create_publisher(TFMessage, '/tf', TF_QOS)
             self._tf_static = self.node.create_publisher(TFMessage, '/tf_static',
                                                          TF_STATIC_QOS)
@@ -264,6 +268,9 @@ class AgentTopics:
             topics[name].ground_truth.publish(data)
         for bumper in frame.bumpers:
             topics[bumper.name].bumper.publish(bumper.cdr)
+        markers = bumper_markers(record, self.simulation.frame_id)
+        if markers is not None:
+            self._bumper_markers.publish(markers)
         for scan in frame.scans:
             entities = topics[scan.name]
             if entities.scan is None:  # scanners turned on by a reset
