@@ -38,3 +38,19 @@ def test_another_type_on_cmd_vel_is_named_once_with_the_setting(probe, processes
     assert len(hints) == 1, text
     assert '/ball_0/cmd_vel' in hints[0] and sent.__name__ in hints[0]
     assert publisher.get_subscription_count() == 0  # indeed never matched
+
+
+def test_the_tools_send_the_type_the_world_takes(probes):
+    from ball_world.tools.teleop_drive import command_type, stamped
+    world, tool = probes('world'), probes('tool')
+    world.node.create_subscription(TwistStamped, 'rover/cmd_vel', lambda m: None, 10)
+    world.node.create_subscription(Twist, 'ball_0/cmd_vel', lambda m: None, 10)
+    tool.spin_until(lambda: tool.node.count_subscribers('rover/cmd_vel') > 0
+                    and tool.node.count_subscribers('ball_0/cmd_vel') > 0, 'the graph')
+    assert command_type(tool.node, 'rover/cmd_vel') is TwistStamped
+    assert command_type(tool.node, 'ball_0/cmd_vel') is Twist
+    assert command_type(tool.node, 'nobody/cmd_vel') is Twist
+    message = Twist()
+    message.linear.x = 0.5
+    wrapped = stamped(tool.node, message, 'base_link')
+    assert wrapped.twist.linear.x == 0.5 and wrapped.header.frame_id == 'base_link'
