@@ -287,6 +287,10 @@ class StaticGeometry:
                                           edge / np.maximum(run_lengths, 1e-300)[:, None]))
         self.index = SegmentIndex(self.segments,
                                   cells.resolution if cells is not None else 0.0)
+        #: columns and rows of the index, the first run's wall number, the number of runs
+        #: (as exact mode's kernel takes them: exact_kernel's LAYOUT_COLUMNS ... RUNS)
+        self.layout = np.array([self.index.columns, self.index.rows, self.wall_count,
+                                self.run_count], dtype=np.int64)
         self._scan_grid = None
 
     def __len__(self):
