@@ -51,8 +51,6 @@ BUCKET_SPACING = 2.0
 #: Most buckets per segment (plus BUCKETS_SLACK); buckets grow past it.
 BUCKETS_PER_SEGMENT = 4
 BUCKETS_SLACK = 1024
-#: Cells of a lidar block (`ScanGrid`): a beam crosses an empty block in one step.
-BLOCK_CELLS = 8
 
 
 def expand(owners, low, high):
@@ -311,30 +309,22 @@ class StaticGeometry:
 
 
 class ScanGrid:
-    """A map's solid cells as a beam walks them: one byte a cell (1 solid), and a coarser
-    level of blocks of BLOCK_CELLS x BLOCK_CELLS cells (1: the block holds a solid cell or
-    reaches past the grid), so a beam crosses empty space a block at a time.
+    """A map's solid cells as a beam walks them (core.lidar): one byte a cell (1 solid), in
+    OccupancyGrid's layout, and `frame` (origin x, origin y, resolution). `skips` (each
+    cell's chessboard distance to the nearest solid cell) is made by the compiled scan the
+    first time it walks the grid (core.lidar_kernel.chessboard_distances), so a World that
+    never scans, or scans with the numpy reference, never pays for it.
 
     Without a map: a grid of no cells, which a scan never walks.
     """
 
     def __init__(self, cells=None):
+        self.skips = None
         if cells is None:
             self.solid = np.zeros((0, 0), dtype=np.uint8)
-            self.blocks = np.zeros((0, 0), dtype=np.uint8)
             self.frame = np.array([0.0, 0.0, 1.0])
             return
-        solid = cells.solid
-        rows, columns = solid.shape
-        self.solid = np.ascontiguousarray(solid, dtype=np.uint8)
-        block_rows = -(-rows // BLOCK_CELLS)
-        block_columns = -(-columns // BLOCK_CELLS)
-        padded = np.ones((block_rows * BLOCK_CELLS, block_columns * BLOCK_CELLS), dtype=bool)
-        padded[:rows, :columns] = solid
-        self.blocks = np.ascontiguousarray(
-            padded.reshape(block_rows, BLOCK_CELLS, block_columns, BLOCK_CELLS)
-            .any(axis=(1, 3)), dtype=np.uint8)
-        #: origin_x, origin_y, resolution
+        self.solid = np.ascontiguousarray(cells.solid, dtype=np.uint8)
         self.frame = np.array([cells.origin_x, cells.origin_y, cells.resolution])
 
     @property
