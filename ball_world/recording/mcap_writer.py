@@ -178,17 +178,21 @@ def plain(value):
 def parameters_document(parameters):
     """The params-file dict {'ball_world': {'ros__parameters': {...}}} for `parameters`.
 
-    Dotted names nest ('balls.x' -> balls: {x: ...}), as users write them. Empty lists are
+    Dotted names nest ('balls.x' -> balls: {x: ...}), as users write them, except under a
+    name that has a value itself ('map': '...', 'map.unknown_solid': ...). Empty lists are
     kept: rcl reads them as unset, which the node takes as the (empty) default.
     """
     tree = {}
     for name in sorted(parameters):
         value = '' if name in NOT_REPEATED else plain(parameters[name])
         node = tree
-        *path, leaf = name.split('.')
-        for part in path:
-            node = node.setdefault(part, {})
-        node[leaf] = value
+        parts = name.split('.')
+        # A name that is also another's prefix ('map' and 'map.unknown_solid') keeps the
+        # rest of the longer one as a dotted key, as rcl reads it: sorted, the shorter
+        # comes first and is a value, not a mapping to nest into.
+        while len(parts) > 1 and isinstance(node.get(parts[0], {}), dict):
+            node = node.setdefault(parts.pop(0), {})
+        node['.'.join(parts)] = value
     return {NODE_NAME: {'ros__parameters': tree}}
 
 
