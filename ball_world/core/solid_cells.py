@@ -77,8 +77,10 @@ class CellQueries:
         cells = self.cells
         res = cells.resolution
         xmin, ymin, xmax, ymax = cells.bounds
-        outside = x - radius < xmin or x + radius > xmax or y - radius < ymin \
-            or y + radius > ymax
+        # Distance to each edge first, then compared, as for the squares: x - radius would
+        # round away a hair of overlap.
+        outside = x - xmin < radius or xmax - x < radius or y - ymin < radius \
+            or ymax - y < radius
         # One cell more on each side: rounding in the divisions cannot hide one.
         c0 = max(0, math.floor((x - radius - cells.origin_x) / res) - 1)
         c1 = min(cells.columns, math.floor((x + radius - cells.origin_x) / res) + 2)
@@ -130,8 +132,8 @@ class CellQueries:
         res = cells.resolution
         x, y = positions[:, 0], positions[:, 1]
         xmin, ymin, xmax, ymax = cells.bounds
-        outside = (x - radii < xmin) | (x + radii > xmax) | (y - radii < ymin) \
-            | (y + radii > ymax)
+        outside = (x - xmin < radii) | (xmax - x < radii) | (y - ymin < radii) \
+            | (ymax - y < radii)
         c0 = np.clip(np.floor((x - radii - cells.origin_x) / res) - 1, 0, cells.columns)
         c1 = np.clip(np.floor((x + radii - cells.origin_x) / res) + 2, 0, cells.columns)
         r0 = np.clip(np.floor((y - radii - cells.origin_y) / res) - 1, 0, cells.rows)
