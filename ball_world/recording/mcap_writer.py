@@ -144,6 +144,8 @@ ROLE_QOS = {
     agent_topics.TF: offered_qos_profiles(100),
     agent_topics.TF_STATIC: offered_qos_profiles(1, durability='transient_local'),
     agent_topics.SCAN: offered_qos_profiles(10),
+    agent_topics.GROUND_TRUTH: offered_qos_profiles(10),
+    agent_topics.BUMPER: offered_qos_profiles(10),
 }
 
 _SEQUENCE_MODULO = 2 ** 32  # MCAP message sequence numbers are uint32
