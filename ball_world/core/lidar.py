@@ -157,8 +157,10 @@ def first_solid(px, py, dx, dy, bound, grid):
     nx = np.where(sx > 0, ci + 1, ci)
     ny = np.where(sy > 0, cj + 1, cj)
     with np.errstate(divide='ignore', invalid='ignore'):
-        tx = np.where(sx != 0, crossing(origin_x, nx, resolution, px, dx), np.inf)
-        ty = np.where(sy != 0, crossing(origin_y, ny, resolution, py, dy), np.inf)
+        ix = np.where(sx != 0, 1.0 / dx, 0.0)
+        iy = np.where(sy != 0, 1.0 / dy, 0.0)
+    tx = np.where(sx != 0, crossing(origin_x, nx, resolution, px, ix), np.inf)
+    ty = np.where(sy != 0, crossing(origin_y, ny, resolution, py, iy), np.inf)
     beam = np.arange(len(dx))
     ci = np.full(len(dx), ci)
     cj = np.full(len(dx), cj)
@@ -177,12 +179,11 @@ def first_solid(px, py, dx, dy, bound, grid):
         out[beam[hit]] = t[hit]
         nx = nx + np.where(step_x, sx, 0)
         ny = ny + np.where(step_y, sy, 0)
-        with np.errstate(divide='ignore', invalid='ignore'):
-            tx = np.where(step_x, crossing(origin_x, nx, resolution, px, dx), tx)
-            ty = np.where(step_y, crossing(origin_y, ny, resolution, py, dy), ty)
+        tx = np.where(step_x, crossing(origin_x, nx, resolution, px, ix), tx)
+        ty = np.where(step_y, crossing(origin_y, ny, resolution, py, iy), ty)
         keep = np.flatnonzero(going & ~hit)
-        beam, ci, cj, nx, ny, tx, ty, sx, sy, dx, dy, bound = (
-            np.take(a, keep) for a in (beam, ci, cj, nx, ny, tx, ty, sx, sy, dx, dy, bound))
+        beam, ci, cj, nx, ny, tx, ty, sx, sy, ix, iy, bound = (
+            np.take(a, keep) for a in (beam, ci, cj, nx, ny, tx, ty, sx, sy, ix, iy, bound))
     return out
 
 
@@ -217,10 +218,10 @@ def distances_numba(positions, radii, walls, grid, origin, cos_yaw, sin_yaw, bod
 
 
 def _skips(grid):
-    """The grid's chessboard distances (lidar_kernel.chessboard_distances), made the first
-    time the compiled scan walks it and kept with it."""
+    """The grid's free squares (lidar_kernel.free_squares), made the first time the
+    compiled scan walks it and kept with it."""
     if grid.skips is None:
-        grid.skips = lidar_kernel.chessboard_distances(grid.solid)
+        grid.skips = lidar_kernel.free_squares(grid.solid)
     return grid.skips
 
 

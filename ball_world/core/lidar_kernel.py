@@ -57,8 +57,8 @@ WALL_DEGENERATE = 1e-6
 MIN_INCREMENT = 1e-12
 #: A ball or wall further than range_max times (1 + this) cannot be hit within range_max.
 REACH_SLACK = 1e-6
-#: Largest distance (cells) chessboard_distances keeps: a beam leaves at most a square of
-#: 2 * 255 - 1 cells in one step (7.6 m at 3 cm).
+#: Largest square (cells a side) free_squares keeps: a beam crosses at most 255 cells in one
+#: step (7.6 m at 3 cm).
 SKIP_CAP = 255
 
 
@@ -123,10 +123,12 @@ def grid_line(origin, index, resolution):
     return origin + index * resolution
 
 
-def crossing(origin, index, resolution, p, d):
+def crossing(origin, index, resolution, p, inverse):
     """The beam parameter (distance along a unit direction, m) where a beam from p along d
-    (one axis of each) crosses grid line `index`: (line - p) / d."""
-    return (grid_line(origin, index, resolution) - p) / d
+    (one axis of each) crosses grid line `index`: (line - p) / d, as (line - p) * (1 / d)
+    with `inverse` = 1 / d (a walk computes a crossing per step: a product costs a
+    fraction of a division; within an ulp of the quotient, far below float32's)."""
+    return (grid_line(origin, index, resolution) - p) * inverse
 
 
 def start_cell(p, origin, resolution):
@@ -226,50 +228,47 @@ if njit is not None:
 
 
 @_compile
-def chessboard_distances(solid):
-    """Each cell's distance (in cells, max(|di|, |dj|)) to the nearest solid cell or the
-    outside of the grid, capped at 255: 0 on solid cells, and on a free cell d means every
-    cell within d - 1 of it (a square of side 2 d - 1) is free and inside the grid.
+def free_squares(solid):
+    """For each cell and each quadrant of directions, the side (in cells, capped at
+    SKIP_CAP) of the largest square of free cells inside the grid that has the cell at its
+    corner and extends that way: out[j, i, q] for q = 2 (y grows) + 1 (x grows), 0 on solid
+    cells.
 
-    Two passes of the chessboard chamfer (each cell from its four neighbours already
-    visited), exact for this metric. The compiled walk (first_solid) leaves such a square in
-    one step: empty space costs a few steps per beam, not one per cell.
+    A beam in cell (i, j) going into quadrant q stays inside that square until it crosses
+    its far side along x or y (it only moves away from the cell's other two sides), so it
+    crosses the square in one step (first_solid). The largest-square recurrence, run from
+    the quadrant's far corner: side = 1 + min(of the three neighbours ahead), outside = 0.
     """
     rows = solid.shape[0]
     columns = solid.shape[1]
-    out = np.empty((rows, columns), dtype=np.uint8)
-    distance = np.empty((rows, columns), dtype=np.int64)
-    for j in range(rows):
-        for i in range(columns):
-            if solid[j, i]:
-                distance[j, i] = 0
-                continue
-            best = 0  # the outside (solid) is next to every border cell
-            if j > 0 and i > 0 and i < columns - 1:
-                best = min(distance[j - 1, i - 1], distance[j - 1, i], distance[j - 1, i + 1],
-                           distance[j, i - 1])
-            distance[j, i] = min(best + 1, SKIP_CAP)
-    for j in range(rows - 1, -1, -1):
-        for i in range(columns - 1, -1, -1):
-            best = 0
-            if j < rows - 1 and i > 0 and i < columns - 1:
-                best = min(distance[j + 1, i + 1], distance[j + 1, i], distance[j + 1, i - 1],
-                           distance[j, i + 1])
-            distance[j, i] = min(distance[j, i], best + 1)
-            out[j, i] = distance[j, i]
+    out = np.zeros((rows, columns, 4), dtype=np.uint8)
+    for q in range(4):
+        sx = 1 if q & 1 else -1
+        sy = 1 if q & 2 else -1
+        for jj in range(rows):
+            j = rows - 1 - jj if sy > 0 else jj
+            for ii in range(columns):
+                i = columns - 1 - ii if sx > 0 else ii
+                if solid[j, i]:
+                    continue
+                side = 0
+                if 0 <= i + sx < columns and 0 <= j + sy < rows:
+                    side = min(out[j, i + sx, q], out[j + sy, i, q], out[j + sy, i + sx, q])
+                out[j, i, q] = min(side + 1, SKIP_CAP)
     return out
 
 
 @_compile
-def _solid_at(solid, i, j):
-    """Whether cell (column i, row j) is solid; everything outside the grid is."""
-    if i < 0 or j < 0 or j >= solid.shape[0] or i >= solid.shape[1]:
+def _blocked(skips, i, j):
+    """Whether cell (column i, row j) is solid (free_squares: no square at it); everything
+    outside the grid is."""
+    if i < 0 or j < 0 or j >= skips.shape[0] or i >= skips.shape[1]:
         return True
-    return solid[j, i] != 0
+    return skips[j, i, 0] == 0
 
 
 @_compile
-def _catch_up(t_end, c, line, t_line, step, reach, origin, resolution, p, d):
+def _catch_up(t_end, c, line, t_line, step, reach, origin, resolution, p, d, inverse):
     """Along one axis, the beam's cell just before t_end, from cell c whose next line `line`
     it crosses at t_line: every line crossed before t_end (at most `reach`) taken, as the
     cell by cell walk takes them. Returns (cell, next line, its crossing)."""
@@ -278,27 +277,27 @@ def _catch_up(t_end, c, line, t_line, step, reach, origin, resolution, p, d):
     start = c
     # A guess from the position at t_end, kept within the reach, then mended with the very
     # crossings the cell by cell walk compares.
-    guess = np.int64(start_cell(p + t_end * d, origin, resolution))
+    guess = np.int64(math.floor((p + t_end * d - origin) / resolution))
     if step > 0:
         guess = min(max(guess, start + 1), start + reach)
     else:
         guess = max(min(guess, start - 1), start - reach)
     c = guess
     line = c + 1 if step > 0 else c
-    t_line = crossing(origin, line, resolution, p, d)
+    t_line = crossing(origin, line, resolution, p, inverse)
     while t_line < t_end:
         c += step
         line += step
-        t_line = crossing(origin, line, resolution, p, d)
-    while c != start and not crossing(origin, line - step, resolution, p, d) < t_end:
+        t_line = crossing(origin, line, resolution, p, inverse)
+    while c != start and not crossing(origin, line - step, resolution, p, inverse) < t_end:
         c -= step
         line -= step
-        t_line = crossing(origin, line, resolution, p, d)
+        t_line = crossing(origin, line, resolution, p, inverse)
     return c, line, t_line
 
 
 @_compile
-def first_solid(px, py, dx, dy, bound, solid, skips, origin_x, origin_y, resolution):
+def first_solid(px, py, dx, dy, bound, skips, origin_x, origin_y, resolution):
     """Distance along the beam from p along the unit vector d to where it first enters a
     solid cell of the map (or leaves the grid: outside is solid), if that is at most
     `bound`; +inf otherwise. 0 when p itself is in a solid cell.
@@ -308,28 +307,34 @@ def first_solid(px, py, dx, dy, bound, solid, skips, origin_x, origin_y, resolut
     entered cell's edge, the same bits as the numpy reference's walk (core.lidar). Where
     the beam crosses a line of each axis at the same parameter it passes through a vertex,
     touching three cells there: it is stopped if any of them is solid. `skips`
-    (chessboard_distances) lets it leave a square of free cells in one step: the cell and
+    (free_squares) lets it cross a square of free cells ahead in one step: the cell and
     next lines it reaches are those the cell by cell walk would (_catch_up), so the result
-    is the same.
+    is the same. (A beam along an axis uses the quadrant of x growing: the square holds its
+    column or row all the same.) Whether a cell is solid is read from `skips` too (0 on
+    solid cells), in the bytes the next step reads anyway.
     """
     ci = np.int64(start_cell(px, origin_x, resolution))
     cj = np.int64(start_cell(py, origin_y, resolution))
-    if _solid_at(solid, ci, cj):
+    if _blocked(skips, ci, cj):
         return 0.0
     sx = 1 if dx > 0.0 else (-1 if dx < 0.0 else 0)
     sy = 1 if dy > 0.0 else (-1 if dy < 0.0 else 0)
+    ix = 1.0 / dx if sx != 0 else 0.0
+    iy = 1.0 / dy if sy != 0 else 0.0
+    quadrant = (2 if sy > 0 else 0) + (1 if sx >= 0 else 0)
     nx = ci + 1 if sx > 0 else ci
     ny = cj + 1 if sy > 0 else cj
-    tx = crossing(origin_x, nx, resolution, px, dx) if sx != 0 else np.inf
-    ty = crossing(origin_y, ny, resolution, py, dy) if sy != 0 else np.inf
+    tx = crossing(origin_x, nx, resolution, px, ix) if sx != 0 else np.inf
+    ty = crossing(origin_y, ny, resolution, py, iy) if sy != 0 else np.inf
     while True:
-        reach = np.int64(skips[cj, ci]) - 1
+        reach = np.int64(skips[cj, ci, quadrant]) - 1
         if reach > 0:
-            # The square of free cells within `reach` of (ci, cj): where the beam leaves it.
+            # The square of free cells ahead of (ci, cj), `reach` more along each axis:
+            # where the beam leaves it.
             ex = ci + reach + 1 if sx > 0 else ci - reach
             ey = cj + reach + 1 if sy > 0 else cj - reach
-            tex = crossing(origin_x, ex, resolution, px, dx) if sx != 0 else np.inf
-            tey = crossing(origin_y, ey, resolution, py, dy) if sy != 0 else np.inf
+            tex = crossing(origin_x, ex, resolution, px, ix) if sx != 0 else np.inf
+            tey = crossing(origin_y, ey, resolution, py, iy) if sy != 0 else np.inf
             leave = min(tex, tey)
             if not leave <= bound:
                 return np.inf
@@ -342,38 +347,40 @@ def first_solid(px, py, dx, dy, bound, solid, skips, origin_x, origin_y, resolut
                 ny = ey
                 ty = tey
             if tex < tey:
-                cj, ny, ty = _catch_up(tex, cj, ny, ty, sy, reach, origin_y, resolution, py, dy)
+                cj, ny, ty = _catch_up(tex, cj, ny, ty, sy, reach, origin_y, resolution, py, dy,
+                                       iy)
             elif tey < tex:
-                ci, nx, tx = _catch_up(tey, ci, nx, tx, sx, reach, origin_x, resolution, px, dx)
+                ci, nx, tx = _catch_up(tey, ci, nx, tx, sx, reach, origin_x, resolution, px, dx,
+                                       ix)
         # One cell on.
         if tx < ty:
             if not tx <= bound:
                 return np.inf
             ci += sx
             nx += sx
-            if _solid_at(solid, ci, cj):
+            if _blocked(skips, ci, cj):
                 return tx
-            tx = crossing(origin_x, nx, resolution, px, dx)
+            tx = crossing(origin_x, nx, resolution, px, ix)
         elif ty < tx:
             if not ty <= bound:
                 return np.inf
             cj += sy
             ny += sy
-            if _solid_at(solid, ci, cj):
+            if _blocked(skips, ci, cj):
                 return ty
-            ty = crossing(origin_y, ny, resolution, py, dy)
+            ty = crossing(origin_y, ny, resolution, py, iy)
         else:
             if not tx <= bound:
                 return np.inf
-            if (_solid_at(solid, ci + sx, cj) or _solid_at(solid, ci, cj + sy)
-                    or _solid_at(solid, ci + sx, cj + sy)):
+            if (_blocked(skips, ci + sx, cj) or _blocked(skips, ci, cj + sy)
+                    or _blocked(skips, ci + sx, cj + sy)):
                 return tx
             ci += sx
             nx += sx
             cj += sy
             ny += sy
-            tx = crossing(origin_x, nx, resolution, px, dx)
-            ty = crossing(origin_y, ny, resolution, py, dy)
+            tx = crossing(origin_x, nx, resolution, px, ix)
+            ty = crossing(origin_y, ny, resolution, py, iy)
 
 
 @_compile
@@ -415,7 +422,7 @@ def scan_sectors(positions, radii, walls, solid, skips, frame, px, py, cos_yaw, 
     is none, -inf when it is closer than range_min.
 
     The map: `solid` (one byte a cell, OccupancyGrid's layout; empty without a map), its
-    `skips` (chessboard_distances) and `frame` (origin x, origin y, resolution); each beam
+    `skips` (free_squares) and `frame` (origin x, origin y, resolution); each beam
     walks it up to its nearest ball or wall hit (first_solid).
 
     Beam k's direction is the body direction (bx[k], by[k]), at angle_min + k * increment,
@@ -484,8 +491,8 @@ def scan_sectors(positions, radii, walls, solid, skips, frame, px, py, cos_yaw, 
             shift += turn
     if solid.shape[0] > 0:
         for k in range(samples):
-            out[k] = min(out[k], first_solid(px, py, ux[k], uy[k], min(out[k], reach), solid,
-                                             skips, frame[0], frame[1], frame[2]))
+            out[k] = min(out[k], first_solid(px, py, ux[k], uy[k], min(out[k], reach), skips,
+                                             frame[0], frame[1], frame[2]))
     for k in range(samples):
         out[k] = rep117(out[k], range_min, reach)
 
@@ -496,7 +503,7 @@ def warm():
     solid = np.zeros((4, 5), dtype=np.uint8)
     solid[1, 3] = 1
     scan_sectors(np.array([[0.0, 0.0], [2.0, 0.0]]), np.array([0.3, 0.4]),
-                 np.array([[3.0, -1.0, 3.0, 1.0]]), solid, chessboard_distances(solid),
+                 np.array([[3.0, -1.0, 3.0, 1.0]]), solid, free_squares(solid),
                  np.array([-1.0, -1.0, 0.5]), 0.0, 0.0, 1.0, 0.0, np.array([1.0, 0.0]),
                  np.array([0.0, 1.0]), 0.0, 0.5 * math.pi, 0, 0.1, 5.0, out)
     return out
