@@ -26,9 +26,8 @@ import sys
 import tempfile
 import time
 
-import numpy as np
-
 from benchmarks import warehouse
+
 from ball_world.core import lidar
 from ball_world.core.scenario import build_scene
 from ball_world.core.solid_cells import CellQueries

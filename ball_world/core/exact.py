@@ -18,10 +18,11 @@ every step would cost more than the events themselves). Same world, same sequenc
 of edits between steps: bit-identical trajectories. The state is kept beside the world, not
 in it, and follows edits by itself: a ball whose position or velocity differs from what the
 last step left (an impulse, a set-state) is predicted again; a change in the number of
-balls, a radius or a wall rebuilds everything (a World's map never changes). `invalidate(world)` drops the state, so the
-next step starts from the world's arrays alone. `carried(world)` gives the state as plain
-arrays and `restore(world, carried)` takes it back (core.exact_carry), so a World rebuilt
-from a recording's arrays and the carried state steps bit for bit as the original did.
+balls, a radius or a wall rebuilds everything (a World's map never changes).
+`invalidate(world)` drops the state, so the next step starts from the world's arrays alone.
+`carried(world)` gives the state as plain arrays and `restore(world, carried)` takes it back
+(core.exact_carry), so a World rebuilt from a recording's arrays and the carried state steps
+bit for bit as the original did.
 
 Bounded work: a step processes at most `event_budget(n)` events, then raises
 EventBudgetExceeded instead of going on (the balls are left where they were at that moment,

@@ -3,9 +3,10 @@
 What it computes: for each beam, the true distance from the scanner to the first ball, wall
 or solid map cell the beam meets (ray-circle and ray-segment intersection in closed form,
 `core.lidar_kernel`; a map's cells by a walk of its grid, where the distance is the closed
-form of the first solid cell's edge), the scanner's own ball excluded. Then REP 117's conventions for a
-sensor_msgs/LaserScan: +inf when nothing lies within range_max, -inf when the first thing is
-closer than range_min. Then, if asked, Gaussian noise on the ranges that are neither.
+form of the first solid cell's edge), the scanner's own ball excluded. Then REP 117's
+conventions for a sensor_msgs/LaserScan: +inf when nothing lies within range_max, -inf when
+the first thing is closer than range_min. Then, if asked, Gaussian noise on the ranges that
+are neither.
 
 Two backends, one answer: `numpy` is the reference, every beam against every ball that can
 be within range_max (vectorised, in chunks); `numba` tests each ball only against the beams

@@ -29,10 +29,11 @@ import numpy as np
 
 from ball_world.core import broadphase, limits, rules, static_geometry, stepping
 from ball_world.core.broadphase import (CELLS_PER_BALL, CELLS_SLACK, grid_shape, LEVEL_RATIO,
-                                        PAD, SLACK, widened)
+                                        PAD)
 from ball_world.core.rules import (advance, pair_approaching, pair_response, pair_touching,
                                    reach_squared, reflect_off_end, reflect_off_wall,
                                    speed_squared, wall_approaching, wall_offset, wall_touching)
+from ball_world.core.static_geometry import SLACK, widened
 from ball_world.core.stepping import (BALL_BALL, BALL_WALL, MAX_ROUNDS, over_budget,
                                       plan_substeps, reachable_speed, refusal_possible, replan,
                                       ROUNDS, speed_limit, STEP_DONE, STEP_REFUSED, SUBSTEPS,
