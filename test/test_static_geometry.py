@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from ball_world.core.solid_cells import SolidCells
-from ball_world.core.static_geometry import (boundary_runs, SegmentIndex, StaticGeometry)
+from ball_world.core.static_geometry import boundary_runs, SegmentIndex, StaticGeometry
 from ball_world.core.world import Walls, World
 
 ORIGIN = (-1.5, 2.25)
@@ -111,8 +111,9 @@ def test_one_solid_cell_is_four_runs_around_its_square():
 
 def test_a_free_grid_is_closed_by_the_outside():
     runs = boundary_runs(cells_of(np.zeros((2, 3), dtype=bool), (0.0, 0.0), 1.0))
-    assert sorted(map(list, runs)) == [[0.0, 0.0, 0.0, 2.0], [0.0, 0.0, 3.0, 0.0],
-                                      [0.0, 2.0, 3.0, 2.0], [3.0, 0.0, 3.0, 2.0]]
+    expected = [[0.0, 0.0, 0.0, 2.0], [0.0, 0.0, 3.0, 0.0], [0.0, 2.0, 3.0, 2.0],
+                [3.0, 0.0, 3.0, 2.0]]
+    assert sorted(map(list, runs)) == expected
 
 
 def test_cells_meeting_at_a_corner_only_keep_four_runs_ending_there():
