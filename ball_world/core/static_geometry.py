@@ -146,13 +146,13 @@ def bucket_size(extent_x, extent_y, count, resolution, reach=0.0):
     BUCKETS_PER_SEGMENT per segment (plus BUCKETS_SLACK) allow over the extent, at least
     MIN_BUCKET_CELLS map cells (resolution 0 without a map) and at least half of `reach`
     (an index dilated by it, see SegmentIndex: a bucket then lists what lies within a square
-    of twice its width around it), widened until the budget holds."""
+    of twice its width around it), widened by a tenth at a time until the budget holds."""
     budget = BUCKETS_PER_SEGMENT * count + BUCKETS_SLACK
     area = max(extent_x, 0.0) * max(extent_y, 0.0)
     size = max(math.sqrt(area / budget), MIN_BUCKET_CELLS * resolution, 0.5 * reach,
                1e-6 * max(extent_x, extent_y, 1.0))
     while (extent_x / size + 1.0) * (extent_y / size + 1.0) > budget:
-        size *= 2.0
+        size *= 1.1
     return size
 
 
