@@ -29,6 +29,11 @@ predicted impact is exact whatever the cells). Each wall is listed in the bucket
 cell of each grid where a ball of its class could touch it; a wall too long for that is
 checked by every ball of the class.
 
+A map's solid cells (core.static_geometry: boundary runs, numbered after the walls) are not
+in those buckets: each prediction walks the static index along the ball's path up to its
+next event (_scan_runs), so a map of any size costs what lies along the paths. Without a map
+nothing of this runs, and worlds step bit for bit as they did before maps.
+
 Robustness near contact (why rounding cannot creep into overlap or loop):
 - A pair or a wall collides only while approaching, and a pair that already overlaps and
   approaches collides at once, so an overlap is never left to grow.

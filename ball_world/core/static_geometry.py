@@ -3,11 +3,13 @@
 Why one module: seed mode, exact mode and the lidar ask the same questions of static
 geometry (which walls can a ball touch, which can it hit along its path, where does a beam
 first meet a wall), and a map of a real building has tens of thousands of boundary edges.
-Today's walls were rasterised into the balls' grid on every rebuild of the candidate lists,
-and exact mode listed them in buckets sized by the ball count (too-long walls checked by
-every ball): both cost O(walls) or more per step. Here the static geometry is indexed once
-per World, in a grid sized by the geometry, and every question costs what lies near the
-ball or the beam, whatever the size of the map.
+Walls used to be rasterised into the balls' grid on every rebuild of the candidate lists,
+and exact mode lists them in buckets sized by the ball count (too-long walls checked by
+every ball): with a map's runs both would cost O(runs) or more per step. Here the static
+geometry is indexed once per World, in a grid sized by the geometry, and every question
+costs what lies near the ball or the beam, whatever the size of the map. (Exact mode keeps
+the World's own walls in its buckets, as before maps, so a world without a map steps bit
+for bit as it did; only the map's runs are walked through this index.)
 
 A map's solid cells become walls as the boundary of the solid region, in merged runs
 (`boundary_runs`): every edge between a solid cell (or the outside of the grid, solid too)
