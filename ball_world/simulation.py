@@ -21,13 +21,15 @@ from ball_world.core.edits import (check_placement, check_speeds, EditRefused, E
                                    TOO_MANY)
 from ball_world.core.impulses import ImpulseRejected, lookup_ball, velocity_after
 from ball_world.core.limits import MAX_SIM_TIME_NS
+from ball_world.core.occupancy_map import MapError
 from ball_world.core.parameters import checked, MAX_AGENTS
-from ball_world.core.scenario import build_world, step_duration_ns
+from ball_world.core.scenario import build_scene, ScenarioError, step_duration_ns
 from ball_world.core.world import World
 from ball_world.msgs.agent_cdr import encode_odometry, encode_tf_message
 from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
                                  encode_vector3_stamped)
 from ball_world.msgs.impulse_batch import encode_impulses
+from ball_world.msgs.map_cdr import encode_occupancy_grid
 from ball_world.msgs.twist_cdr import encode_twist, encode_twist_stamped
 from ball_world.scans import AgentScans, check as check_scans
 from ball_world.step_record import (AgentFrame, AppliedCommand, AppliedEdit, AppliedImpulse,
@@ -55,15 +57,42 @@ class BuiltWorld:
     parameters: dict
     world: object
     dt_ns: int
+    occupancy_map: object = None  # core.occupancy_map.OccupancyMap, when `map` names one
+    cells: object = None  # its core.solid_cells.CellQueries
 
 
-def build(parameters):
-    """Check the parameters and build their world (raises ScenarioError); touches nothing."""
+def load_map(parameters):
+    """The OccupancyMap `map` names, read from its files (None for no map).
+
+    Raises ScenarioError naming `map` with the one line map_files gives: the node's start
+    refuses a missing image or a bad YAML as it refuses any other parameter.
+    """
+    path = checked(parameters)['map']
+    if not path:
+        return None
+    from ball_world.map_files import load_map_file
+    try:
+        return load_map_file(path)
+    except MapError as error:
+        raise ScenarioError('map', str(error)) from None
+
+
+def build(parameters, occupancy_map=None):
+    """Check the parameters and build their world (raises ScenarioError).
+
+    occupancy_map: the map `map` names, already loaded (the node's, or a recording's copy);
+    when None and `map` names one, it is read from its files here.
+    """
     parameters = checked(parameters)
-    world = build_world(parameters)
+    if parameters['map'] and occupancy_map is None:
+        occupancy_map = load_map(parameters)
+    elif not parameters['map']:
+        occupancy_map = None
+    world, cells = build_scene(parameters, occupancy_map)
     agent_names(parameters, len(world))
     check_scans(parameters)
-    return BuiltWorld(parameters=parameters, world=world, dt_ns=step_duration_ns(parameters))
+    return BuiltWorld(parameters=parameters, world=world, dt_ns=step_duration_ns(parameters),
+                      occupancy_map=occupancy_map, cells=cells)
 
 
 def _ignore(events):
@@ -98,8 +127,12 @@ class Simulation:
     with the next step's stamp too.
     """
 
-    def __init__(self, parameters, sinks=(), topics=None, on_sink_failure=None, built=None):
+    def __init__(self, parameters, sinks=(), topics=None, on_sink_failure=None, built=None,
+                 occupancy_map=None):
         self.sinks = list(sinks)
+        # The map every build of this run uses (a recording's copy in re-simulation), so a
+        # reset never reads the map's files again.
+        self.occupancy_map = occupancy_map if built is None else built.occupancy_map
         self.topics = dict(topics or DEFAULT_TOPICS)
         self.on_sink_failure = on_sink_failure
         self.segment = -1
@@ -123,13 +156,18 @@ class Simulation:
         file never goes back in time.
         """
         if built is None:
-            built = build(parameters)
+            built = build(parameters, self.occupancy_map)
         self._hand_over_pending()
         parameters, world, dt_ns = built.parameters, built.world, built.dt_ns
         self.parameters = parameters
         self.world = world
         self.dt_ns = dt_ns
         self.frame_id = str(parameters['frame_id'])
+        self.occupancy_map = built.occupancy_map
+        self.cells = built.cells
+        # /map of the segment: encoded once, at its start (step 0's simulation time).
+        self.map_cdr = None if built.occupancy_map is None else encode_occupancy_grid(
+            0, self.frame_id, built.occupancy_map)
         self.entities = Entities(len(world))
         self._names = tuple(self.entities.names)
         self.agents = Agents(agent_names(parameters, len(world)),
@@ -160,7 +198,7 @@ class Simulation:
             radii=world.radii.copy(), masses=world.masses.copy(),
             walls=world.walls.segments.copy(), positions=world.positions.copy(),
             velocities=world.velocities.copy(), dt_ns=dt_ns, frame_id=self.frame_id,
-            names=self._names)
+            names=self._names, occupancy_map=self.occupancy_map, map_cdr=self.map_cdr)
         self._each_sink(lambda sink: sink.start_segment(snapshot, info))
         return self.record(stats=None)
 
@@ -174,7 +212,7 @@ class Simulation:
         bit the recorded run's. Raises ValueError for balls or an exact-mode state the
         World refuses. Meant for a Simulation without sinks.
         """
-        built = build(parameters)
+        built = build(parameters, self.occupancy_map)
         base = built.world
         world = World(state.positions.copy(), state.velocities.copy(), state.radii.copy(),
                       state.masses.copy(), walls=base.walls.segments, backend=base.backend,
@@ -183,7 +221,8 @@ class Simulation:
             world.restore_carried_state(state.exact)
         # The agents are the state's (the parameters name those the segment began with).
         self.reset({**built.parameters, 'agents': []},
-                   BuiltWorld({**built.parameters, 'agents': []}, world, built.dt_ns))
+                   BuiltWorld({**built.parameters, 'agents': []}, world, built.dt_ns,
+                              built.occupancy_map, built.cells))
         self.parameters = built.parameters
         self.entities = Entities.restored(state.names, state.retired, len(base))
         self._names = tuple(self.entities.names)
@@ -431,7 +470,7 @@ class Simulation:
                     raise EditRefused(NAME_INVALID, f'an agent named {name}: {clash}')
                 what = f"ball '{name}' at"
                 check_placement(world, self.entities, self.arena, ball.x, ball.y,
-                                ball.radius, what, near=near)
+                                ball.radius, what, near=near, cells=self.cells)
                 self._check_against_new(ball, accepted, placed, what)
                 low = min(smallest, ball.radius)
                 high = max(largest, ball.radius)
@@ -512,7 +551,8 @@ class Simulation:
         for value in (vx, vy):
             if not math.isfinite(value):
                 raise EditRefused(INVALID_POSE, f'velocity ({vx}, {vy}) is not finite')
-        check_placement(world, self.entities, self.arena, x, y, radius, what, skip=index)
+        check_placement(world, self.entities, self.arena, x, y, radius, what, skip=index,
+                        cells=self.cells)
         mass = float(world.masses[index])
         old = world.velocities[index]
         energy = world.kinetic_energy() + 0.5 * mass * (

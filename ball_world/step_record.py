@@ -120,6 +120,10 @@ class WorldSnapshot:
     dt_ns: int
     frame_id: str
     names: Optional[tuple] = None  # entity names in pose order (ball_<i> when None)
+    # The map (core.occupancy_map.OccupancyMap: its files' bytes and its grid) and its
+    # nav_msgs/OccupancyGrid bytes as published on `map` at the segment start; None without.
+    occupancy_map: Optional[object] = None
+    map_cdr: Optional[bytes] = None
 
 
 @dataclass(frozen=True)

@@ -161,9 +161,9 @@ def test_layout_is_valid_json_naming_recorded_topics_and_stats_by_index(recorded
     scene = config['3D!world']
     assert scene['followTf'] == 'world'
     # /ball_0/odom and /ball_0/scan are there when ball_0 is an agent (test_agent_views and
-    # test_scans check them).
-    assert set(scene['topics']) - {'/ball_0/odom', '/ball_0/scan'} == {'/markers', '/balls'} \
-        <= set(topics)
+    # test_scans check them), /map with a map (test_map_views).
+    assert set(scene['topics']) - {'/ball_0/odom', '/ball_0/scan', '/map'} \
+        == {'/markers', '/balls'} <= set(topics)
     assert all(settings['visible'] for settings in scene['topics'].values())
     plotted = []
     for panel_id, panel in config.items():

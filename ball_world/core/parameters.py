@@ -292,6 +292,12 @@ PARAMETERS = (
               'of four walls, m; empty: no box.', sizes=(0, 4), rule=_box, **_XY),
     Parameter('walls', DOUBLE_ARRAY, [], 'More wall segments, flat x1, y1, x2, y2, ... in m.',
               multiple_of=4, max_size=4 * limits.MAX_WALLS, **_XY),
+    Parameter('map', STRING, '', "A map in nav2_map_server's format: the YAML's path "
+              '(relative to the working directory; its image relative to the YAML). Occupied '
+              'cells, and everything outside the image, are solid walls; /map publishes it. '
+              "'': no map.", AT_START, max_length=MAX_PATH_LENGTH),
+    Parameter('map.unknown_solid', BOOL, True, 'Unknown cells (-1) of the map are solid too (a '
+              'map is closed where nobody looked).'),
     Parameter('balls.x', DOUBLE_ARRAY, [], 'Explicit balls: x of each centre, m.', **_BALLS,
               **_XY),
     Parameter('balls.y', DOUBLE_ARRAY, [], 'Explicit balls: y of each centre, m.', **_BALLS,

@@ -14,6 +14,7 @@ import threading
 import time
 
 from geometry_msgs.msg import PoseArray, Vector3Stamped
+from nav_msgs.msg import OccupancyGrid
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
@@ -36,6 +37,7 @@ from ball_world.core.pacing import MAX_LAG, steps_due
 from ball_world.core.scenario import describe, ScenarioError, step_duration_ns
 from ball_world.core.stepping import SubstepLimitExceeded
 from ball_world.msgs.cdr import decode_vector3_stamped, encode_clock
+from ball_world.msgs.map_cdr import encode_occupancy_grid
 from ball_world.msgs.markers import MarkerBuilder
 from ball_world.recording.writer_thread import BackgroundSink
 from ball_world.ros.agents import AgentTopics, TYPE_CHECK_PERIOD
@@ -75,6 +77,10 @@ STEP_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
 MARKER_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+#: What nav2_map_server offers on map: reliable, transient local, so RViz, Foxglove and a
+#: Nav2 costmap that subscribe late still get it.
+MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: Edits are few and each matters: reliable, with room for a burst of spawns.
 EDITS_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 IMPULSE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=IMPULSE_QUEUE_DEPTH,
@@ -216,6 +222,9 @@ class BallWorld(Node):
         self.clock_pub = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
         self.edits_pub = self.create_publisher(String, 'edits', EDITS_QOS)
         self.entities_pub = self.create_publisher(String, 'entity_names', MARKER_QOS)
+        self.map_pub = None
+        if self.simulation.occupancy_map is not None:
+            self.map_pub = self.create_publisher(OccupancyGrid, 'map', MAP_QOS)
         self._impulse_sub = self.create_subscription(
             Vector3Stamped, 'impulse', self._on_impulse, IMPULSE_QOS, raw=True)
         # Calls that take long (a reset builds its world on a thread) run as coroutines in
@@ -254,6 +263,7 @@ class BallWorld(Node):
         self._start_wall = time.monotonic()
         self._held = []  # ('clock' or 'tf', record) not published yet: see _release_held
         self._publish(self.simulation.last_record, first=True)
+        self._publish_map()
         summary, names = self._startup_lines(values)
         self.get_logger().info(summary)
         self.get_logger().debug(names)
@@ -263,11 +273,15 @@ class BallWorld(Node):
         (debug: `--ros-args --log-level ball_world:=debug` shows it)."""
         simulation = self.simulation
         published = [self.resolve_topic_name(name) for name in TOPICS_OUT]
+        if self.map_pub is not None:
+            published.append(self.resolve_topic_name('map'))
         if values['publish_clock']:
             published.append('/clock')
         services = [self.resolve_service_name(name) for name in SERVICES]
         standard = ', '.join(self.interfaces.names)
-        summary = (f'world: {describe(simulation.world, simulation.dt_ns)}; rate '
+        occupancy_map = simulation.occupancy_map
+        map_text = '' if occupancy_map is None else f'; map {occupancy_map.describe()}'
+        summary = (f'world: {describe(simulation.world, simulation.dt_ns)}{map_text}; rate '
                    f"{values['rate_hz']:g} Hz{' (paused at step 0)' if self.paused else ''}; "
                    f'node {self.get_fully_qualified_name()}')
         names = (f"publishing {', '.join(published)}; subscribed to "
@@ -418,6 +432,20 @@ class BallWorld(Node):
             self._held_due = now + TF_HOLD
         return not self._held
 
+    def _publish_map(self):
+        """Publish the segment's /map (latched: transient local), if the world has a map.
+
+        The bytes are the Simulation's, encoded once at the segment start, unless frame_id
+        changed since: then the map goes out again in the new frame.
+        """
+        simulation = self.simulation
+        if self.map_pub is None or simulation.map_cdr is None:
+            return
+        data = simulation.map_cdr
+        if simulation.frame_id != simulation.parameters['frame_id']:
+            data = encode_occupancy_grid(0, simulation.frame_id, simulation.occupancy_map)
+        self.map_pub.publish(data)
+
     # Markers ----------------------------------------------------------------------------
 
     def _rebuild_markers(self):
@@ -517,6 +545,7 @@ class BallWorld(Node):
         self._next_due = None  # the new world's schedule starts at the next tick
         self._world_edited()
         self._publish(record, first=True)
+        self._publish_map()
         message = (f'reset to step 0: {describe(self.simulation.world, self.simulation.dt_ns)}'
                    f"; discarded {discarded} queued impulse{'' if discarded == 1 else 's'}")
         self.get_logger().info(message)
@@ -578,9 +607,11 @@ class BallWorld(Node):
         """
         future = Future()
 
+        occupancy_map = self.simulation.occupancy_map  # `map` is read-only: loaded once
+
         def work():
             try:
-                future.set_result(build(values))
+                future.set_result(build(values, occupancy_map))
             except Exception as error:  # noqa: B902 - every outcome must reach the service
                 future.set_exception(error)
             self._wake.trigger()
@@ -646,6 +677,7 @@ class BallWorld(Node):
         if 'frame_id' in changes:
             self.simulation.frame_id = changes['frame_id']
             self._rebuild_markers()
+            self._publish_map()
         if 'markers.rate_hz' in changes:
             self._set_markers_rate(changes['markers.rate_hz'])
         return SetParametersResult(successful=True)

@@ -138,7 +138,7 @@ def _rebuild(segment, first_step):
     """The segment's Simulation at step 0 (the reader checked that its dt is the recorded one)."""
     if first_step.ball_count is not None:
         segment.check_ball_count(first_step.ball_count)
-    return Simulation(segment.parameters, sinks=())
+    return Simulation(segment.parameters, sinks=(), occupancy_map=segment.occupancy_map)
 
 
 def _resume(segment):
@@ -157,7 +157,7 @@ def _resume(segment):
                              '(resume_exact; an older ball_world wrote it without them): it '
                              're-simulates bit for bit only from its first step (give the bag '
                              'directory with the file where it starts)')
-    simulation = Simulation(segment.parameters, sinks=())
+    simulation = Simulation(segment.parameters, sinks=(), occupancy_map=segment.occupancy_map)
     try:
         simulation.resume(segment.parameters, segment.resume, segment.index,
                           segment.log_offset_ns)
