@@ -215,7 +215,7 @@ class Simulation:
         base = built.world
         world = World(state.positions.copy(), state.velocities.copy(), state.radii.copy(),
                       state.masses.copy(), walls=base.walls.segments, backend=base.backend,
-                      mode=base.mode)
+                      mode=base.mode, solid_cells=base.solid_cells)
         if state.exact is not None:
             world.restore_carried_state(state.exact)
         # The agents are the state's (the parameters name those the segment began with).
