@@ -3,6 +3,9 @@
 The node is a thin ROS shell around a Simulation; re-simulation and tests drive the same
 class directly. Keeping the clock, the order of impulses and edits and the record layout
 here is what makes a live run and its re-simulation bit-identical.
+
+A world with a map is built from the map's bytes (core.occupancy_map), read from its files
+once (map_files) or taken from a recording: every reset of a run uses the same map.
 """
 from collections import deque
 from dataclasses import dataclass
