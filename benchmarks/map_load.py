@@ -7,7 +7,10 @@ The maps: the two real ones shipped in maps/ (TurtleBot3 sandbox, 147,456 cells;
 walls, shelves and unknown border, like a SLAM map). The loader's time is read_map_files +
 load_map (decode, cells) and the world's CellQueries, the median of --repeat runs; the
 node's is the wall time of `ball_world -p max_steps:=1` (process start to its first step and
-exit) with the map and without, so their difference is what the map costs a start.
+exit) with the map and without, so their difference is what the map costs a start (on a
+loaded machine that difference drowns in the start's noise); the world's build in this process
+(a Simulation: files read, decoded, cells, placement, the World's static geometry, /map
+encoded) is what the node does between its start and its first step.
 """
 import argparse
 import os
@@ -20,8 +23,10 @@ import time
 
 import numpy as np
 
+from ball_world.core.parameters import DEFAULTS
 from ball_world.core.solid_cells import CellQueries
 from ball_world.map_files import load_map_file
+from ball_world.simulation import Simulation
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -56,6 +61,15 @@ def loader_seconds(path, repeat):
     return statistics.median(times), occupancy
 
 
+def build_seconds(repeat, **values):
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        Simulation({**DEFAULTS, 'random.count': 20, **values})
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
 def node_seconds(repeat, *parameters):
     node = Path(sys.prefix) / 'bin' / 'ball_world'
     times = []
@@ -79,14 +93,18 @@ def main(argv=None):
         maps = [ROOT / 'maps' / 'tb3_sandbox.yaml', ROOT / 'maps' / 'depot.yaml',
                 warehouse(Path(folder))]
         baseline = node_seconds(args.repeat, 'random.count:=20')
-        print(f'node start to first step without a map: {baseline:.2f} s')
+        built = build_seconds(args.repeat)
+        print(f'without a map: world built in {built * 1e3:.0f} ms; node start to first step '
+              f'{baseline:.2f} s')
         for path in maps:
             seconds, occupancy = loader_seconds(path, args.repeat)
+            built = build_seconds(args.repeat, map=str(path), arena=[])
             started = node_seconds(args.repeat, f'map:={path}', 'arena:=[]',
                                    'random.count:=20')
             print(f'{path.name}: {occupancy.width} x {occupancy.height} = '
                   f'{occupancy.width * occupancy.height:,} cells; loader {seconds * 1e3:.0f} ms;'
-                  f' node start to first step {started:.2f} s (+{started - baseline:.2f} s)')
+                  f' world built in {built * 1e3:.0f} ms; node start to first step '
+                  f'{started:.2f} s ({started - baseline:+.2f} s)')
 
 
 if __name__ == '__main__':
