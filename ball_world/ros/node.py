@@ -40,7 +40,7 @@ from ball_world.msgs.cdr import decode_vector3_stamped, encode_clock
 from ball_world.msgs.map_cdr import encode_occupancy_grid
 from ball_world.msgs.markers import MarkerBuilder
 from ball_world.recording.writer_thread import BackgroundSink
-from ball_world.ros.agents import AgentTopics
+from ball_world.ros.agents import AgentTopics, TYPE_CHECK_PERIOD
 from ball_world.ros.calls import SERVICE_QOS
 from ball_world.ros.parameters import converted, current_values, declare_all, ParameterError
 from ball_world.ros.rcl_init import init_quietly
@@ -258,6 +258,7 @@ class BallWorld(Node):
         self._set_markers_rate(values['markers.rate_hz'])
         self.create_timer(FLUSH_PERIOD, self.simulation.flush, clock=self._steady)
         self.create_timer(REPORT_PERIOD, self._report, clock=self._steady)
+        self.create_timer(TYPE_CHECK_PERIOD, self.agent_topics.check_types, clock=self._steady)
         self._window = (time.monotonic(), 0)
         self._start_wall = time.monotonic()
         self._held = []  # ('clock' or 'tf', record) not published yet: see _release_held
@@ -402,7 +403,9 @@ class BallWorld(Node):
         self.state_pub.publish(record.state_cdr)
         self.stats_pub.publish(record.stats_cdr)
         self.agent_topics.publish(record, tf=not hold)
-        self._held = [('clock', record), ('tf', record)] if hold else []
+        # The /clock twice: a client that loses one (it takes /clock best effort, depth 1)
+        # still sees the jump before the /tf.
+        self._held = [('clock', record), ('clock', record), ('tf', record)] if hold else []
         self._held_due = time.monotonic() + TF_HOLD
 
     def _release_held(self, now=None):
@@ -416,7 +419,8 @@ class BallWorld(Node):
         either way a use_sim_time tf2 buffer, which clears itself at the jump, ends up
         holding transforms of the other timeline (dropped as TF_OLD_DATA, or kept and
         looked up as the latest). Held TF_HOLD apart, and to timer ticks (no step is taken
-        meanwhile), each goes out after the one before it has had time to arrive.
+        meanwhile), each goes out after the one before it has had time to arrive; the
+        /clock twice, since clients take it best effort (rclpy's and rclcpp's TimeSource).
         """
         now = time.monotonic() if now is None else now
         while self._held and now >= self._held_due:
