@@ -3,6 +3,9 @@
 The node is a thin ROS shell around a Simulation; re-simulation and tests drive the same
 class directly. Keeping the clock, the order of impulses and edits and the record layout
 here is what makes a live run and its re-simulation bit-identical.
+
+A world with a map is built from the map's bytes (core.occupancy_map), read from its files
+once (map_files) or taken from a recording: every reset of a run uses the same map.
 """
 from collections import deque
 from dataclasses import dataclass
@@ -216,7 +219,7 @@ class Simulation:
         base = built.world
         world = World(state.positions.copy(), state.velocities.copy(), state.radii.copy(),
                       state.masses.copy(), walls=base.walls.segments, backend=base.backend,
-                      mode=base.mode)
+                      mode=base.mode, solid_cells=base.solid_cells)
         if state.exact is not None:
             world.restore_carried_state(state.exact)
         # The agents are the state's (the parameters name those the segment began with).

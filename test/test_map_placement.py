@@ -195,3 +195,18 @@ def test_set_state_onto_a_solid_cell_is_refused_and_leaves_the_ball(simulation):
                                           "map's solid cell"):
         simulation.set_state('ball_0', 0.0, 0.0, 0.0, 0.0)
     assert np.array_equal(simulation.world.positions[0], before)
+
+
+@pytest.mark.parametrize('name, agents, balls', [('sandbox', 2, 14), ('depot', 20, 60)])
+def test_the_worlds_to_start_from_build_with_their_robots_clear_of_the_map(name, agents,
+                                                                           balls):
+    import yaml
+    root = MAPS.parent
+    document = yaml.safe_load((root / 'worlds' / f'{name}.yaml').read_text())
+    values = document['/**']['ros__parameters']
+    values['map'] = str(root / values['map'])  # relative to the repository, as documented
+    simulation = Simulation(values)
+    assert len(simulation.world) == balls and len(simulation.agents) == agents
+    assert simulation.parameters['agent.drive'] == 'diff' and not simulation.arena
+    assert simulation.cells.first_overlapping_ball(simulation.world.positions,
+                                                   simulation.world.radii) is None

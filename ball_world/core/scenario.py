@@ -415,7 +415,8 @@ def build_scene(params, occupancy_map=None):
         raise ScenarioError('physics.mode', "'exact' needs the numba package (pip install "
                                             "numba); use 'seed'")
     world = World(positions, velocities, radii, masses, walls=np.concatenate((box, walls)),
-                  backend=_physics_backend(params), mode=params['physics.mode'])
+                  backend=_physics_backend(params), mode=params['physics.mode'],
+                  solid_cells=None if cells is None else cells.cells)
     _check_speeds(world, params, dt_ns)
     return Scene(world, cells)
 

@@ -13,6 +13,12 @@ the step they were applied before, interleaved with that step's impulses in the 
 were applied (each edit's impulses_before says so too); with the parameters they make the
 run re-simulable through any number of spawns, deletions and state sets.
 
+A world with a map (`map`) keeps the map in the recording: its YAML and image as MCAP
+attachments, under the names the run gave them, once per file (each split file carries
+them), with the segment metadata naming them and their SHA-256 (MAP_KEYS), so resim, info
+and to_rrd need no map file; and `map`, the nav_msgs/OccupancyGrid the node latched, at each
+segment (and split file) start, transient local, for `ros2 bag play` and Foxglove.
+
 Two topics are recorded for viewers and players only (the tools never read them back):
 `markers`, the MarkerArray the node publishes for RViz (a sphere per ball sized by its
 radius, the walls as a line list), so Foxglove's 3D panel shows the world from the file
