@@ -548,7 +548,7 @@ def markdown(results, args, pymunk, allocator, command):
     for n in args.n:
         row = results['rates'].get(n, {})
         pymunks = [row[name] for name in (PYMUNK_TREE, PYMUNK_HASH) if row.get(name)]
-        ratios = [f'{row[name] / max(pymunks):.2f}' if pymunks and row.get(name) else '-'
+        ratios = [f'{row[name] / max(pymunks):.3g}' if pymunks and row.get(name) else '-'
                   for name in ours]
         lines.append(f'| {n:,} | ' + ' | '.join(_rate(row.get(name)) for name in engines)
                      + ''.join(f' | {ratio}' for ratio in ratios) + ' |')
