@@ -1,0 +1,148 @@
+"""What ball_world_score reads from a world's recording: each scan of an agent, the pose it
+was taken from, and the ground truth at it.
+
+For every recorded scan of `<ns>/<agent>/scan`: the balls of that step (`balls`, with the
+names and radii of its segment as the recorded edits left them), which of them the scan
+could see (core.lidar.seen_balls: at least one beam, without noise, meets the ball first
+within range, from the agent's centre along its heading), and the scanner's pose in the
+world frame, looked up in the recorded /tf and /tf_static for exactly the frame the scan
+names, `<frame_prefix><agent>/base_link` (never a frame that merely ends like it: an agent
+named `xball_0` has its own). Each segment (a run between resets) is a sequence of its own,
+with its own transforms: stamps start again at 0 after a reset.
+
+The recording is read with the project's bounded reader (recording.mcap_reader): a file
+that is not a ball_world recording, cut off or corrupt is a RecordingError with one line.
+"""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ball_world.core import lidar
+from ball_world.core.agents import frames as agent_frames
+from ball_world.msgs.agent_cdr import decode_laser_scan, decode_tf_message
+from ball_world.recording import agent_topics
+from ball_world.recording.mcap_reader import BallRoster, RecordingError, snapshot_and_info
+from ball_world.recording.recording_set import open_recording
+from ball_world.scans import fan_from
+from ball_world.scoring.planar_tf import PlanarTransforms, TransformError, yaw_of
+
+
+@dataclass(frozen=True)
+class RecordedScan:
+    """One scan of the agent, with its step's balls and what it could see."""
+
+    step: int
+    stamp_ns: int
+    message: object  # agent_cdr.DecodedScan
+    pose: tuple  # (x, y, yaw) of the scanner's frame in the world frame
+    names: tuple  # the balls of the step
+    positions: np.ndarray  # (N, 2)
+    visible: np.ndarray  # (N,) bool
+
+
+@dataclass
+class RecordedSegment:
+    """The scans of one segment and the transforms recorded in it."""
+
+    index: int
+    world_frame: str
+    scan_frame: str  # <frame_prefix><agent>/base_link
+    transforms: PlanarTransforms
+    scans: list = field(default_factory=list)
+
+
+def add_transforms(transforms, data, static=False):
+    """Every transform of a TFMessage's bytes into `transforms` (ValueError if malformed)."""
+    decoded = decode_tf_message(data)
+    for stamp, parent, child, row in zip(decoded.stamps_ns, decoded.frame_ids,
+                                         decoded.child_frame_ids, decoded.transforms):
+        transforms.add(parent, child, stamp, row[0], row[1], yaw_of(*row[3:7]), static)
+
+
+def read_run(path, agent):
+    """[RecordedSegment] of `agent`'s scans in the recording at `path` (a file or a bag
+    directory); RecordingError with one line for anything that cannot be scored."""
+    recording = open_recording(path)
+    scan_topics = {}
+    for position, segment in enumerate(recording.segments):
+        namespace = agent_topics.namespace_of(segment.topics)
+        scan_topics[f'{namespace}/{agent}/{agent_topics.SCAN}'] = position
+    scan_topic = next((t for t in scan_topics if t in recording.topics), None)
+    if scan_topic is None:
+        agents = sorted({topic.rsplit('/', 2)[-2] for topic in recording.topics
+                         if topic.endswith(f'/{agent_topics.SCAN}')})
+        known = f"its scanning agents: {', '.join(agents)}" if agents else \
+            'it has no scans (no agents, or agent.scan.samples 0)'
+        raise RecordingError(f'no scan of {agent!r} ({agent}/scan); {known}')
+    segments = [RecordedSegment(index=segment.index, world_frame=segment.frame_id,
+                                scan_frame=agent_frames(segment.parameters['frame_prefix'],
+                                                        agent)[1],
+                                transforms=PlanarTransforms())
+                for segment in recording.segments]
+    scans = {}
+    for message in recording.messages(list(scan_topics) + [agent_topics.TF_STATIC_TOPIC]):
+        position = recording.segment_at(message.log_time_ns)
+        try:
+            if message.topic == agent_topics.TF_STATIC_TOPIC:
+                add_transforms(segments[position].transforms, message.data, static=True)
+            else:
+                scans[message.log_time_ns] = decode_laser_scan(message.data)
+        except ValueError as error:
+            raise RecordingError(f'{message.topic} at log time {message.log_time_ns} ns does '
+                                 f'not decode: {error}') from None
+    current = roster = walls = None
+    for step in recording.steps():
+        if step.segment != current:
+            current = step.segment
+            snapshot, _ = snapshot_and_info(recording.segments[current], step)
+            roster = BallRoster(snapshot, recording.segments[current].index)
+            walls = snapshot.walls
+        roster.follow(step)
+        segment = segments[current]
+        if step.tf_cdr is not None:
+            try:
+                add_transforms(segment.transforms, step.tf_cdr)
+            except ValueError as error:
+                raise RecordingError(f'/tf at step {step.step} does not decode: '
+                                     f'{error}') from None
+        message = scans.get(step.log_time_ns)
+        if message is None or step.positions is None:
+            continue
+        segment.scans.append(_scan_of(step, message, roster, walls, segment, agent,
+                                      recording.segments[current].parameters))
+    found = [segment for segment in segments if segment.scans]
+    if not found:
+        raise RecordingError(f'no scan of {agent!r} was recorded with its step')
+    return found
+
+
+def _scan_of(step, message, roster, walls, segment, agent, parameters):
+    if len(step.positions) != len(roster):
+        raise RecordingError(f'step {step.step} has {len(step.positions)} balls, not '
+                             f'{len(roster)}')
+    if message.frame_id != segment.scan_frame:
+        raise RecordingError(f'the scan of step {step.step} is in frame '
+                             f'{message.frame_id!r}, not {segment.scan_frame!r}')
+    try:
+        index = roster.names.index(agent)
+    except ValueError:
+        raise RecordingError(f'{agent!r} is no ball at step {step.step}') from None
+    try:
+        pose = segment.transforms.lookup(segment.world_frame, segment.scan_frame,
+                                         message.stamp_ns)
+    except TransformError as error:
+        raise RecordingError(f'no pose of the scan of step {step.step}: {error}') from None
+    return scan_at(step.step, message, pose, roster.names, step.positions, roster.radii,
+                   walls, index, parameters)
+
+
+def scan_at(step, message, pose, names, positions, radii, walls, index, parameters):
+    """The RecordedScan of agent `index`'s scan `message` taken from `pose` among these
+    balls: which of them it could see (the same computation for a recording and for the
+    benchmark's simulated scenes, so the two score alike)."""
+    fan = fan_from(parameters, float(radii[index]))
+    seen = lidar.seen_balls(positions, radii, walls, positions[index], pose[2], fan, index)
+    visible = np.zeros(len(positions), dtype=bool)
+    visible[seen] = True
+    return RecordedScan(step=step, stamp_ns=message.stamp_ns, message=message, pose=pose,
+                        names=tuple(names), positions=positions, visible=visible)
