@@ -38,8 +38,8 @@ class PlanarTransforms:
         if static:
             self._static[child] = (parent, float(x), float(y), float(yaw))
             return
-        self._rows.setdefault(child, {})[int(stamp_ns)] = (parent, float(x), float(y),
-                                                            float(yaw))
+        rows = self._rows.setdefault(child, {})
+        rows[int(stamp_ns)] = (parent, float(x), float(y), float(yaw))
         self._tables.pop(child, None)
 
     def frames(self):

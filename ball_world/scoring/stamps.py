@@ -80,7 +80,7 @@ def describe(pairing, total, tolerance_ns):
             f'{len(offsets)} of {total} track messages match no scan stamp {within}: '
             f'their stamps are {_ms(abs(median))} {side} the nearest scan '
             f'(median; from {_signed_ms(offsets.min())} to {_signed_ms(offsets.max())}); '
-            f'stamp tracks with their scan\'s header.stamp, or pair them with '
+            "stamp tracks with their scan's header.stamp, or pair them with "
             f'--stamp-tolerance {_suggested(offsets)}')
     if len(pairing.extra):
         parts.append(f'{len(pairing.extra)} track messages found their scan taken by a '

@@ -166,7 +166,7 @@ def world_scenes(path, duration_override):
         raise BenchError(f'{path}: expected a mapping with a non-empty list `worlds`')
     unknown = set(document) - {'duration', 'agent', 'cmd_vel', 'worlds'}
     if unknown:
-        raise BenchError(f"{path}: unknown key {sorted(unknown)[0]!r} (duration, agent, "
+        raise BenchError(f'{path}: unknown key {sorted(unknown)[0]!r} (duration, agent, '
                          'cmd_vel, worlds)')
     duration = _number(document.get('duration', 30.0), path, 'duration')
     if duration_override is not None:

@@ -136,9 +136,11 @@ def fit_circle(points, radius_min, radius_max):
     """Centre (x, y), radius and rms residual of the circle that best fits the points.
 
     Least squares on the distances to the circle (Gauss-Newton; a radius that reaches one
-    of its bounds stays there, and the centre alone is fitted), started from the centroid pushed one mean radius away from the scanner (the
-    visible side of a ball faces the scanner at the origin). Fewer than three points cannot
-    tell the radius: it is then the mean of the bounds, and the circle has a closed form.
+    of its bounds stays there, and the centre alone is fitted), started from the centroid
+    pushed one mean radius away from the scanner (the visible side of a ball faces the
+    scanner at the origin). Fewer than three points cannot tell the radius: it is then the
+    mean of the bounds, and the circle has a closed form (three points: the circle through
+    them, when its radius is within the bounds).
     Plain floats, not numpy: a ball shows a handful of beams, and for so few numbers the
     loop below is several times faster than array calls.
     """
