@@ -37,6 +37,7 @@ class RecordedScan:
     pose: tuple  # (x, y, yaw) of the scanner's frame in the world frame
     names: tuple  # the balls of the step
     positions: np.ndarray  # (N, 2)
+    radii: np.ndarray  # (N,)
     visible: np.ndarray  # (N,) bool
 
 
@@ -48,6 +49,7 @@ class RecordedSegment:
     world_frame: str
     scan_frame: str  # <frame_prefix><agent>/base_link
     transforms: PlanarTransforms
+    walls: np.ndarray = None  # (M, 4) wall segments, for drawing
     scans: list = field(default_factory=list)
 
 
@@ -97,6 +99,7 @@ def read_run(path, agent):
             snapshot, _ = snapshot_and_info(recording.segments[current], step)
             roster = BallRoster(snapshot, recording.segments[current].index)
             walls = snapshot.walls
+            segments[current].walls = walls
         roster.follow(step)
         segment = segments[current]
         if step.tf_cdr is not None:
@@ -145,4 +148,5 @@ def scan_at(step, message, pose, names, positions, radii, walls, index, paramete
     visible = np.zeros(len(positions), dtype=bool)
     visible[seen] = True
     return RecordedScan(step=step, stamp_ns=message.stamp_ns, message=message, pose=pose,
-                        names=tuple(names), positions=positions, visible=visible)
+                        names=tuple(names), positions=positions, radii=radii,
+                        visible=visible)
