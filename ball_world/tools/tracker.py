@@ -85,6 +85,9 @@ ON_LINE = 0.05
 #: A run whose end points are further apart than a ball's diameter plus this (m) is no
 #: ball: not fitted (a wall seen head-on makes runs of hundreds of beams).
 WIDER = 0.1
+#: A fit whose centre moves further than this many largest radii from its points is given
+#: up (a wall: its points want a circle far larger than a ball; it would not fit anyway).
+RUNAWAY = 3.0
 #: A circle fits when its rms distance to the points is below this (m): a few times the
 #: default noise of 0.01 m, far below the sag of a wall piece bent onto a ball's radius.
 MAX_RMS = 0.03
@@ -135,13 +138,13 @@ def clusters(ranges, scan):
 def fit_circle(points, radius_min, radius_max):
     """Centre (x, y), radius and rms residual of the circle that best fits the points.
 
-    Least squares on the distances to the circle (Gauss-Newton; a radius that reaches one
-    of its bounds stays there, and the centre alone is fitted), started from the centroid
-    pushed one mean radius away from the scanner (the visible side of a ball faces the
-    scanner at the origin). Fewer than three points cannot tell the radius: it is then the
-    mean of the bounds, and the circle has a closed form (three points: the circle through
-    them, when its radius is within the bounds).
-    Plain floats, not numpy: a ball shows a handful of beams, and for so few numbers the
+    Least squares on the distances to the circle (Gauss-Newton, radius kept within its
+    bounds: points that want a much larger circle, a wall, send the centre away and do not
+    fit), started from the centroid pushed one mean radius away from the scanner (the
+    visible side of a ball faces the scanner at the origin). Fewer than three points cannot
+    tell the radius: it is then the mean of the bounds, and the circle has a closed form
+    (three points: the circle through them, when its radius is within the bounds). Plain
+    floats, not numpy: a ball shows a handful of beams, and for so few numbers the
     loop below is several times faster than array calls.
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 2).tolist()
@@ -158,17 +161,16 @@ def fit_circle(points, radius_min, radius_max):
         circle = _circumcircle(points)
         if circle is not None and radius_min <= circle[2] <= radius_max:
             return np.array(circle[:2]), circle[2], 0.0
-    bounded = False  # the radius reached a bound: from then on it stays there
     for _ in range(20):
-        step = _gauss_newton_step(points, cx, cy, radius, fit_radius=not bounded)
+        step = _gauss_newton_step(points, cx, cy, radius)
         if step is None:
             break
         cx, cy = cx + step[0], cy + step[1]
-        wanted = radius + step[2]
-        radius = min(max(wanted, radius_min), radius_max)
-        bounded = bounded or radius != wanted
+        radius = min(max(radius + step[2], radius_min), radius_max)
         if math.hypot(step[0], step[1]) < 1e-6:
             break
+        if math.hypot(cx - mx, cy - my) > RUNAWAY * radius_max:
+            break  # the centre runs off after a far larger circle: no ball, stop early
     rms = math.sqrt(sum((math.hypot(x - cx, y - cy) - radius) ** 2 for x, y in points) / n)
     return np.array([cx, cy]), radius, rms
 
@@ -206,12 +208,12 @@ def _circle_of_radius(points, radius, away):
     return np.array([mx + depth * nx, my + depth * ny]), radius, 0.0
 
 
-def _gauss_newton_step(points, cx, cy, radius, fit_radius=True):
+def _gauss_newton_step(points, cx, cy, radius):
     """The Gauss-Newton step (dcx, dcy, dr) for the residuals d - r, from the normal
     equations (the gradient of a residual is (-ux, -uy, -1), u the unit vector from the
-    centre to its point). Without fit_radius, or when the radius cannot be told (a short
-    arc: the system is singular), the step moves the centre alone (dr = 0); None when even
-    that cannot be solved."""
+    centre to its point). When the radius cannot be told (a short arc: the system is
+    singular) the step moves the centre alone (dr = 0); None when even that cannot be
+    solved."""
     sxx = sxy = syy = sx = sy = bx = by = b = 0.0
     for x, y in points:
         ox, oy = x - cx, y - cy
@@ -230,7 +232,7 @@ def _gauss_newton_step(points, cx, cy, radius, fit_radius=True):
     # Cramer's rule on [[sxx, sxy, sx], [sxy, syy, sy], [sx, sy, n]] (dcx, dcy, dr) = (bx, by, b).
     minors = (syy * n - sy * sy, sxy * n - sy * sx, sxy * sy - syy * sx)
     det = sxx * minors[0] - sxy * minors[1] + sx * minors[2]
-    if fit_radius and abs(det) > 1e-9 * n:
+    if abs(det) > 1e-9 * n:
         dcx = (bx * minors[0] - sxy * (by * n - sy * b) + sx * (by * sy - syy * b)) / det
         dcy = (sxx * (by * n - sy * b) - bx * minors[1] + sx * (sxy * b - by * sx)) / det
         dr = (sxx * (syy * b - by * sy) - sxy * (sxy * b - by * sx)
