@@ -1,0 +1,114 @@
+"""ball_world_score's benchmark over many scenes: repeatable bit for bit whatever the number
+of processes, scoring a simulated scene exactly as a recording of it is scored, running any
+tracker class, and saying in one line what is wrong with a bad one."""
+import json
+
+import pytest
+
+from ball_world.recording.mcap_writer import McapSink
+from ball_world.scoring import figures
+from ball_world.simulation import Simulation
+from ball_world.tools import score, score_bench
+from ball_world.tools.score_frames import frames_with_tracker
+from ball_world.tools.score_recording import read_run
+from ball_world.tools.tracker import ScanTracker
+
+TRACKERS = '''
+class Still:
+    """Sees nothing."""
+    def update(self, scan, pose):
+        return []
+
+
+class Broken:
+    def update(self, scan, pose):
+        return 1 / 0
+
+
+class Wrong:
+    def update(self, scan, pose):
+        return 5
+'''
+
+
+def bench(capsys, *argv):
+    code = score.main(['--json', *map(str, argv)])
+    out, err = capsys.readouterr()
+    return code, (json.loads(out) if code == 0 else None), err
+
+
+def test_seeds_are_repeatable_bit_for_bit_on_one_or_two_processes(capsys):
+    code, two, err = bench(capsys, '--seeds', '1:4', '--duration', '2', '--jobs', '2')
+    assert code == 0, err
+    assert two['jobs'] == 2 and two['scenes'] == 3
+    code, one, _ = bench(capsys, '--seeds', '1:4', '--duration', '2', '--jobs', '1')
+    for report in (one, two):
+        del report['seconds'], report['jobs']
+    assert one == two
+    assert [row['scene'] for row in one['per_scene']] == ['seed 1', 'seed 2', 'seed 3']
+    hota = one['summary']['HOTA']
+    assert 0.4 < hota['mean'] < 1.0 and hota['ci95'] > 0.0 and hota['scenes'] == 3
+    assert len(one['worst']) == 3
+
+
+def test_a_scene_scores_as_its_recording_scores(tmp_path):
+    scene = score_bench.seed_scenes([7], 3.0)[0]
+    simulated = figures.score_tracks(
+        frames_with_tracker(score_bench.simulated_scans(scene), ScanTracker()), 0.5)
+    path = tmp_path / 'scene.mcap'
+    simulation = Simulation(scene.parameters, sinks=[McapSink(path)])
+    for _ in range(scene.steps):
+        simulation.command(scene.agent, *scene.command)
+        simulation.step()
+    simulation.close()
+    segment, = read_run(path, scene.agent)
+    recorded = figures.score_tracks(frames_with_tracker(segment.scans, ScanTracker()), 0.5)
+    assert simulated.figures() == recorded.figures()
+
+
+def test_a_tracker_class_from_a_file_runs_and_a_bad_one_is_one_line(tmp_path, capsys):
+    module = tmp_path / 'my_trackers.py'
+    module.write_text(TRACKERS)
+    code, report, err = bench(capsys, '--seeds', '2', '--duration', '1', '--jobs', '1',
+                              '--tracker', f'{module}:Still')
+    assert code == 0, err
+    assert report['summary']['MOTA']['mean'] == 0.0
+    assert report['summary']['CLR_FP']['mean'] == 0.0 and report['tracker'].endswith(':Still')
+    for spec, expected in ((f'{module}:Broken', 'ZeroDivisionError: division by zero (at '
+                                                'my_trackers.py:'),
+                           (f'{module}:Wrong', 'not rows (id, x, y, ...)'),
+                           (f'{module}:Missing', 'has no class Missing'),
+                           ('no_such_module:X', "No module named 'no_such_module'")):
+        code, _, err = bench(capsys, '--seeds', '1', '--duration', '1', '--jobs', '1',
+                             '--tracker', spec)
+        assert code == 1 and err.count('\n') == 1 and expected in err, err
+
+
+def test_worlds_from_a_file_and_its_mistakes(tmp_path, capsys):
+    worlds = tmp_path / 'worlds.yaml'
+    worlds.write_text('duration: 1\nworlds:\n  - name: few\n    seeds: 0:2\n'
+                      '    parameters: {random.count: 8}\n'
+                      '  - name: many\n    parameters: {random.count: 30}\n')
+    code, report, err = bench(capsys, '--worlds', worlds, '--jobs', '1')
+    assert code == 0, err
+    assert [row['scene'] for row in report['per_scene']] == ['few seed 0', 'few seed 1',
+                                                             'many']
+    for text, expected in (('worlds: []\n', 'non-empty list `worlds`'),
+                           ('worlds:\n  - parameters: {random.cont: 3}\n',
+                            "'random.cont': no such parameter"),
+                           ('worlds: [{}]\nspeed: 3\n', "unknown key 'speed'"),
+                           ('worlds: [{}\n', 'worlds.yaml')):
+        worlds.write_text(text)
+        code, _, err = bench(capsys, '--worlds', worlds, '--jobs', '1')
+        assert code == 1 and err.count('\n') == 1 and expected in err, err
+
+
+@pytest.mark.parametrize('argv', [
+    ['--seeds', '3:1'], ['--seeds', 'x'], ['--seeds', '0:2', '--jobs', '0'],
+    ['--seeds', '0:2', '--duration', 'inf'], ['--seeds', '0:2', '--worlds', 'w.yaml'],
+    ['--seeds', '0:2', '--csv', 'x.csv']])
+def test_bad_benchmark_arguments_exit_2(argv, capsys):
+    with pytest.raises(SystemExit) as stop:
+        score.main(argv)
+    assert stop.value.code == 2
+    assert capsys.readouterr().err.splitlines()[-1].startswith('ball_world_score: error: ')
