@@ -112,3 +112,21 @@ def test_bad_benchmark_arguments_exit_2(argv, capsys):
         score.main(argv)
     assert stop.value.code == 2
     assert capsys.readouterr().err.splitlines()[-1].startswith('ball_world_score: error: ')
+
+
+def test_scenes_recorded_with_a_tracker_node_score_as_a_benchmark(tmp_path, capsys):
+    from ball_world_testing.harness import executable, run_tool
+    out_dir = tmp_path / 'scenes'
+    code, out, err = run_tool('ball_world_score_scenes', '--seeds', '4:5', '--out', out_dir,
+                              '--tracks-topic', '/ball_0/tracks', '--duration', '2', '--',
+                              executable('ball_world_tracker'), '--ros-args',
+                              '-p', 'agent:=ball_0')
+    assert code == 0, err
+    assert 'seed 4:' in out and (out_dir / 'seed_4' / 'tracks.mcap').is_file()
+    code, report, err = bench(capsys, '--scenes', out_dir, '--jobs', '1')
+    assert code == 0, err
+    assert report['scenes'] == 1 and report['summary']['HOTA']['mean'] > 0.4
+    # The same seeds again into the same directory: refused, nothing overwritten.
+    code, _, err = run_tool('ball_world_score_scenes', '--seeds', '4:5', '--out', out_dir,
+                            '--tracks-topic', '/ball_0/tracks', '--', 'true')
+    assert code == 1 and 'already holds seed_4' in err

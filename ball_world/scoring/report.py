@@ -110,6 +110,8 @@ def bench_lines(report):
     if pooled:
         lines += ['', 'all scenes pooled (as TrackEval combines sequences):']
         lines += figure_lines(pooled, kind)
+    for note in report.get('stamp_notes', ()):
+        lines.append(f'warning: {note}')
     lines += ['', f"worst scenes by {report['worst_by']}: " + ', '.join(
         f'{label} ({_f(value)})' for label, value in report['worst'])]
     return lines

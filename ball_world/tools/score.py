@@ -101,17 +101,28 @@ def describe_exception(error):
 
 
 def score_recording(args):
-    """The report of one recording (a dict) and the scores behind it."""
+    """The report of the recording the arguments name (a dict) and the scores behind it."""
+    report, segments, scores = score_files(
+        args.recording, args.agent, args.gate, args.tracks, args.stamp_tolerance)
+    if args.per_track:
+        report['per_ball'], report['per_track'] = _breakdown(scores)
+    return report, segments, scores
+
+
+def score_files(recording, agent, gate, tracks_source=None, tolerance=0.0):
+    """Score one recording: with the example tracker, or with the tracks of
+    tracks_source = (MCAP, TOPIC) paired by stamp within `tolerance` s. Returns
+    (report dict, RecordedSegments, SequenceScores with their frame_list)."""
     from ball_world.scoring import figures as metrics
     from ball_world.tools import score_frames, score_recording as recorded, score_tracks
     from ball_world.tools import tracker as example
 
-    segments = recorded.read_run(args.recording, args.agent)
+    segments = recorded.read_run(recording, agent)
     tracks = None
-    if args.tracks:
-        tracks = score_tracks.read_tracks(*args.tracks)
+    if tracks_source:
+        tracks = score_tracks.read_tracks(*tracks_source)
         if len(segments) > 1:
-            raise ScoreError(f'{args.recording} holds {len(segments)} runs (the world was '
+            raise ScoreError(f'{recording} holds {len(segments)} runs (the world was '
                              'reset): stamps start again at each, so recorded tracks cannot '
                              'be paired with one; record one run per file')
     scores, paired = [], None
@@ -120,36 +131,33 @@ def score_recording(args):
             frames = score_frames.frames_with_tracker(segment.scans, example.ScanTracker(),
                                                       'the example tracker')
         else:
-            paired = score_frames.frames_with_tracks(
-                segment, tracks.sets, round(args.stamp_tolerance * 1e9))
+            paired = score_frames.frames_with_tracks(segment, tracks.sets,
+                                                     round(tolerance * 1e9))
             if paired.pairing.paired == 0:
                 raise ScoreError(f'no track message pairs with a scan: {paired.note}')
             frames = paired.frames
         score = (metrics.score_detections if tracks is not None and
-                 tracks.kind == 'detections' else metrics.score_tracks)(frames, args.gate)
+                 tracks.kind == 'detections' else metrics.score_tracks)(frames, gate)
         score.frame_list = frames
         scores.append(score)
     combined = metrics.combine(scores)
+    visible = sum(int(f.visible.sum()) for s in scores for f in s.frame_list)
+    sightings = sum(len(f.visible) for s in scores for f in s.frame_list)
     report = {
-        'recording': str(args.recording), 'agent': args.agent, 'gate': args.gate,
+        'recording': str(recording), 'agent': agent, 'gate': gate,
         'tracks': {'source': 'the example tracker' if tracks is None else
-                   f'{args.tracks[1]} in {args.tracks[0]}',
+                   f'{tracks_source[1]} in {tracks_source[0]}',
                    'type': 'example tracker' if tracks is None else tracks.type,
                    'kind': 'tracks' if tracks is None else tracks.kind},
         'scans': sum(len(s.scans) for s in segments), 'segments': len(segments),
-        'truth': {'visible': int(sum(sum(int(f.visible.sum()) for f in s.frame_list)
-                                     for s in scores)),
-                  'hidden': int(sum(sum(int((~f.visible).sum()) for f in s.frame_list)
-                                    for s in scores))},
+        'truth': {'visible': visible, 'hidden': sightings - visible},
         'dont_care': combined.dont_care,
-        'stamps': None if paired is None else _stamps_report(paired, args.stamp_tolerance),
+        'stamps': None if paired is None else _stamps_report(paired, tolerance),
         'figures': combined.figures(),
     }
     if len(scores) > 1:
         report['per_segment'] = [dict(segment=s.index, **score.figures())
                                  for s, score in zip(segments, scores)]
-    if args.per_track:
-        report['per_ball'], report['per_track'] = _breakdown(scores)
     return report, segments, scores
 
 
