@@ -3,9 +3,10 @@
 `ball_world_score run.mcap --rerun scored.rrd` logs, at each scan (timelines `sim_time` and
 `scan`):
 
-- `arena/balls/visible` and `arena/balls/hidden`: the balls the scan could see (green, with
-  their names) and those it could not (grey: don't-care);
-- `arena/agent`: the scanner's heading, and `arena/scan` the end points of its beams;
+- `arena/balls/visible` and `arena/balls/hidden`: the balls the scan could see (green, their
+  names under them in `arena/balls/names`) and those it could not (grey: don't-care);
+- `arena/agent`: the scanning agent (orange) and its heading, `arena/scan` the end points of
+  its beams;
 - `arena/tracks`: the tracks with their ids, blue when matched, magenta when a false
   positive, grey when don't-care (on a hidden ball); `arena/matches` a line from each
   matched ball to its track;
@@ -27,6 +28,7 @@ ARENA = 'arena'
 GREEN, GREY, BLUE, MAGENTA, RED, YELLOW = ((90, 190, 110), (150, 150, 150, 110),
                                            (60, 120, 230), (220, 60, 200), (230, 50, 50),
                                            (240, 200, 40))
+ORANGE = (250, 150, 30)
 RING_STEPS = 32
 TRACK_RADIUS = 0.07
 
@@ -107,21 +109,30 @@ def _log_scan(stream, rr, recorded, frame, score, k, sequence, last_track):
     """Log one scan; returns (misses, false positives, id switches) there."""
     positions, radii, visible = frame.truth_xy, recorded.radii, frame.visible
     names = np.array(frame.truth_ids, dtype=object)
-    stream.log(f'{ARENA}/balls/visible', rr.Points2D(
-        positions[visible], radii=radii[visible], colors=GREEN,
-        labels=[str(n) for n in names[visible]], show_labels=True))
-    stream.log(f'{ARENA}/balls/hidden', rr.Points2D(
-        positions[~visible], radii=radii[~visible], colors=GREY))
     x, y, yaw = recorded.pose
-    stream.log(f'{ARENA}/agent', rr.Arrows2D(origins=[(x, y)], vectors=[
-        (0.6 * math.cos(yaw), 0.6 * math.sin(yaw))], colors=(250, 150, 30)))
+    agent = np.all(positions == (x, y), axis=1)  # the scanner's own ball
+    hidden = ~visible & ~agent
+    stream.log(f'{ARENA}/balls/visible', rr.Points2D(
+        positions[visible], radii=radii[visible], colors=GREEN))
+    # Names under the balls (Rerun draws a label below its point): not over the tracks'.
+    below = positions[visible] - np.column_stack((np.zeros(int(visible.sum())),
+                                                  radii[visible] + 0.04))
+    stream.log(f'{ARENA}/balls/names', rr.Points2D(
+        below, radii=0.001, colors=GREEN, labels=[str(n) for n in names[visible]],
+        show_labels=True))
+    stream.log(f'{ARENA}/balls/hidden', rr.Points2D(
+        positions[hidden], radii=radii[hidden], colors=GREY))
+    stream.log(f'{ARENA}/agent', rr.Points2D(positions[agent], radii=radii[agent],
+                                             colors=ORANGE))
+    stream.log(f'{ARENA}/agent/heading', rr.Arrows2D(origins=[(x, y)], vectors=[
+        (0.6 * math.cos(yaw), 0.6 * math.sin(yaw))], colors=ORANGE))
     message = recorded.message
     ranges = np.asarray(message.ranges, dtype=np.float64)
     angles = yaw + message.angle_min + np.arange(len(ranges)) * message.angle_increment
     hit = np.isfinite(ranges)
     stream.log(f'{ARENA}/scan', rr.Points2D(np.column_stack(
         (x + ranges[hit] * np.cos(angles[hit]), y + ranges[hit] * np.sin(angles[hit]))),
-        radii=0.02, colors=(250, 150, 30)))
+        radii=0.02, colors=ORANGE))
     removed = set(sequence.dont_care[k].tolist())
     matched_ball, matched_track, switched = {}, {}, []
     if score.matches is not None:
