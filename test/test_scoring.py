@@ -183,3 +183,22 @@ def test_sequences_combine_as_one_when_their_ids_differ():
                                           for f in second], GATE).figures()
     for name in ('MOTA', 'MOTP', 'IDF1', 'CLR_FN', 'IDSW', 'HOTA', 'DetA', 'AssA', 'LocA'):
         assert combined[name] == pytest.approx(whole[name]), name
+
+
+def test_the_scoring_mathematics_has_no_ros_no_files_and_no_tools():
+    import ast
+    from pathlib import Path
+    folder = Path(figures.__file__).parent
+    outside = ('rclpy', 'mcap', 'rerun', 'yaml', 'ball_world.ros', 'ball_world.recording',
+               'ball_world.tools', 'ball_world.msgs', 'os', 'io', 'pathlib')
+    for path in folder.glob('*.py'):
+        tree = ast.parse(path.read_text())
+        names = {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import)
+                 for alias in node.names}
+        names |= {node.module for node in ast.walk(tree)
+                  if isinstance(node, ast.ImportFrom) and node.module}
+        bad = sorted(n for n in names if any(n == o or n.startswith(o + '.') for o in outside))
+        assert not bad, f'{path.name} imports {bad}'
+        calls = {node.func.id for node in ast.walk(tree)
+                 if isinstance(node, ast.Call) and isinstance(node.func, ast.Name)}
+        assert 'open' not in calls and 'print' not in calls, path.name

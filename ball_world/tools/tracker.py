@@ -12,10 +12,11 @@ yours, on the same recording). Read it top to bottom. For each scan it does four
   3. puts the centres in the world frame with the scanner's pose from /tf (world ->
      <p><name>/odom -> <p><name>/base_link at the scan's stamp);
   4. updates one constant-velocity Kalman filter per track: predict every track to the
-     scan's time, pair tracks and detections nearest first within a gate (greedy: scipy,
-     which has the Hungarian method, is not a dependency; with balls further apart than
-     the gate the two agree), correct the paired tracks, start a track for each unpaired
-     detection, and drop tracks unseen for `max_misses` scans.
+     scan's time, pair tracks and detections nearest first within a gate (greedy, the
+     simplest rule: with balls further apart than the gate it agrees with the optimal
+     assignment; scipy.optimize.linear_sum_assignment is the next step up), correct the
+     paired tracks, start a track for each unpaired detection, and drop tracks unseen for
+     `max_misses` scans.
 
 It publishes `<name>/tracks` (visualization_msgs/MarkerArray in the world frame, one sphere
 per confirmed track, marker id = track id, so RViz and ball_world_score see the ids) and
@@ -27,9 +28,11 @@ missing each ball on the scans it needs to be confirmed.
 
     ros2 run ball_world ball_world_tracker --ros-args -p agent:=ball_0
 
-Everything above the node class is plain Python and numpy (no ROS): `Tracker` and
-`detect` are what the tests drive with synthetic scans, and what ball_world_score runs
-offline on recorded scans.
+Everything above the node class is plain Python and numpy (no ROS). `ScanTracker` is the
+whole tracker as one class, `update(scan, pose) -> rows (id, x, y, vx, vy)`: the node runs
+it on live scans, ball_world_score on recorded ones and on simulated scenes
+(`ball_world_score --seeds 0:100`), and a class of your own with the same method is scored
+the same way (`--tracker my_module:MyTracker`).
 """
 import math
 import sys
