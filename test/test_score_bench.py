@@ -130,3 +130,12 @@ def test_scenes_recorded_with_a_tracker_node_score_as_a_benchmark(tmp_path, caps
     code, _, err = run_tool('ball_world_score_scenes', '--seeds', '4:5', '--out', out_dir,
                             '--tracks-topic', '/ball_0/tracks', '--', 'true')
     assert code == 1 and 'already holds seed_4' in err
+
+
+def test_a_tracker_that_repeats_an_id_is_one_line(tmp_path, capsys):
+    module = tmp_path / 'twice.py'
+    module.write_text('class Twice:\n    def update(self, scan, pose):\n'
+                      '        return [(1, 0.0, 0.0), (1, 1.0, 1.0)]\n')
+    code, _, err = bench(capsys, '--seeds', '1', '--duration', '0.5', '--jobs', '1',
+                         '--tracker', f'{module}:Twice')
+    assert code == 1 and err.count('\n') == 1 and 'track id 1 appears twice' in err

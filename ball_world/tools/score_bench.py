@@ -296,6 +296,7 @@ def run_scene(job):
     error of a tracker that failed. Runs in a worker process."""
     position, scene, spec, gate = job
     from ball_world.scoring import figures
+    from ball_world.scoring.frames import DuplicateTrack
     from ball_world.tools.score_frames import frames_with_tracker, FramesError
     try:
         tracker = _new_tracker(load_tracker_class(spec), spec or EXAMPLE)
@@ -309,6 +310,8 @@ def run_scene(job):
             raise BenchError(f'{spec or EXAMPLE} failed on {scene.label}: '
                              f'{describe_exception(error)}') from None
         score = figures.score_tracks(frames, gate)
+    except DuplicateTrack as error:
+        return position, scene.label, None, f'{spec or EXAMPLE} on {scene.label}: {error}'
     except (BenchError, FramesError) as error:
         return position, scene.label, None, str(error)
     score.sequence = score.matches = None  # not sent back: large, and not needed

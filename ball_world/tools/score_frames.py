@@ -89,6 +89,9 @@ def frames_with_tracks(segment, sets, tolerance_ns=0):
             out.append(frame(recorded, (), np.empty((0, 2))))
             continue
         xy = track_set.xy
+        if not np.isfinite(xy).all():
+            raise FramesError(f'tracks at stamp {track_set.stamp_ns} ns have a position '
+                              'that is not finite')
         if track_set.frame_id != segment.world_frame:
             xy = _in_world(segment, track_set)
         ids = track_set.ids or tuple(range(len(xy)))
