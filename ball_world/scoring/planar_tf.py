@@ -26,55 +26,60 @@ def yaw_of(qx, qy, qz, qw):
 
 
 class PlanarTransforms:
-    """Links child -> parent, static or stamped, and lookups up a chain of them."""
+    """Links child -> parent, static or stamped, and lookups up a chain of them.
+
+    Stamped links are kept per child in stamp order; a recording adds them in order, so
+    adding is an append and a lookup a binary search, however long the run.
+    """
 
     def __init__(self):
         self._static = {}  # child -> (parent, x, y, yaw)
-        self._rows = {}  # child -> {stamp_ns: (parent, x, y, yaw)} while adding
-        self._tables = {}  # child -> (parent, stamps list, array (n, 3)) once looked up
+        self._stamps = {}  # child -> [stamp_ns] in order
+        self._values = {}  # child -> [(parent, x, y, yaw)] in the same order
 
     def add(self, parent, child, stamp_ns, x, y, yaw, static=False):
         """One transform: `child`'s pose in `parent` (a later one at a stamp replaces)."""
+        value = (parent, float(x), float(y), float(yaw))
         if static:
-            self._static[child] = (parent, float(x), float(y), float(yaw))
+            self._static[child] = value
             return
-        rows = self._rows.setdefault(child, {})
-        rows[int(stamp_ns)] = (parent, float(x), float(y), float(yaw))
-        self._tables.pop(child, None)
+        stamp_ns = int(stamp_ns)
+        stamps = self._stamps.setdefault(child, [])
+        values = self._values.setdefault(child, [])
+        if stamps and stamps[-1] >= stamp_ns:
+            at = bisect.bisect_left(stamps, stamp_ns)
+            if at < len(stamps) and stamps[at] == stamp_ns:
+                values[at] = value
+                return
+            stamps.insert(at, stamp_ns)
+            values.insert(at, value)
+            return
+        stamps.append(stamp_ns)
+        values.append(value)
 
     def frames(self):
-        return sorted(set(self._static) | set(self._rows))
-
-    def _table(self, child):
-        table = self._tables.get(child)
-        if table is None:
-            rows = self._rows[child]
-            stamps = sorted(rows)
-            parents = {rows[s][0] for s in stamps}
-            if len(parents) > 1:
-                raise TransformError(f'frame {child!r} has more than one parent in /tf: '
-                                     f'{", ".join(sorted(parents))}')
-            values = np.array([rows[s][1:] for s in stamps], dtype=np.float64)
-            table = (rows[stamps[0]][0], stamps, values)
-            self._tables[child] = table
-        return table
+        return sorted(set(self._static) | set(self._stamps))
 
     def link(self, child, stamp_ns):
         """(parent, x, y, yaw) of `child` at stamp_ns, or TransformError."""
-        if child in self._rows:
-            parent, stamps, values = self._table(child)
+        stamps = self._stamps.get(child)
+        if stamps:
+            values = self._values[child]
             at = bisect.bisect_left(stamps, stamp_ns)
             if at < len(stamps) and stamps[at] == stamp_ns:
-                return (parent, *values[at])
+                return values[at]
             if at == 0 or at == len(stamps):
                 raise TransformError(
                     f'no transform of {child!r} at {stamp_ns * 1e-9:.9f} s: /tf has it from '
                     f'{stamps[0] * 1e-9:.9f} to {stamps[-1] * 1e-9:.9f} s')
+            (p0, x0, y0, a0), (p1, x1, y1, a1) = values[at - 1], values[at]
+            if p0 != p1:
+                raise TransformError(f'frame {child!r} changes parent ({p0!r}, {p1!r}) '
+                                     f'around {stamp_ns * 1e-9:.9f} s')
             t0, t1 = stamps[at - 1], stamps[at]
             share = (stamp_ns - t0) / (t1 - t0)
-            (x0, y0, a0), (x1, y1, a1) = values[at - 1], values[at]
             turn = math.remainder(a1 - a0, 2.0 * math.pi)
-            return (parent, x0 + share * (x1 - x0), y0 + share * (y1 - y0),
+            return (p0, x0 + share * (x1 - x0), y0 + share * (y1 - y0),
                     math.remainder(a0 + share * turn, 2.0 * math.pi))
         if child in self._static:
             return self._static[child]

@@ -20,8 +20,12 @@ import numpy as np
 from ball_world.core import lidar
 from ball_world.core.agents import frames as agent_frames
 from ball_world.msgs.agent_cdr import decode_laser_scan, decode_tf_message
+from ball_world.msgs.cdr import decode_pose_array, decode_vector3_stamped
 from ball_world.recording import agent_topics
-from ball_world.recording.mcap_reader import BallRoster, RecordingError, snapshot_and_info
+from ball_world.recording.mcap_reader import (BallRoster, parse_edits, RecordedImpulse,
+                                              RecordedStep, RecordingError,
+                                              snapshot_and_info)
+from ball_world.recording.mcap_writer import EVENT_ROLES
 from ball_world.recording.recording_set import open_recording
 from ball_world.scans import fan_from
 from ball_world.scoring.planar_tf import PlanarTransforms, TransformError, yaw_of
@@ -63,14 +67,17 @@ def add_transforms(transforms, data, static=False):
 
 def read_run(path, agent):
     """[RecordedSegment] of `agent`'s scans in the recording at `path` (a file or a bag
-    directory); RecordingError with one line for anything that cannot be scored."""
+    directory); RecordingError with one line for anything that cannot be scored.
+
+    One pass over the topics it needs (balls, impulses and edits, /tf, /tf_static, the
+    scans), decoding the balls only at the scans: a 10-minute run is read in seconds.
+    """
     recording = open_recording(path)
-    scan_topics = {}
-    for position, segment in enumerate(recording.segments):
+    scan_topics = set()
+    for segment in recording.segments:
         namespace = agent_topics.namespace_of(segment.topics)
-        scan_topics[f'{namespace}/{agent}/{agent_topics.SCAN}'] = position
-    scan_topic = next((t for t in scan_topics if t in recording.topics), None)
-    if scan_topic is None:
+        scan_topics.add(f'{namespace}/{agent}/{agent_topics.SCAN}')
+    if not scan_topics & set(recording.topics):
         agents = sorted({topic.rsplit('/', 2)[-2] for topic in recording.topics
                          if topic.endswith(f'/{agent_topics.SCAN}')})
         known = f"its scanning agents: {', '.join(agents)}" if agents else \
@@ -81,62 +88,102 @@ def read_run(path, agent):
                                                         agent)[1],
                                 transforms=PlanarTransforms())
                 for segment in recording.segments]
-    scans = {}
-    for message in recording.messages(list(scan_topics) + [agent_topics.TF_STATIC_TOPIC]):
-        position = recording.segment_at(message.log_time_ns)
-        try:
-            if message.topic == agent_topics.TF_STATIC_TOPIC:
-                add_transforms(segments[position].transforms, message.data, static=True)
-            else:
-                scans[message.log_time_ns] = decode_laser_scan(message.data)
-        except ValueError as error:
-            raise RecordingError(f'{message.topic} at log time {message.log_time_ns} ns does '
-                                 f'not decode: {error}') from None
-    current = roster = walls = None
-    for step in recording.steps():
-        if step.segment != current:
-            current = step.segment
-            snapshot, _ = snapshot_and_info(recording.segments[current], step)
-            roster = BallRoster(snapshot, recording.segments[current].index)
-            walls = snapshot.walls
-            segments[current].walls = walls
-        roster.follow(step)
-        segment = segments[current]
-        if step.tf_cdr is not None:
-            try:
-                add_transforms(segment.transforms, step.tf_cdr)
-            except ValueError as error:
-                raise RecordingError(f'/tf at step {step.step} does not decode: '
-                                     f'{error}') from None
-        message = scans.get(step.log_time_ns)
-        if message is None or step.positions is None:
-            continue
-        segment.scans.append(_scan_of(step, message, roster, walls, segment, agent,
-                                      recording.segments[current].parameters))
+    roles = {topic: role for topic, role in recording.roles.items()
+             if role == 'balls' or role in EVENT_ROLES}
+    roles.update({topic: 'scan' for topic in scan_topics})
+    roles.update({agent_topics.TF_TOPIC: 'tf', agent_topics.TF_STATIC_TOPIC: 'tf_static'})
+    reader = _Reader(recording, segments, agent)
+    for message in recording.messages(list(roles)):
+        reader.add(roles[message.topic], message)
+    reader.finish()
     found = [segment for segment in segments if segment.scans]
     if not found:
         raise RecordingError(f'no scan of {agent!r} was recorded with its step')
     return found
 
 
-def _scan_of(step, message, roster, walls, segment, agent, parameters):
-    if len(step.positions) != len(roster):
-        raise RecordingError(f'step {step.step} has {len(step.positions)} balls, not '
-                             f'{len(roster)}')
+class _Reader:
+    """The messages of one log time gathered, then turned into the roster's changes, the
+    transforms and, at a scan, a RecordedScan."""
+
+    def __init__(self, recording, segments, agent):
+        self.recording = recording
+        self.segments = segments
+        self.agent = agent
+        self.log_time_ns = None
+        self.current = self.roster = self.walls = None
+        self.group = {}
+
+    def add(self, role, message):
+        if message.log_time_ns != self.log_time_ns:
+            self.finish()
+            self.log_time_ns = message.log_time_ns
+        self.group.setdefault(role, []).append(message.data)
+
+    def finish(self):
+        if not self.group:
+            return
+        group, self.group = self.group, {}
+        log_time = self.log_time_ns
+        try:
+            self._take(group, log_time)
+        except ValueError as error:
+            raise RecordingError(f'a message at log time {log_time} ns does not decode: '
+                                 f'{error}') from None
+
+    def _take(self, group, log_time):
+        recording = self.recording
+        position = recording.segment_at(log_time)
+        described = recording.segments[position]
+        segment = self.segments[position]
+        if position != self.current:
+            self.current = position
+            snapshot, _ = snapshot_and_info(described)
+            self.roster = BallRoster(snapshot, described.index)
+            self.walls = segment.walls = snapshot.walls
+        stamp = log_time - described.log_offset_ns
+        step = stamp // described.dt_ns
+        impulses = tuple(RecordedImpulse(*decode_vector3_stamped(data), cdr=data)
+                         for data in group.get('impulse', ()))
+        edits = group.get('edits', ())
+        if impulses or edits:
+            try:
+                applied = parse_edits(edits, len(impulses))
+            except RecordingError as error:
+                raise RecordingError(f'segment {described.index} step {step}: recorded '
+                                     f'{error}') from None
+            self.roster.follow(RecordedStep(
+                segment=position, step=step, stamp_ns=stamp, log_time_ns=log_time,
+                positions=None, state=None, stats=None, impulses=impulses, balls_cdr=None,
+                state_cdr=None, stats_cdr=None, balls_stamp_ns=None, edits=applied))
+        for data in group.get('tf_static', ()):
+            add_transforms(segment.transforms, data, static=True)
+        for data in group.get('tf', ()):
+            add_transforms(segment.transforms, data)
+        if 'scan' in group and 'balls' in group:
+            positions = decode_pose_array(group['balls'][-1])[2]
+            segment.scans.append(_scan_of(step, positions, decode_laser_scan(group['scan'][-1]),
+                                          self.roster, self.walls, segment, self.agent,
+                                          described.parameters))
+
+
+def _scan_of(step, positions, message, roster, walls, segment, agent, parameters):
+    if len(positions) != len(roster):
+        raise RecordingError(f'step {step} has {len(positions)} balls, not {len(roster)}')
     if message.frame_id != segment.scan_frame:
-        raise RecordingError(f'the scan of step {step.step} is in frame '
+        raise RecordingError(f'the scan of step {step} is in frame '
                              f'{message.frame_id!r}, not {segment.scan_frame!r}')
     try:
         index = roster.names.index(agent)
     except ValueError:
-        raise RecordingError(f'{agent!r} is no ball at step {step.step}') from None
+        raise RecordingError(f'{agent!r} is no ball at step {step}') from None
     try:
         pose = segment.transforms.lookup(segment.world_frame, segment.scan_frame,
                                          message.stamp_ns)
     except TransformError as error:
-        raise RecordingError(f'no pose of the scan of step {step.step}: {error}') from None
-    return scan_at(step.step, message, pose, roster.names, step.positions, roster.radii,
-                   walls, index, parameters)
+        raise RecordingError(f'no pose of the scan of step {step}: {error}') from None
+    return scan_at(step, message, pose, roster.names, positions, roster.radii, walls, index,
+                   parameters)
 
 
 def scan_at(step, message, pose, names, positions, radii, walls, index, parameters):

@@ -150,7 +150,8 @@ def fit_circle(points, radius_min, radius_max):
     floats, not numpy: a ball shows a handful of beams, and for so few numbers the
     loop below is several times faster than array calls.
     """
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 2).tolist()
+    if isinstance(points, np.ndarray):
+        points = points.reshape(-1, 2).tolist()
     n = len(points)
     radius = 0.5 * (radius_min + radius_max)
     mx = sum(x for x, _ in points) / n
@@ -250,23 +251,29 @@ def _gauss_newton_step(points, cx, cy, radius):
 def detect(ranges, scan, options=Options()):
     """Centres (K, 2) of the balls seen in one scan, in the scanner's frame."""
     ranges = np.asarray(ranges, dtype=np.float64)
-    points = scan_points(ranges, scan)
     valid = np.isfinite(ranges) & (ranges >= scan.range_min) & (ranges <= scan.range_max)
-    used = np.zeros(len(ranges), dtype=bool)
+    runs = clusters(ranges, scan)
+    # From here on one beam at a time: Python lists answer that far faster than arrays.
+    points = scan_points(ranges, scan).tolist()
+    valid = valid.tolist()
+    ranges = ranges.tolist()
+    used = [False] * len(ranges)
     found = []
     # Longest runs first: each may take in the beams beside it that graze the same ball.
-    for run in sorted(clusters(ranges, scan), key=len, reverse=True):
-        if used[run].any():
+    for run in sorted(runs, key=len, reverse=True):
+        if any(used[k] for k in run):
             continue
         if math.dist(points[run[0]], points[run[-1]]) > 2.0 * options.radius_max + WIDER:
-            used[run] = True
+            for k in run:
+                used[k] = True
             continue  # wider than any ball: a piece of wall (or balls side by side)
         run, (centre, radius, rms) = _grown(run, points, valid, used, options)
-        used[run] = True
+        for k in run:
+            used[k] = True
         if not _in_front(ranges, points, run):
             continue  # a piece of wall, or of something behind others
         # The circle must fit, and lie behind its points (a ball shows its near side).
-        if rms <= MAX_RMS and np.hypot(*centre) > ranges[run].mean():
+        if rms <= MAX_RMS and math.hypot(*centre) > sum(ranges[k] for k in run) / len(run):
             found.append(centre)
     return np.array(found).reshape(-1, 2)
 
@@ -279,7 +286,7 @@ def _grown(run, points, valid, used, options):
     circle through the run still fits with them.
     """
     n = len(points)
-    fit = fit_circle(points[run], options.radius_min, options.radius_max)
+    fit = fit_circle([points[k] for k in run], options.radius_min, options.radius_max)
     for step in (-1, 1):
         for _ in range(2):
             edge = run[0] if step < 0 else run[-1]
@@ -288,7 +295,8 @@ def _grown(run, points, valid, used, options):
                     points[edge], points[beside]) > 2.0 * options.radius_max:
                 break
             grown = [beside] + run if step < 0 else run + [beside]
-            grown_fit = fit_circle(points[grown], options.radius_min, options.radius_max)
+            grown_fit = fit_circle([points[k] for k in grown], options.radius_min,
+                                   options.radius_max)
             if grown_fit[2] > MAX_RMS:
                 break
             run, fit = grown, grown_fit
@@ -318,18 +326,18 @@ def _in_front(ranges, points, run):
         if continues and len(run) < 3:
             return False
         behind = ranges[beside]
-        if not continues and (behind == np.inf or behind > ranges[edge] + FOREGROUND):
+        if not continues and (behind == math.inf or behind > ranges[edge] + FOREGROUND):
             front = True
     return front
 
 
 def _on_line(point, a, b):
     """Whether `point` lies within ON_LINE of the line through a and b."""
-    ab = b - a
-    length = math.hypot(*ab)
+    abx, aby = b[0] - a[0], b[1] - a[1]
+    length = math.hypot(abx, aby)
     if length == 0.0:
         return False
-    return abs(ab[0] * (point[1] - a[1]) - ab[1] * (point[0] - a[0])) / length < ON_LINE
+    return abs(abx * (point[1] - a[1]) - aby * (point[0] - a[0])) / length < ON_LINE
 
 
 def to_world(points, x, y, yaw):
