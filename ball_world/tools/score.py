@@ -25,6 +25,14 @@ import sys
 import traceback
 
 PROG = 'ball_world_score'
+EXAMPLES = """examples:
+  ball_world_score run.mcap                                  the example tracker on a recording
+  ball_world_score run.mcap --tracks mine /ball_0/my_tracks  your tracker's recorded output
+  ball_world_score --seeds 0:100                             100 simulated scenes, every core
+  ball_world_score --seeds 0:100 --tracker my_tracker.py:MyTracker
+  ball_world_score --scenes DIR                              scenes ball_world_score_scenes made
+
+docs/scoring.md: ground truth, the gate, don't-care, stamps, the metrics, the CSV."""
 
 
 class ScoreError(Exception):
@@ -48,8 +56,12 @@ def _tolerance(text):
 def parse_args(argv):
     from ball_world.tools import score_bench
     parser = argparse.ArgumentParser(
-        prog=PROG, description=__doc__.split('\n\n')[1].replace('\n', ' '),
-        epilog='See docs/scoring.md for what the figures mean.')
+        prog=PROG, formatter_class=argparse.RawDescriptionHelpFormatter,
+        description='How well tracks follow the balls a scanner could see: HOTA (DetA, '
+                    'AssA, LocA), IDF1 and CLEAR-MOT,\n'
+                    "equal to TrackEval's on the same frames, on one recording or over many "
+                    'simulated scenes.',
+        epilog=EXAMPLES)
     parser.add_argument('recording', nargs='?',
                         help='a ball_world MCAP (or bag directory) recorded with a scanning '
                              'agent')
