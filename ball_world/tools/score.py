@@ -20,9 +20,7 @@ and prints. Every bad input is one line on stderr and exit status 1 (2 for bad a
 import argparse
 import json
 import math
-import os
 import sys
-import traceback
 
 PROG = 'ball_world_score'
 EXAMPLES = """examples:
@@ -33,10 +31,6 @@ EXAMPLES = """examples:
   ball_world_score --scenes DIR                              scenes ball_world_score_scenes made
 
 docs/scoring.md: ground truth, the gate, don't-care, stamps, the metrics, the CSV."""
-
-
-class ScoreError(Exception):
-    """Something in the input that scoring cannot go on with; the message says what."""
 
 
 def _positive(text):
@@ -102,107 +96,14 @@ def parse_args(argv):
     return args
 
 
-def describe_exception(error):
-    """One line for an exception raised in a user's code: what and where."""
-    where = ''
-    frames = traceback.extract_tb(error.__traceback__)
-    if frames:
-        last = frames[-1]
-        where = f' (at {os.path.basename(last.filename)}:{last.lineno})'
-    return f'{type(error).__name__}: {error}{where}'
-
-
 def score_recording(args):
     """The report of the recording the arguments name (a dict) and the scores behind it."""
+    from ball_world.tools.score_one import breakdown, score_files
     report, segments, scores = score_files(
         args.recording, args.agent, args.gate, args.tracks, args.stamp_tolerance)
     if args.per_track:
-        report['per_ball'], report['per_track'] = _breakdown(scores)
+        report['per_ball'], report['per_track'] = breakdown(scores)
     return report, segments, scores
-
-
-def score_files(recording, agent, gate, tracks_source=None, tolerance=0.0):
-    """Score one recording: with the example tracker, or with the tracks of
-    tracks_source = (MCAP, TOPIC) paired by stamp within `tolerance` s. Returns
-    (report dict, RecordedSegments, SequenceScores with their frame_list)."""
-    from ball_world.scoring import figures as metrics
-    from ball_world.tools import score_frames, score_recording as recorded, score_tracks
-    from ball_world.tools import tracker as example
-
-    segments = recorded.read_run(recording, agent)
-    tracks = None
-    if tracks_source:
-        tracks = score_tracks.read_tracks(*tracks_source)
-        if len(segments) > 1:
-            raise ScoreError(f'{recording} holds {len(segments)} runs (the world was '
-                             'reset): stamps start again at each, so recorded tracks cannot '
-                             'be paired with one; record one run per file')
-    scores, paired = [], None
-    for segment in segments:
-        if tracks is None:
-            frames = score_frames.frames_with_tracker(segment.scans, example.ScanTracker(),
-                                                      'the example tracker')
-        else:
-            paired = score_frames.frames_with_tracks(segment, tracks.sets,
-                                                     round(tolerance * 1e9))
-            if paired.pairing.paired == 0:
-                raise ScoreError(f'no track message pairs with a scan: {paired.note}')
-            frames = paired.frames
-        score = (metrics.score_detections if tracks is not None and
-                 tracks.kind == 'detections' else metrics.score_tracks)(frames, gate)
-        score.frame_list = frames
-        scores.append(score)
-    combined = metrics.combine(scores)
-    visible = sum(int(f.visible.sum()) for s in scores for f in s.frame_list)
-    sightings = sum(len(f.visible) for s in scores for f in s.frame_list)
-    report = {
-        'recording': str(recording), 'agent': agent, 'gate': gate,
-        'tracks': {'source': 'the example tracker' if tracks is None else
-                   f'{tracks_source[1]} in {tracks_source[0]}',
-                   'type': 'example tracker' if tracks is None else tracks.type,
-                   'kind': 'tracks' if tracks is None else tracks.kind},
-        'scans': sum(len(s.scans) for s in segments), 'segments': len(segments),
-        'truth': {'visible': visible, 'hidden': sightings - visible},
-        'dont_care': combined.dont_care,
-        'stamps': None if paired is None else _stamps_report(paired, tolerance),
-        'figures': combined.figures(),
-    }
-    if len(scores) > 1:
-        report['per_segment'] = [dict(segment=s.index, **score.figures())
-                                 for s, score in zip(segments, scores)]
-    return report, segments, scores
-
-
-def _stamps_report(paired, tolerance):
-    import numpy as np
-    pairing = paired.pairing
-    offsets = pairing.unpaired_offsets_ns()
-    return {'messages': paired.messages, 'paired': pairing.paired,
-            'unpaired': int(len(pairing.unpaired)), 'extra': int(len(pairing.extra)),
-            'scans_without_tracks': pairing.scans_without, 'tolerance_s': tolerance,
-            'unpaired_offset_ms': None if len(offsets) == 0 else {
-                'median': float(np.median(offsets)) * 1e-6,
-                'min': float(offsets.min()) * 1e-6, 'max': float(offsets.max()) * 1e-6},
-            'note': paired.note}
-
-
-def _breakdown(scores):
-    from ball_world.scoring import breakdown
-    balls, tracks = [], []
-    for score in scores:
-        if score.kind != 'tracks':
-            return None, None
-        ball_lines, track_lines = breakdown.lines(score.sequence, score.matches)
-        balls += [dict(ball=line.ball, frames=line.frames, matched=line.matched,
-                       tracked=line.tracked, switches=line.switches,
-                       fragmentations=line.fragmentations, tracks=list(line.tracks))
-                  for line in ball_lines]
-        tracks += [dict(track=line.track, first_s=line.first_ns * 1e-9,
-                        lifetime_s=line.lifetime_s, frames=line.frames, matched=line.matched,
-                        false_positives=line.false_positives, switches=line.switches,
-                        fragmentations=line.fragmentations, balls=list(line.balls))
-                   for line in track_lines]
-    return balls, tracks
 
 
 def _json_ready(value):
@@ -229,13 +130,18 @@ def _write_outputs(args, segments, scores):
 
 def main(argv=None):
     from ball_world.recording.mcap_reader import RecordingError
-    from ball_world.tools.score_frames import FramesError
-    from ball_world.tools.score_tracks import TracksError
     from ball_world.scoring.frames import DuplicateTrack
+    from ball_world.tools.score_frames import FramesError
+    from ball_world.tools.score_one import ScoreError
+    from ball_world.tools.score_tracks import TracksError
 
     args = parse_args(sys.argv[1:] if argv is None else argv)
     try:
-        if args.recording is None:
+        if args.scenes is not None:
+            from ball_world.tools import score_scenes
+            report = score_scenes.score_directory(args)
+            lines_of = 'bench_lines'
+        elif args.recording is None:
             from ball_world.tools import score_bench
             report = score_bench.run(args)
             lines_of = 'bench_lines'

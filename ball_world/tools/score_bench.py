@@ -233,7 +233,7 @@ def load_tracker_class(spec):
     except BenchError:
         raise
     except Exception as error:  # noqa: B902 - a user's module may raise anything on import
-        from ball_world.tools.score import describe_exception
+        from ball_world.tools.user_code import describe_exception
         raise BenchError(f'--tracker: importing {module_name} failed: '
                          f'{describe_exception(error)}') from None
     tracker_class = getattr(module, class_name, None)
@@ -246,7 +246,7 @@ def _new_tracker(tracker_class, spec):
     try:
         tracker = tracker_class()
     except Exception as error:  # noqa: B902 - user code
-        from ball_world.tools.score import describe_exception
+        from ball_world.tools.user_code import describe_exception
         raise BenchError(f'--tracker {spec}: making one failed: '
                          f'{describe_exception(error)}') from None
     if not callable(getattr(tracker, 'update', None)):
@@ -306,7 +306,7 @@ def run_scene(job):
         except FramesError:
             raise
         except Exception as error:  # noqa: B902 - a user's tracker may raise anything
-            from ball_world.tools.score import describe_exception
+            from ball_world.tools.user_code import describe_exception
             raise BenchError(f'{spec or EXAMPLE} failed on {scene.label}: '
                              f'{describe_exception(error)}') from None
         score = figures.score_tracks(frames, gate)
@@ -328,10 +328,8 @@ def available_cores():
 
 
 def run(args):
-    """The report of a benchmark (a dict; BenchError when it cannot run)."""
-    if args.scenes is not None:
-        from ball_world.tools import score_scenes
-        return score_scenes.score_directory(args)
+    """The report of a benchmark of simulated scenes (a dict; BenchError when it cannot
+    run)."""
     duration = 30.0 if args.duration is None else args.duration
     if args.seeds is not None:
         scenes = seed_scenes(args.seed_range, duration)

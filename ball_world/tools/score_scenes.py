@@ -308,7 +308,7 @@ def scene_directories(path):
 def _score_scene(job):
     position, label, world, tracks, agent, topic, gate, tolerance = job
     from ball_world.recording.mcap_reader import RecordingError
-    from ball_world.tools.score import score_files, ScoreError
+    from ball_world.tools.score_one import score_files, ScoreError
     from ball_world.tools.score_frames import FramesError
     from ball_world.tools.score_tracks import TracksError
     try:
