@@ -207,10 +207,11 @@ def _stop(process, seconds=10.0):
 
 def record_scene(recorder, args, seed, directory):
     """Record one scene into `directory` (made here)."""
+    from ball_world.recording.files import claim_output
     os.mkdir(directory)
     steps = max(1, round(args.duration * 60.0))
     world_path = os.path.join(directory, 'world.mcap')
-    log = open(os.path.join(directory, 'processes.log'), 'wb')
+    log = claim_output(os.path.join(directory, 'processes.log')).writer()
     world_command = [shutil.which('ball_world') or os.path.join(
         os.path.dirname(sys.executable), 'ball_world'), '--ros-args',
         '-p', f'random.seed:={seed}', '-p', f"agents:=['{args.agent}']",
@@ -256,8 +257,25 @@ def record_scene(recorder, args, seed, directory):
         log.close()
 
 
-def main(argv=None):
+def _write_description(args):
+    """DIR/scenes.yaml: which agent and topic the scenes hold, for the scoring (replaced
+    whole, never written through a symlink: recording.files.PartialOutput)."""
     import yaml
+    from ball_world.recording.files import PartialOutput
+    text = yaml.safe_dump({'agent': args.agent, 'tracks_topic': args.tracks_topic,
+                           'duration': args.duration, 'cmd_vel': list(args.cmd_vel),
+                           'tracker': ' '.join(args.tracker)})
+    output = PartialOutput(os.path.join(args.out, SCENES_FILE), overwrite=True)
+    try:
+        with output.claim.writer() as stream:
+            stream.write(text.encode('utf-8'))
+        output.commit()
+    except BaseException:
+        output.discard()
+        raise
+
+
+def main(argv=None):
     args = parse_args(sys.argv[1:] if argv is None else argv)
     try:
         os.makedirs(args.out, exist_ok=True)
@@ -270,11 +288,7 @@ def main(argv=None):
         print(f'{PROG}: {getattr(error, "strerror", None) or error}', file=sys.stderr)
         return 1
     try:
-        scenes_file = os.path.join(args.out, SCENES_FILE)
-        with open(scenes_file, 'w', encoding='utf-8') as stream:
-            yaml.safe_dump({'agent': args.agent, 'tracks_topic': args.tracks_topic,
-                            'duration': args.duration, 'cmd_vel': list(args.cmd_vel),
-                            'tracker': ' '.join(args.tracker)}, stream)
+        _write_description(args)
         for seed in args.seed_range:
             count = record_scene(recorder, args, seed, os.path.join(args.out, f'seed_{seed}'))
             print(f'{PROG}: seed {seed}: {count} track messages', flush=True)
