@@ -125,7 +125,16 @@ def test_scenes_recorded_with_a_tracker_node_score_as_a_benchmark(tmp_path, caps
     assert 'seed 4:' in out and (out_dir / 'seed_4' / 'tracks.mcap').is_file()
     code, report, err = bench(capsys, '--scenes', out_dir, '--jobs', '1')
     assert code == 0, err
-    assert report['scenes'] == 1 and report['summary']['HOTA']['mean'] > 0.4
+    # Each scene scores as its two files do (a live tracker on a loaded machine may skip
+    # scans, so the figures themselves vary from run to run); every message the example
+    # node published carried its scan's stamp.
+    assert report['scenes'] == 1 and report['stamp_notes'] == []
+    assert report['pooled']['CLR_TP'] > 0
+    scene = out_dir / 'seed_4'
+    code, single, err = bench(capsys, scene / 'world.mcap', '--tracks', scene / 'tracks.mcap',
+                              '/ball_0/tracks')
+    assert code == 0, err
+    assert single['figures'] == report['pooled']
     # The same seeds again into the same directory: refused, nothing overwritten.
     code, _, err = run_tool('ball_world_score_scenes', '--seeds', '4:5', '--out', out_dir,
                             '--tracks-topic', '/ball_0/tracks', '--', 'true')
