@@ -44,6 +44,7 @@ setup(
             'ball_world_cli = ball_world.tools.cli:main',
             'ball_world_tracker = ball_world.tools.tracker:main',
             'ball_world_score = ball_world.tools.score:main',
+            'ball_world_score_scenes = ball_world.tools.score_scenes:main',
         ],
     },
 )

@@ -13,8 +13,9 @@ import pytest
 from ball_world.core import lidar
 from ball_world.core.scenario import arena_walls
 from ball_world.core.world import World
+from ball_world.scoring.figures import score_tracks
+from ball_world.scoring.frames import Frame
 from ball_world.tools import tracker
-from ball_world.tools.score import clear_mot
 
 FAN = lidar.Fan(-math.pi, 2.0 * math.pi / 360, 360, 0.35, 12.0, 0.01)
 GEOMETRY = tracker.ScanGeometry(FAN.angle_min, FAN.angle_increment, FAN.range_min,
@@ -58,6 +59,45 @@ def test_detect_finds_each_ball_and_no_wall(scanner):
     assert len(found) == 3
     for centre in balls:
         assert np.min(np.hypot(*(found - centre).T)) < 0.02
+
+
+def test_few_points_give_the_circle_of_the_mean_radius_through_them():
+    # Two points 0.2 apart, radius 0.2 (the mean of the bounds): the centre lies beyond
+    # them at sqrt(0.2^2 - 0.1^2) from their middle.
+    centre, radius, rms = tracker.fit_circle([[3.0, -0.1], [3.0, 0.1]], 0.1, 0.3)
+    assert radius == 0.2 and rms == 0.0
+    assert centre == pytest.approx([3.0 + math.sqrt(0.03), 0.0])
+    # Further apart than a diameter: centred between them, each 0.05 from the circle.
+    centre, radius, rms = tracker.fit_circle([[3.0, -0.25], [3.0, 0.25]], 0.1, 0.3)
+    assert centre == pytest.approx([3.0, 0.0]) and rms == pytest.approx(0.05)
+    # Three points on a circle of radius 0.25: that circle.
+    angles = (2.9, 3.1, 3.3)
+    points = [[4.0 + 0.25 * math.cos(a), 1.0 + 0.25 * math.sin(a)] for a in angles]
+    centre, radius, rms = tracker.fit_circle(points, 0.1, 0.3)
+    assert centre == pytest.approx([4.0, 1.0]) and radius == pytest.approx(0.25)
+
+
+def test_points_on_a_flat_surface_do_not_fit_a_ball():
+    # Seven points on a line (a wall) and on a circle of radius 2: no circle of radius
+    # 0.1-0.3 fits them.
+    line = np.column_stack((np.full(7, 4.0), np.linspace(-0.3, 0.3, 7)))
+    angles = np.linspace(2.95, 3.35, 7)
+    arc = np.column_stack((6.0 + 2.0 * np.cos(angles), 2.0 * np.sin(angles)))
+    for points in (line, arc):
+        _, radius, rms = tracker.fit_circle(points, 0.1, 0.3)
+        assert 0.1 <= radius <= 0.3 and rms > tracker.MAX_RMS
+
+
+def test_the_scan_tracker_takes_a_scan_and_a_pose():
+    balls = np.array([[3.0, 7.0], [7.5, 7.5]])
+    radii = np.array([0.3, 0.2])
+    ranges = lidar.scan(balls, radii, BOX, (5.0, 5.0), 0.5, FAN._replace(noise_stddev=0.0))
+    scan = tracker.Scan(0, 'ball_0/base_link', FAN.angle_min, FAN.angle_increment,
+                        FAN.range_min, FAN.range_max, ranges.astype(np.float32))
+    rows = tracker.ScanTracker().update(scan, (5.0, 5.0, 0.5))
+    assert sorted(row[0] for row in rows) == [0, 1]
+    for centre in balls:
+        assert min(math.dist(centre, row[1:3]) for row in rows) < 0.02
 
 
 def test_kalman_track_learns_a_constant_velocity():
@@ -110,7 +150,8 @@ def gas(seed, n=20):
 
 
 def tracked_run(seed, track=None, scans=40, steps_per_scan=10, dt=0.01):
-    """Frames (truth, tracks) of a scanner riding on ball 0 and turning at 0.3 rad/s."""
+    """Frames (every ball, visible or not, and the tracks) of a scanner riding on ball 0 and
+    turning at 0.3 rad/s."""
     world = gas(seed)
     scanner = lidar.Scanner(FAN, 'numpy', seed=seed, name='ball_0')
     track = track or tracker.Tracker()
@@ -124,8 +165,11 @@ def tracked_run(seed, track=None, scans=40, steps_per_scan=10, dt=0.01):
         found = tracker.to_world(tracker.detect(ranges, GEOMETRY), *origin, yaw)
         tracks = track.update(t, found)
         seen = lidar.seen_balls(world.positions, world.radii, world.walls, origin, yaw, FAN, 0)
-        frames.append(({int(i): tuple(world.positions[i]) for i in seen},
-                       {row[0]: (row[1], row[2]) for row in tracks}))
+        visible = np.zeros(len(world), dtype=bool)
+        visible[seen] = True
+        frames.append(Frame(step, tuple(range(len(world))), world.positions.copy(), visible,
+                            tuple(row[0] for row in tracks),
+                            np.array([row[1:3] for row in tracks]).reshape(-1, 2)))
         for _ in range(steps_per_scan):
             world.step(dt)
     return frames
@@ -133,10 +177,11 @@ def tracked_run(seed, track=None, scans=40, steps_per_scan=10, dt=0.01):
 
 @pytest.mark.parametrize('seed', [0, 1])
 def test_tracks_follow_the_moving_balls(seed):
-    score = clear_mot(tracked_run(seed), gate=0.5)
-    assert score.truth > 300
-    assert score.mota > 0.7, score.lines()
-    assert score.motp < 0.06, score.lines()
+    score = score_tracks(tracked_run(seed), gate=0.5).figures()
+    assert score['CLR_TP'] + score['CLR_FN'] > 300
+    assert score['MOTA'] > 0.7, score
+    assert score['mean_distance_m'] < 0.06, score
+    assert score['HOTA'] > 0.6, score
 
 
 class Forgetful(tracker.Tracker):
@@ -156,10 +201,10 @@ class Shifted(tracker.Tracker):
 
 
 def test_broken_trackers_fail_the_bounds():
-    forgetful = clear_mot(tracked_run(0, Forgetful()), gate=0.5)
-    assert forgetful.mota < 0.3
-    shifted = clear_mot(tracked_run(0, Shifted()), gate=0.5)
-    assert shifted.motp > 0.08
+    forgetful = score_tracks(tracked_run(0, Forgetful()), gate=0.5).figures()
+    assert forgetful['MOTA'] < 0.3 and forgetful['AssA'] < 0.2
+    shifted = score_tracks(tracked_run(0, Shifted()), gate=0.5).figures()
+    assert shifted['mean_distance_m'] > 0.08
 
 
 def test_tracker_command_line_help_and_bad_parameters():

@@ -12,10 +12,11 @@ yours, on the same recording). Read it top to bottom. For each scan it does four
   3. puts the centres in the world frame with the scanner's pose from /tf (world ->
      <p><name>/odom -> <p><name>/base_link at the scan's stamp);
   4. updates one constant-velocity Kalman filter per track: predict every track to the
-     scan's time, pair tracks and detections nearest first within a gate (greedy: scipy,
-     which has the Hungarian method, is not a dependency; with balls further apart than
-     the gate the two agree), correct the paired tracks, start a track for each unpaired
-     detection, and drop tracks unseen for `max_misses` scans.
+     scan's time, pair tracks and detections nearest first within a gate (greedy, the
+     simplest rule: with balls further apart than the gate it agrees with the optimal
+     assignment; scipy.optimize.linear_sum_assignment is the next step up), correct the
+     paired tracks, start a track for each unpaired detection, and drop tracks unseen for
+     `max_misses` scans.
 
 It publishes `<name>/tracks` (visualization_msgs/MarkerArray in the world frame, one sphere
 per confirmed track, marker id = track id, so RViz and ball_world_score see the ids) and
@@ -27,9 +28,11 @@ missing each ball on the scans it needs to be confirmed.
 
     ros2 run ball_world ball_world_tracker --ros-args -p agent:=ball_0
 
-Everything above the node class is plain Python and numpy (no ROS): `Tracker` and
-`detect` are what the tests drive with synthetic scans, and what ball_world_score runs
-offline on recorded scans.
+Everything above the node class is plain Python and numpy (no ROS). `ScanTracker` is the
+whole tracker as one class, `update(scan, pose) -> rows (id, x, y, vx, vy)`: the node runs
+it on live scans, ball_world_score on recorded ones and on simulated scenes
+(`ball_world_score --seeds 0:100`), and a class of your own with the same method is scored
+the same way (`--tracker my_module:MyTracker`).
 """
 import math
 import sys
@@ -82,6 +85,12 @@ JUMP_FLOOR = 0.05
 FOREGROUND = 0.1
 #: A point this close (m) to the line of the two beyond it continues their surface.
 ON_LINE = 0.05
+#: A run whose end points are further apart than a ball's diameter plus this (m) is no
+#: ball: not fitted (a wall seen head-on makes runs of hundreds of beams).
+WIDER = 0.1
+#: A fit whose centre moves further than this many largest radii from its points is given
+#: up (a wall: its points want a circle far larger than a ball; it would not fit anyway).
+RUNAWAY = 3.0
 #: A circle fits when its rms distance to the points is below this (m): a few times the
 #: default noise of 0.01 m, far below the sag of a wall piece bent onto a ball's radius.
 MAX_RMS = 0.03
@@ -106,26 +115,25 @@ def clusters(ranges, scan):
     points = scan_points(ranges, scan)
     spacing = abs(scan.angle_increment)
     full_turn = n * spacing >= 2.0 * math.pi - 1e-9
-
-    def joined(a, b):
-        if not (valid[a] and valid[b]):
-            return False
-        reach = JUMP_FLOOR + JUMP_SPACINGS * spacing * min(ranges[a], ranges[b])
-        return math.dist(points[a], points[b]) <= reach
-
+    # joined[k]: beams k and k + 1 (the last and the first for k = n - 1) are one object.
+    following = np.roll(np.arange(n), -1)
+    reach = JUMP_FLOOR + JUMP_SPACINGS * spacing * np.minimum(
+        np.where(valid, ranges, 0.0), np.where(valid[following], ranges[following], 0.0))
+    gap = np.hypot(*(points[following] - points).T)
+    joined = valid & valid[following] & (gap <= reach)
     runs = []
     current = []
-    for k in range(n):
-        if valid[k] and current and joined(current[-1], k):
+    for k in np.flatnonzero(valid).tolist():
+        if current and current[-1] == k - 1 and joined[k - 1]:
             current.append(k)
         else:
             if current:
                 runs.append(current)
-            current = [k] if valid[k] else []
+            current = [k]
     if current:
         runs.append(current)
     if full_turn and len(runs) > 1 and runs[0][0] == 0 and runs[-1][-1] == n - 1 \
-            and joined(n - 1, 0):
+            and joined[n - 1]:
         runs[0] = runs.pop() + runs[0]
     return runs
 
@@ -134,53 +142,138 @@ def fit_circle(points, radius_min, radius_max):
     """Centre (x, y), radius and rms residual of the circle that best fits the points.
 
     Least squares on the distances to the circle (Gauss-Newton, radius kept within its
-    bounds), started from the centroid pushed one mean radius away from the scanner (the
+    bounds: points that want a much larger circle, a wall, send the centre away and do not
+    fit), started from the centroid pushed one mean radius away from the scanner (the
     visible side of a ball faces the scanner at the origin). Fewer than three points cannot
-    tell the radius: it is then the mean of the bounds.
+    tell the radius: it is then the mean of the bounds, and the circle has a closed form
+    (three points: the circle through them, when its radius is within the bounds). Plain
+    floats, not numpy: a ball shows a handful of beams, and for so few numbers the
+    loop below is several times faster than array calls.
     """
-    points = np.asarray(points, dtype=np.float64)
+    if isinstance(points, np.ndarray):
+        points = points.reshape(-1, 2).tolist()
+    n = len(points)
     radius = 0.5 * (radius_min + radius_max)
-    centroid = points.mean(axis=0)
-    away = centroid / max(np.hypot(*centroid), 1e-12)
-    centre = centroid + radius * away
-    fit_radius = len(points) >= 3
+    mx = sum(x for x, _ in points) / n
+    my = sum(y for _, y in points) / n
+    norm = max(math.hypot(mx, my), 1e-12)
+    away = (mx / norm, my / norm)
+    if n < 3:
+        return _circle_of_radius(points, radius, away)
+    cx, cy = mx + radius * away[0], my + radius * away[1]
+    if n == 3:  # three points: the circle through them, when its radius is plausible
+        circle = _circumcircle(points)
+        if circle is not None and radius_min <= circle[2] <= radius_max:
+            return np.array(circle[:2]), circle[2], 0.0
     for _ in range(20):
-        offset = points - centre
-        distance = np.maximum(np.hypot(offset[:, 0], offset[:, 1]), 1e-12)
-        residual = distance - radius
-        # d residual / d (cx, cy, r)
-        jacobian = np.column_stack((-offset[:, 0] / distance, -offset[:, 1] / distance,
-                                    -np.ones(len(points))))
-        if not fit_radius:
-            jacobian = jacobian[:, :2]
-        change = np.linalg.lstsq(jacobian, -residual, rcond=None)[0]
-        centre = centre + change[:2]
-        if fit_radius:
-            radius = min(max(radius + change[2], radius_min), radius_max)
-        if np.hypot(*change[:2]) < 1e-6:
+        step = _gauss_newton_step(points, cx, cy, radius)
+        if step is None:
             break
-    offset = points - centre
-    rms = math.sqrt(np.mean((np.hypot(offset[:, 0], offset[:, 1]) - radius) ** 2))
-    return centre, radius, rms
+        cx, cy = cx + step[0], cy + step[1]
+        radius = min(max(radius + step[2], radius_min), radius_max)
+        if math.hypot(step[0], step[1]) < 1e-6:
+            break
+        if math.hypot(cx - mx, cy - my) > RUNAWAY * radius_max:
+            break  # the centre runs off after a far larger circle: no ball, stop early
+    rms = math.sqrt(sum((math.hypot(x - cx, y - cy) - radius) ** 2 for x, y in points) / n)
+    return np.array([cx, cy]), radius, rms
+
+
+def _circumcircle(points):
+    """(cx, cy, r) of the circle through three points, None when they are in line."""
+    (ax, ay), (bx, by), (cx, cy) = points
+    d = 2.0 * (ax * (by - cy) + bx * (cy - ay) + cx * (ay - by))
+    if abs(d) < 1e-12:
+        return None
+    a2, b2, c2 = ax * ax + ay * ay, bx * bx + by * by, cx * cx + cy * cy
+    ux = (a2 * (by - cy) + b2 * (cy - ay) + c2 * (ay - by)) / d
+    uy = (a2 * (cx - bx) + b2 * (ax - cx) + c2 * (bx - ax)) / d
+    return ux, uy, math.hypot(ax - ux, ay - uy)
+
+
+def _circle_of_radius(points, radius, away):
+    """The least-squares circle of a given radius through one or two points: for two
+    closer than a diameter, the circle through both whose centre lies beyond them (seen
+    from the scanner); further apart, the one centred between them."""
+    if len(points) == 1:
+        (x, y), = points
+        return np.array([x + radius * away[0], y + radius * away[1]]), radius, 0.0
+    (x0, y0), (x1, y1) = points
+    mx, my = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    half = 0.5 * math.hypot(x1 - x0, y1 - y0)
+    if half == 0.0:
+        return np.array([mx + radius * away[0], my + radius * away[1]]), radius, 0.0
+    if half >= radius:
+        return np.array([mx, my]), radius, half - radius
+    nx, ny = -(y1 - y0) / (2.0 * half), (x1 - x0) / (2.0 * half)
+    if nx * mx + ny * my < 0.0:
+        nx, ny = -nx, -ny
+    depth = math.sqrt(radius * radius - half * half)
+    return np.array([mx + depth * nx, my + depth * ny]), radius, 0.0
+
+
+def _gauss_newton_step(points, cx, cy, radius):
+    """The Gauss-Newton step (dcx, dcy, dr) for the residuals d - r, from the normal
+    equations (the gradient of a residual is (-ux, -uy, -1), u the unit vector from the
+    centre to its point). When the radius cannot be told (a short arc: the system is
+    singular) the step moves the centre alone (dr = 0); None when even that cannot be
+    solved."""
+    sxx = sxy = syy = sx = sy = bx = by = b = 0.0
+    for x, y in points:
+        ox, oy = x - cx, y - cy
+        d = math.hypot(ox, oy) or 1e-12
+        ux, uy = ox / d, oy / d
+        r = d - radius
+        sxx += ux * ux
+        sxy += ux * uy
+        syy += uy * uy
+        sx += ux
+        sy += uy
+        bx += ux * r
+        by += uy * r
+        b += r
+    n = float(len(points))
+    # Cramer's rule on [[sxx, sxy, sx], [sxy, syy, sy], [sx, sy, n]] (dcx, dcy, dr) = (bx, by, b).
+    minors = (syy * n - sy * sy, sxy * n - sy * sx, sxy * sy - syy * sx)
+    det = sxx * minors[0] - sxy * minors[1] + sx * minors[2]
+    if abs(det) > 1e-9 * n:
+        dcx = (bx * minors[0] - sxy * (by * n - sy * b) + sx * (by * sy - syy * b)) / det
+        dcy = (sxx * (by * n - sy * b) - bx * minors[1] + sx * (sxy * b - by * sx)) / det
+        dr = (sxx * (syy * b - by * sy) - sxy * (sxy * b - by * sx)
+              + bx * minors[2]) / det
+        return dcx, dcy, dr
+    det2 = sxx * syy - sxy * sxy
+    if abs(det2) <= 1e-12 * n:
+        return None
+    return (bx * syy - sxy * by) / det2, (sxx * by - sxy * bx) / det2, 0.0
 
 
 def detect(ranges, scan, options=Options()):
     """Centres (K, 2) of the balls seen in one scan, in the scanner's frame."""
     ranges = np.asarray(ranges, dtype=np.float64)
-    points = scan_points(ranges, scan)
     valid = np.isfinite(ranges) & (ranges >= scan.range_min) & (ranges <= scan.range_max)
-    used = np.zeros(len(ranges), dtype=bool)
+    runs = clusters(ranges, scan)
+    # From here on one beam at a time: Python lists answer that far faster than arrays.
+    points = scan_points(ranges, scan).tolist()
+    valid = valid.tolist()
+    ranges = ranges.tolist()
+    used = [False] * len(ranges)
     found = []
     # Longest runs first: each may take in the beams beside it that graze the same ball.
-    for run in sorted(clusters(ranges, scan), key=len, reverse=True):
-        if used[run].any():
+    for run in sorted(runs, key=len, reverse=True):
+        if any(used[k] for k in run):
             continue
+        if math.dist(points[run[0]], points[run[-1]]) > 2.0 * options.radius_max + WIDER:
+            for k in run:
+                used[k] = True
+            continue  # wider than any ball: a piece of wall (or balls side by side)
         run, (centre, radius, rms) = _grown(run, points, valid, used, options)
-        used[run] = True
+        for k in run:
+            used[k] = True
         if not _in_front(ranges, points, run):
             continue  # a piece of wall, or of something behind others
         # The circle must fit, and lie behind its points (a ball shows its near side).
-        if rms <= MAX_RMS and np.hypot(*centre) > ranges[run].mean():
+        if rms <= MAX_RMS and math.hypot(*centre) > sum(ranges[k] for k in run) / len(run):
             found.append(centre)
     return np.array(found).reshape(-1, 2)
 
@@ -193,7 +286,7 @@ def _grown(run, points, valid, used, options):
     circle through the run still fits with them.
     """
     n = len(points)
-    fit = fit_circle(points[run], options.radius_min, options.radius_max)
+    fit = fit_circle([points[k] for k in run], options.radius_min, options.radius_max)
     for step in (-1, 1):
         for _ in range(2):
             edge = run[0] if step < 0 else run[-1]
@@ -202,7 +295,8 @@ def _grown(run, points, valid, used, options):
                     points[edge], points[beside]) > 2.0 * options.radius_max:
                 break
             grown = [beside] + run if step < 0 else run + [beside]
-            grown_fit = fit_circle(points[grown], options.radius_min, options.radius_max)
+            grown_fit = fit_circle([points[k] for k in grown], options.radius_min,
+                                   options.radius_max)
             if grown_fit[2] > MAX_RMS:
                 break
             run, fit = grown, grown_fit
@@ -232,18 +326,18 @@ def _in_front(ranges, points, run):
         if continues and len(run) < 3:
             return False
         behind = ranges[beside]
-        if not continues and (behind == np.inf or behind > ranges[edge] + FOREGROUND):
+        if not continues and (behind == math.inf or behind > ranges[edge] + FOREGROUND):
             front = True
     return front
 
 
 def _on_line(point, a, b):
     """Whether `point` lies within ON_LINE of the line through a and b."""
-    ab = b - a
-    length = math.hypot(*ab)
+    abx, aby = b[0] - a[0], b[1] - a[1]
+    length = math.hypot(abx, aby)
     if length == 0.0:
         return False
-    return abs(ab[0] * (point[1] - a[1]) - ab[1] * (point[0] - a[0])) / length < ON_LINE
+    return abs(abx * (point[1] - a[1]) - aby * (point[0] - a[0])) / length < ON_LINE
 
 
 def to_world(points, x, y, yaw):
@@ -328,6 +422,39 @@ class Tracker:
                 self.next_id += 1
         return [(track.id, *track.state) for track in self.tracks
                 if track.hits >= options.confirm and track.misses == 0]
+
+
+class Scan(NamedTuple):
+    """A laser scan as a tracker gets it: sensor_msgs/LaserScan's fields (ranges as the
+    message carries them, float32), stamp in integer nanoseconds."""
+
+    stamp_ns: int
+    frame_id: str
+    angle_min: float
+    angle_increment: float
+    range_min: float
+    range_max: float
+    ranges: np.ndarray
+
+
+class ScanTracker:
+    """The example tracker as ball_world_score runs any tracker: one `update(scan, pose)`
+    per scan, pose the scanner's (x, y, yaw) in the world frame at the scan's stamp (what
+    /tf gives), returning the tracks seen in that scan as rows (id, x, y, ...) in the world
+    frame. A tracker of your own with this interface is scored by
+    `ball_world_score --seeds 0:100 --tracker my_module:MyTracker` on many scenes; the node
+    below runs this one on live scans."""
+
+    def __init__(self, options=Options()):
+        self.options = options
+        self.tracker = Tracker(options)
+
+    def update(self, scan, pose):
+        geometry = ScanGeometry(scan.angle_min, scan.angle_increment, scan.range_min,
+                                scan.range_max)
+        centres = to_world(detect(np.asarray(scan.ranges, dtype=np.float64), geometry,
+                                  self.options), *pose)
+        return self.tracker.update(scan.stamp_ns * 1e-9, centres)
 
 
 def associate(predicted, detections, gate):
@@ -434,7 +561,7 @@ def _node_class():
             self.options = Options(float(radius[0]), float(radius[1]), numbers['gate'],
                                    numbers['meas_stddev'], numbers['accel_stddev'],
                                    int(numbers['confirm']), int(numbers['max_misses']))
-            self.tracker = Tracker(self.options)
+            self.tracker = ScanTracker(self.options)
             self.poses = Poses()
             self.waiting = []  # scans waiting for the transform at their stamp
             self.scan_frame = f'{prefix}{agent}/base_link'
@@ -482,21 +609,20 @@ def _node_class():
                         continue
                     return
                 self.waiting.pop(0)
-                scan = ScanGeometry(msg.angle_min, msg.angle_increment, msg.range_min,
-                                    msg.range_max)
-                centres = to_world(detect(np.array(msg.ranges, dtype=np.float64), scan,
-                                          self.options), *pose)
-                tracks = self.tracker.update(stamp[0] + 1e-9 * stamp[1], centres)
-                self.publish(msg.header.stamp, tracks)
+                scan = Scan(stamp[0] * 1_000_000_000 + stamp[1], msg.header.frame_id,
+                            msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max,
+                            np.array(msg.ranges, dtype=np.float32))
+                self.publish(msg.header.stamp, self.tracker.update(scan, pose))
 
         def publish(self, stamp, tracks):
             markers = self.MarkerArray()
-            clear = self.Marker()
-            clear.action = self.Marker.DELETEALL  # tracks that ended disappear
-            markers.markers.append(clear)
             poses = self.PoseArray()
             poses.header.stamp = stamp
             poses.header.frame_id = self.world_frame
+            clear = self.Marker()
+            clear.header = poses.header  # stamped too: an empty set of tracks is a result
+            clear.action = self.Marker.DELETEALL  # tracks that ended disappear
+            markers.markers.append(clear)
             for track_id, x, y, _, _ in tracks:
                 marker = self.Marker()
                 marker.header = poses.header
