@@ -82,9 +82,10 @@ import rerun.blueprint as rrb
 
 from ball_world.core.parameters import BY_NAME
 from ball_world.recording.rerun_agents import AGENTS, heading_arrows
+from ball_world.recording.rerun_labels import LabelPlacer
 from ball_world.recording.rerun_outlet import new_stream, Outlet, OutletFailed, parse_view
 from ball_world.recording.rerun_scale import padded, ruler
-from ball_world.scans import hit_points
+from ball_world.recording.rerun_scans import scan_layers, SCANS
 from ball_world.step_record import PACKAGE_NAME
 
 APPLICATION_ID = PACKAGE_NAME
@@ -98,9 +99,8 @@ TRAILS = 'arena/trails'
 LABELS = 'arena/labels'
 SCALE = 'arena/scale'
 SCALE_LABELS = 'arena/scale/labels'
-#: Each agent's latest scan, as its hit points in the arena: arena/scans/<name>.
-SCANS = 'arena/scans'
-SCAN_COLOR = (0, 200, 255)
+#: The simulated time and the real-time factor, as a line of text above the scene.
+CLOCK = 'arena/clock'
 ENERGY = 'plots/energy_change'
 COLLISIONS = 'plots/collisions'
 MOMENTUM = 'plots/momentum'
@@ -112,13 +112,16 @@ STEP = 'step'
 #: Labels are logged up to this many balls; beyond, they only clutter the view and would
 #: cost a second positions array per step.
 LABEL_LIMIT = 30
-#: A ball's label point lies this fraction of its radius below its bottom edge: the viewer
-#: draws the label's top a few pixels below the point, so the name sits just under the ball.
-LABEL_GAP = 0.1
 #: A line of label text is about this fraction of the scene's larger side in the fitted view:
 #: an impulse's label below the tail of its arrow goes a line further down, under the label
 #: of the ball it pushed.
 LABEL_LINE_FRACTION = 0.03
+#: Dark grey, for the clock line: over 4.5:1 on the light theme's label box and the dark one's.
+CLOCK_COLOR = (90, 90, 90)
+#: Room above the scene for the clock line, as a fraction of the view's larger side.
+CLOCK_FRACTION = 0.05
+#: A file's clock line is logged every this many simulated seconds (a view's every frame).
+FILE_CLOCK_SECONDS = 0.1
 
 #: A file's buffered steps are sent once this many are pending, or this many positions.
 MAX_PENDING_STEPS = 64
@@ -251,6 +254,13 @@ def scene_bounds(world):
     return (xmin - margin, ymin - margin, xmax + margin, ymax + margin)
 
 
+def view_bounds(world):
+    """The arena view's bounds: the scene, room for the ruler's labels at the bottom and
+    the left (rerun_scale.padded), and a line for the clock at the top."""
+    xmin, ymin, xmax, ymax = padded(scene_bounds(world))
+    return (xmin, ymin, xmax, ymax + CLOCK_FRACTION * max(xmax - xmin, ymax - ymin))
+
+
 def expected_real_time_factor(parameters):
     """The real-time factor the run's rate aims at (rate_hz x dt), or None when it runs as
     fast as it can (rate_hz 0): then no scale fits in advance."""
@@ -277,8 +287,9 @@ def blueprint(world, parameters=None, plot_seconds=None):
     the plots show only that much simulated time up to the time shown (a live view: what a
     viewer draws each frame stays bounded however long the run), else the whole run.
     """
-    # With room at the bottom and the left for the ruler's labels (rerun_scale).
-    xmin, ymin, xmax, ymax = (float(v) for v in padded(scene_bounds(world)))
+    # With room at the bottom and the left for the ruler's labels (rerun_scale), and at the
+    # top for the clock.
+    xmin, ymin, xmax, ymax = (float(v) for v in view_bounds(world))
     arena = rrb.Spatial2DView(
         origin='/', contents=f'/{ARENA}/**', name='arena (+y up)',
         visual_bounds=rrb.VisualBounds2D(x_range=[xmin, xmax], y_range=[-ymax, -ymin]))
@@ -422,6 +433,9 @@ class _Segment:
         # Arrow heads stay this far inside the scene's bounds (the view's edges).
         inset = ARROW_INSET_FRACTION * self.span
         self.inside = (xmin + inset, ymin + inset, xmax - inset, ymax - inset)
+        self.view = view_bounds(world)
+        # The clock line hangs below this point, centred, in the room above the scene.
+        self.clock_point = (0.5 * (xmin + xmax), self.view[3])
 
 
 class RerunSink:
@@ -437,11 +451,14 @@ class RerunSink:
     when one destination fails while another goes on (when the last one fails, the sink
     raises instead, so its owner drops it and says so). file_process: the file is written
     by a child process (rerun_process), which keeps the SDK's per-chunk index of a long
-    recording out of this process's memory.
+    recording out of this process's memory. view_recording_id: the view's recording id
+    (other programs may draw into the same recording); None: derived from the parameters,
+    the file's.
     """
 
     def __init__(self, path=None, every=1, view=None, velocities=False, trail_seconds=0.0,
-                 clock=None, report=None, view_fps=VIEW_FPS, file_process=False):
+                 clock=None, report=None, view_fps=VIEW_FPS, file_process=False,
+                 view_recording_id=None):
         if isinstance(every, bool) or not isinstance(every, int) or every < 1:
             raise ValueError(f'every must be a whole number >= 1, got {every!r}')
         if not (isinstance(trail_seconds, (int, float)) and 0.0 <= trail_seconds < math.inf):
@@ -468,6 +485,7 @@ class RerunSink:
         if view is not None:
             self._feeds.append(_Feed(lambda stream, plan: Outlet.view(view, stream, plan),
                                      frame_period=1.0 / view_fps,
+                                     recording_id=view_recording_id,
                                      frame_clock=clock or time.monotonic, **layers))
         self._closed = False
 
@@ -533,8 +551,10 @@ class _Feed:
     """
 
     def __init__(self, open_outlet, every=1, velocities=False, trail_seconds=0.0, clock=None,
-                 frame_period=None, frame_clock=None, stream_factory=new_stream):
+                 frame_period=None, frame_clock=None, stream_factory=new_stream,
+                 recording_id=None):
         self._open_outlet = open_outlet
+        self._recording_id = recording_id  # None: derived from the run's parameters
         self._new_stream = stream_factory
         self.every = every
         self.velocities = velocities
@@ -555,10 +575,14 @@ class _Feed:
         self._totals = np.zeros(2, dtype=np.int64)  # collisions since step 0 of the segment
         self._energy0 = None
         self._shown_names = None
-        self._label_drop = None  # (n, 2) float32 from each ball to its label, if shown
+        self._labels = None  # the segment's LabelPlacer
+        self._label_colors = None  # (n, 3) uint8: each ball's colour, for its label
+        self._labelled = False  # every ball is named (else only the agents)
         # A live view's labels are arrows of length 0 in the balls' row, unless the row's
         # arrows are the velocities (_log_balls).
         self._labels_in_row = self.live and not velocities
+        self._scans = {}  # agent name -> (scan, x, y, yaw): a view's scans for the next frame
+        self._clock_due = None  # a file's next clock line, log ns
         self._impulses = []  # (expires log ns, origin, vector, label, label point) on screen
         #                      or due
         self._impulses_changed = False
@@ -574,6 +598,9 @@ class _Feed:
             self._finish_segment()
             self._segment_base = self._last_global + 1
         self._segment = _Segment(world)
+        self._labels = LabelPlacer(self._segment.view)
+        self._scans = {}
+        self._clock_due = None
         self._totals[:] = 0
         self._energy0 = None
         self._shown_names = None
@@ -615,19 +642,22 @@ class _Feed:
             # Step 0 is the initial state, written when the world is built, not a step: the
             # pause before the first step (the node starting up) is no slowness.
             rtf = self._rtf.add(record.log_time_ns) if record.step else None
-        if record.impulses:
+        pushed = any(not getattr(impulse, 'drive', False) for impulse in record.impulses)
+        if pushed:
             self._add_impulses(record)
+        agents = getattr(record, 'agents', None)
+        if agents is not None and agents.scans:
+            self._take_scans(record, agents)
         if self.live:
             logged = self._frame_due(record)
         else:
-            logged = record.step % self.every == 0 or record.impulses or record.edits
+            logged = record.step % self.every == 0 or pushed or record.edits
         if logged:
             self._log(record, rtf)
         else:
             self._unlogged = (record, rtf)
-        agents = getattr(record, 'agents', None)
-        if agents is not None and agents.scans:
-            self._log_scans(record, agents, self._segment_base + record.step)
+        if self._scans and not self.live:
+            self._log_scans(self._segment_base + record.step, record.log_time_ns)
 
     def flush(self):
         if self._opened and not self._closed:
@@ -655,7 +685,7 @@ class _Feed:
         self._opened = True
         plan = None if world is None else blueprint(
             world, parameters, VIEW_PLOT_SECONDS if self.live else None)
-        stream = self._new_stream(APPLICATION_ID, recording_id(parameters),
+        stream = self._new_stream(APPLICATION_ID, self._recording_id or recording_id(parameters),
                                   VIEW_FLUSH_SECONDS if self.live else None)
         self.outlet = self._open_outlet(stream, plan)
         self._emit('log', ARENA, rr.Transform3D(
@@ -715,8 +745,14 @@ class _Feed:
         if self.live:
             self._log_frame(record, rtf, step)
             self._show_impulses(step, record.log_time_ns)
+            if self._scans:
+                self._log_scans(step, record.log_time_ns)
             return
         self._buffer(record, rtf, step)
+        if self._clock_due is None or record.log_time_ns >= self._clock_due:
+            self._clock_due = record.log_time_ns + round(FILE_CLOCK_SECONDS * 1e9)
+            self._set_time(step, record.log_time_ns)
+            self._log_clock(record, rtf)
         self._show_impulses(step, record.log_time_ns)
         if self.trail_seconds:
             self._log_trails(record, names, step)
@@ -731,11 +767,31 @@ class _Feed:
         self._buffer_plots(
             record, rtf, step, positions,
             np.asarray(record.velocities, dtype=np.float32) if self.velocities else None,
-            self._label_points(positions))
+            self._label_layer(record))
 
-    def _label_points(self, positions):
-        """Where the balls' labels go (under each ball), or None when none are shown."""
-        return None if self._label_drop is None else positions - self._label_drop
+    def _label_layer(self, record):
+        """The names shown at this step: (points (k, 2) float32, texts, colours (k, 3)), placed
+        so that none collides with another or lies on a ball (rerun_labels); None when no
+        ball is named (more than LABEL_LIMIT balls and no agents)."""
+        agents = getattr(record, 'agents', None)
+        first = () if agents is None else agents.indices
+        if not self._labelled and not len(first):
+            return None
+        names = self._shown_names
+        radii = getattr(record, 'radii', None)
+        if radii is None:
+            segment = self._segment
+            radii = [segment.radius.get(name, segment.smallest) for name in names]
+        if self._labelled:
+            kept, points = self._labels.place(record.positions, radii, names, first)
+        else:  # only the agents
+            rows = np.asarray(first, dtype=np.int64)
+            kept, points = self._labels.place(np.asarray(record.positions)[rows],
+                                              np.asarray(radii)[rows],
+                                              [names[i] for i in rows])
+            kept = rows[kept].tolist()
+        return (points.astype(np.float32), [names[i] for i in kept],
+                self._label_colors[kept].reshape(-1, 3))
 
     def _buffer_plots(self, record, rtf, step, positions=None, velocities=None, labels=None):
         """The step's row (with its balls for a file; a view sends those in frames), added in
@@ -764,12 +820,18 @@ class _Feed:
             frame.append(rr.Arrows2D.from_fields(
                 origins=positions, vectors=np.asarray(record.velocities, dtype=np.float32)
                 * np.float32(VELOCITY_SECONDS)))
-        labels = self._label_points(positions)
-        if labels is not None and self._labels_in_row:
-            frame.append(rr.Arrows2D.from_fields(origins=labels))
+        labels = self._label_layer(record)
+        if labels is not None:
+            points, texts, colors = labels
+            if self._labels_in_row:
+                frame.append(rr.Arrows2D.from_fields(
+                    origins=points, vectors=np.zeros_like(points), labels=texts,
+                    colors=colors))
+            else:
+                self._emit('log', LABELS, rr.Points2D.from_fields(
+                    positions=points, labels=texts, colors=colors))
         self._emit('log', BALLS, *frame)
-        if labels is not None and not self._labels_in_row:
-            self._emit('log', LABELS, rr.Points2D.from_fields(positions=labels))
+        self._log_clock(record, rtf)
         self._buffer_plots(record, rtf, step)
         now = self._frame_clock()
         if self._plots_sent is None or now - self._plots_sent >= VIEW_PLOT_PERIOD:
@@ -777,13 +839,14 @@ class _Feed:
             self._send()
 
     def _log_balls(self, record, names, step):
-        """Radii, colours and labels of the balls as they are now, in pose order.
+        """Radii and colours of the balls as they are now, in pose order, and how their
+        labels look.
 
-        The labels go under the balls, LABEL_GAP radii below each, up to LABEL_LIMIT balls,
-        placed by each step's positions (_label_points). In a file they are an entity of
-        their own (LABELS). A live view without velocities gets them in the balls' own row,
-        as arrows of length 0 (drawn as nothing but their labels), so no viewer draws names
-        of one moment under balls of another, and a frame stays one message.
+        The labels themselves (which names, where) are placed at every logged step
+        (_label_layer). In a file they are an entity of their own (LABELS). A live view
+        without velocities gets them in the balls' own row, as arrows of length 0 (drawn as
+        nothing but their labels), so no viewer draws names of one moment under balls of
+        another, and a frame stays one message.
         """
         segment = self._segment
         radii = getattr(record, 'radii', None)
@@ -794,7 +857,8 @@ class _Feed:
         self._set_time(step, record.log_time_ns)
         colors = np.array([ball_color(name) for name in names], dtype=np.uint8).reshape(-1, 3)
         radii = np.asarray(radii, dtype=np.float32).reshape(-1)
-        labelled = len(names) <= LABEL_LIMIT
+        self._label_colors = colors
+        self._labelled = len(names) <= LABEL_LIMIT
         looks = [rr.Points2D.from_fields(radii=radii, colors=colors, draw_order=30.0)]
         if self.live and self.trail_seconds:
             looks.append(rr.LineStrips2D.from_fields(
@@ -802,37 +866,36 @@ class _Feed:
         if self.live and self.velocities:
             looks.append(rr.Arrows2D.from_fields(colors=colors, draw_order=35.0))
         if self._labels_in_row:
-            looks.append(rr.Arrows2D.from_fields(
-                vectors=np.zeros((len(names), 2), dtype=np.float32), radii=0.0, colors=colors,
-                labels=list(names), show_labels=True) if labelled else rr.Arrows2D.cleared())
+            looks.append(rr.Arrows2D.from_fields(radii=0.0, show_labels=True))
         self._emit('log', BALLS, *looks, static=self.live)
         if not self._labels_in_row:
-            self._log_labels(names, colors, labelled)
-        if labelled:
-            self._label_drop = np.zeros((len(names), 2), dtype=np.float32)
-            self._label_drop[:, 1] = radii * np.float32(1.0 + LABEL_GAP)
-        else:
-            self._label_drop = None
+            self._emit('log', LABELS, rr.Points2D.from_fields(radii=0.0, show_labels=True),
+                       static=self.live)
 
-    def _log_labels(self, names, colors, labelled):
-        """The labels' names and colours (LABELS); when there are too many balls, no more
-        label points (an empty set hides the last ones)."""
-        if labelled:
-            self._emit('log', LABELS, rr.Points2D.from_fields(
-                radii=0.0, colors=colors, labels=list(names), show_labels=True),
-                static=self.live)
-        elif self._label_drop is not None:
-            self._emit('log', LABELS, rr.Points2D.from_fields(
-                positions=np.zeros((0, 2), dtype=np.float32)))
+    def _log_clock(self, record, rtf):
+        """The simulated time and the real-time factor, as a line of text above the scene
+        (the real-time factor also has its plot; this says it at a glance)."""
+        text = f'simulated time {record.stamp_ns * 1e-9:.1f} s'
+        if rtf is not None and math.isfinite(rtf):
+            text += f', real-time factor {rtf:.2f}'
+        self._emit('log', CLOCK, rr.Points2D(
+            [self._segment.clock_point], radii=0.0, labels=[text], show_labels=True,
+            colors=CLOCK_COLOR))
 
     def _add_impulses(self, record):
-        """Put the step's impulses on screen for IMPULSE_SECONDS from the step on."""
+        """Put the step's pushes on screen for IMPULSE_SECONDS from the step on.
+
+        An agent's drive (its cmd_vel, turned into an impulse every step it accelerates) is
+        not a push: its heading arrow and its trail show what it does.
+        """
         names = names_of(record)
         masses = getattr(record, 'masses', None)
         radii = getattr(record, 'radii', None)
         index_of = None
         now = record.log_time_ns
         for impulse in record.impulses:
+            if getattr(impulse, 'drive', False):
+                continue
             ball = impulse.ball  # its index when it was applied
             if record.edits:  # a later edit of the step may have moved or deleted the ball
                 if index_of is None:
@@ -860,7 +923,7 @@ class _Feed:
         tip = (origin[0] + vector[0], origin[1] + vector[1])
         if tip[1] < origin[1]:
             return (tip[0], tip[1] - gap)
-        below_ball = radius * (1.0 + LABEL_GAP) + LABEL_LINE_FRACTION * self._segment.span
+        below_ball = radius + 1.5 * LABEL_LINE_FRACTION * self._segment.span
         return (origin[0], origin[1] - max(gap, below_ball))
 
     def _show_impulses(self, step, now):
@@ -883,17 +946,23 @@ class _Feed:
             colors=IMPULSE_COLOR)
         self._emit('log', IMPULSES, arrows, labels)
 
-    def _log_scans(self, record, agents, step):
-        """Each scan's hit points (finite ranges, noise included) where they fall in the arena."""
-        self._set_time(step, record.log_time_ns)
+    def _take_scans(self, record, agents):
+        """Keep the step's scans, with where each was taken from, until they are logged."""
         rows = dict(zip(agents.names, zip(agents.indices, agents.yaws)))
         for scan in agents.scans:
             index, yaw = rows[scan.name]
             x, y = record.positions[index]
-            points = hit_points(scan, float(x), float(y), float(yaw))
-            self._emit('log', f'{SCANS}/{scan.name}', rr.Points2D(
-                points.astype(np.float32), radii=rr.Radius.ui_points(2.0), colors=SCAN_COLOR,
-                draw_order=35.0))
+            self._scans[scan.name] = (scan, float(x), float(y), float(yaw))
+
+    def _log_scans(self, step, log_time_ns):
+        """Each kept scan as a fan of rays from its robot and its hit points (rerun_scans).
+
+        A file gets every scan at its step; a view the latest of each agent at its frames.
+        """
+        self._set_time(step, log_time_ns)
+        for name, (scan, x, y, yaw) in self._scans.items():
+            self._emit('log', f'{SCANS}/{name}', *scan_layers(scan, x, y, yaw))
+        self._scans = {}
 
     def _arrow(self, origin, dvx, dvy):
         """The velocity change times ARROW_SECONDS, its length clamped to the scene's size,
@@ -949,12 +1018,20 @@ class _Feed:
                                    rr.components.Position2DBatch(positions), lengths=sizes),
                 rr.ComponentColumn(rr.Arrows2D.descriptor_vectors(),
                                    rr.components.Vector2DBatch(vectors), lengths=sizes)])
-        label_steps, label_times, label_points = labels
-        if label_points:
+        label_steps, label_times, label_layers = labels
+        if label_layers:
+            points, texts, colors = zip(*label_layers)
+            sizes = [len(p) for p in points]
             self._emit('send_columns', LABELS, self._index(label_steps, label_times), [
                 rr.ComponentColumn(rr.Points2D.descriptor_positions(),
-                                   rr.components.Position2DBatch(np.concatenate(label_points)),
-                                   lengths=[len(p) for p in label_points])])
+                                   rr.components.Position2DBatch(np.concatenate(points)),
+                                   lengths=sizes),
+                rr.ComponentColumn(rr.Points2D.descriptor_labels(),
+                                   rr.components.TextBatch([t for ts in texts for t in ts]),
+                                   lengths=sizes),
+                rr.ComponentColumn(rr.Points2D.descriptor_colors(),
+                                   rr.components.ColorBatch(np.concatenate(colors)),
+                                   lengths=sizes)])
         self._emit('send_columns', ENERGY, index, rr.Scalars.columns(
             scalars=np.array(energy, dtype=np.float64)))
         self._emit('send_columns', COLLISIONS, index, rr.Scalars.columns(
