@@ -77,7 +77,8 @@ def _node_class():
                 raise ValueError("parameter 'recording_id': give the world's view.recording_id")
             self.rr = rr
             self.stream = new_stream(APPLICATION_ID, recording)
-            self.stream.connect_grpc(view)
+            self.view = view
+            self.connected = False
             self.entity = f'{TRACKS}/{self.agent}'
             self.times = TrackTimes()
             self.create_subscription(MarkerArray, f'{self.agent}/tracks', self.on_tracks, 10)
@@ -94,6 +95,11 @@ def _node_class():
             spheres = [m for m in msg.markers if m.type == self.sphere]
             if not msg.markers:
                 return
+            if not self.connected:
+                # Only once tracks come, so after the world opened the recording with its
+                # layout: a viewer that met this stream first would lay the page out itself.
+                self.stream.connect_grpc(self.view)
+                self.connected = True
             stamp = msg.markers[-1].header.stamp
             self.stream.set_time(SIM_TIME, duration=np.timedelta64(
                 self.times(stamp.sec * 1_000_000_000 + stamp.nanosec), 'ns'))
@@ -106,8 +112,9 @@ def _node_class():
                 colors=TRACK_COLOR, draw_order=40.0))
 
         def close(self):
-            self.stream.flush(timeout_sec=2.0)
-            self.stream.disconnect()
+            if self.connected:
+                self.stream.flush(timeout_sec=2.0)
+                self.stream.disconnect()
 
     return ViewTracks
 
