@@ -578,6 +578,7 @@ class _Feed:
         self._labels = None  # the segment's LabelPlacer
         self._label_colors = None  # (n, 3) uint8: each ball's colour, for its label
         self._labelled = False  # every ball is named (else only the agents)
+        self._labels_shown = False  # names are on screen (their last set was not empty)
         # A live view's labels are arrows of length 0 in the balls' row, unless the row's
         # arrows are the velocities (_log_balls).
         self._labels_in_row = self.live and not velocities
@@ -776,7 +777,11 @@ class _Feed:
         agents = getattr(record, 'agents', None)
         first = () if agents is None else agents.indices
         if not self._labelled and not len(first):
-            return None
+            if not self._labels_shown:
+                return None
+            self._labels_shown = False  # an empty set hides the names shown last
+            return (np.zeros((0, 2), dtype=np.float32), [], np.zeros((0, 3), dtype=np.uint8))
+        self._labels_shown = True
         names = self._shown_names
         radii = getattr(record, 'radii', None)
         if radii is None:
@@ -865,10 +870,11 @@ class _Feed:
                 colors=colors, radii=rr.Radius.ui_points(1.0), draw_order=10.0))
         if self.live and self.velocities:
             looks.append(rr.Arrows2D.from_fields(colors=colors, draw_order=35.0))
-        if self._labels_in_row:
+        named = self._labelled or getattr(record, 'agents', None) is not None
+        if self._labels_in_row and named:
             looks.append(rr.Arrows2D.from_fields(radii=0.0, show_labels=True))
         self._emit('log', BALLS, *looks, static=self.live)
-        if not self._labels_in_row:
+        if not self._labels_in_row and named:
             self._emit('log', LABELS, rr.Points2D.from_fields(radii=0.0, show_labels=True),
                        static=self.live)
 
