@@ -26,7 +26,7 @@ PROG = 'ball_world_view_tracks'
 #: Where a tracker's tracks go in the view: under the arena's +y-up transform.
 TRACKS = 'arena/tracks'
 #: Dark green: no ball has it, over 4:1 on both viewer themes.
-TRACK_COLOR = (0, 130, 60)
+TRACK_COLOR = (0, 138, 64)
 #: Vertices of a track's ring.
 RING_VERTICES = 24
 

@@ -68,8 +68,9 @@ class Wander:
         angles = angle_min + angle_increment * np.arange(len(ranges))
         # REP 117: +inf sees nothing within range_max, -inf is closer than range_min.
         reach = np.where(np.isneginf(ranges), 0.0, ranges)
-        ahead = reach * np.cos(angles)  # end points in the robot's frame
-        beside = reach * np.sin(angles)
+        with np.errstate(invalid='ignore'):  # inf x 0: NaN, which compares as False
+            ahead = reach * np.cos(angles)  # end points in the robot's frame
+            beside = reach * np.sin(angles)
         # 1. Anything in the corridor ahead, or right at the robot's flanks?
         in_corridor = (ahead > 0.0) & (ahead < options.avoid_distance) \
             & (np.abs(beside) < options.half_width)
