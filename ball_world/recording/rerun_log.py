@@ -255,6 +255,14 @@ def scene_bounds(world):
     return (xmin - margin, ymin - margin, xmax + margin, ymax + margin)
 
 
+def clock_text(record, rtf):
+    """The clock line: simulated time, and the real-time factor where it is known."""
+    text = f'simulated time {record.stamp_ns * 1e-9:.1f} s'
+    if rtf is not None and math.isfinite(rtf):
+        text += f', real-time factor {rtf:.2f}'
+    return text
+
+
 def view_bounds(world):
     """The arena view's bounds: the scene, room for the ruler's labels at the bottom and
     the left (rerun_scale.padded), and a line for the clock at the top."""
@@ -585,6 +593,8 @@ class _Feed:
         self._labels_in_row = self.live and not velocities
         self._scans = {}  # agent name -> (scan, x, y, yaw): a view's scans for the next frame
         self._clock_due = None  # a file's next clock line, log ns
+        self._clock_rows = []  # a file's clock lines not sent yet: (step, log ns, text)
+        self._clock_looks = False  # a file's clock looks (colour, no radius) are logged
         self._impulses = []  # (expires log ns, origin, vector, label, label point) on screen
         #                      or due
         self._impulses_changed = False
@@ -752,9 +762,9 @@ class _Feed:
             return
         self._buffer(record, rtf, step)
         if self._clock_due is None or record.log_time_ns >= self._clock_due:
+            # Sent with the buffered columns (a writer gathers them into few chunks).
             self._clock_due = record.log_time_ns + round(FILE_CLOCK_SECONDS * 1e9)
-            self._set_time(step, record.log_time_ns)
-            self._log_clock(record, rtf)
+            self._clock_rows.append((step, record.log_time_ns, clock_text(record, rtf)))
         self._show_impulses(step, record.log_time_ns)
         if self.trail_seconds:
             self._log_trails(record, names, step)
@@ -880,14 +890,30 @@ class _Feed:
                        static=self.live)
 
     def _log_clock(self, record, rtf):
-        """The simulated time and the real-time factor, as a line of text above the scene
-        (the real-time factor also has its plot; this says it at a glance)."""
-        text = f'simulated time {record.stamp_ns * 1e-9:.1f} s'
-        if rtf is not None and math.isfinite(rtf):
-            text += f', real-time factor {rtf:.2f}'
+        """A view's clock line: the simulated time and the real-time factor, as a line of
+        text above the scene (the real-time factor also has its plot; this says it at a
+        glance)."""
         self._emit('log', CLOCK, rr.Points2D(
-            [self._segment.clock_point], radii=0.0, labels=[text], show_labels=True,
-            colors=CLOCK_COLOR))
+            [self._segment.clock_point], radii=0.0, labels=[clock_text(record, rtf)],
+            show_labels=True, colors=CLOCK_COLOR))
+
+    def _send_clock(self):
+        """A file's clock lines since the last send, as columns; its looks once."""
+        rows, self._clock_rows = self._clock_rows, []
+        if not rows:
+            return
+        steps, times, texts = zip(*rows)
+        if not self._clock_looks:
+            self._clock_looks = True
+            self._set_time(steps[0], times[0])
+            self._emit('log', CLOCK, rr.Points2D.from_fields(
+                radii=0.0, show_labels=True, colors=CLOCK_COLOR))
+        point = np.asarray([self._segment.clock_point], dtype=np.float32)
+        self._emit('send_columns', CLOCK, self._index(steps, times), [
+            rr.ComponentColumn(rr.Points2D.descriptor_positions(),
+                               rr.components.Position2DBatch(np.repeat(point, len(rows), 0))),
+            rr.ComponentColumn(rr.Points2D.descriptor_labels(),
+                               rr.components.TextBatch(list(texts)))])
 
     def _add_impulses(self, record):
         """Put the step's pushes on screen for IMPULSE_SECONDS from the step on.
@@ -1006,6 +1032,7 @@ class _Feed:
 
     def _send(self):
         """Send the buffered steps as one columnar chunk per entity."""
+        self._send_clock()
         pending = self._pending
         if not len(pending):
             return
