@@ -9,8 +9,9 @@ from test_rerun import read, shown_at
 
 from ball_world.core.lidar import hit_points
 from ball_world.recording.rerun_agents import AGENT_COLOR, AGENTS
-from ball_world.recording.rerun_log import (CLOCK, CLOCK_COLOR, IMPULSE_COLOR, IMPULSES,
-                                            RerunSink)
+from ball_world.recording.rerun_log import (CLOCK, CLOCK_COLOR, COLLISIONS,
+                                            COLLISIONS_HEADROOM, ENERGY, ENERGY_HEADROOM,
+                                            Headroom, IMPULSE_COLOR, IMPULSES, RerunSink)
 from ball_world.recording.rerun_scans import MAX_RAYS, SCANS
 from ball_world.simulation import Simulation
 from ball_world.tools.view_tracks import TRACK_COLOR
@@ -122,3 +123,35 @@ def test_label_text_keeps_the_most_one_colour_can_on_both_themes(color):
     assert best == pytest.approx(3.85, abs=0.01)
     for where, background in LABEL_BOXES.items():
         assert contrast(color, background) >= best - 0.2, where
+
+
+def test_plots_keep_room_above_and_below_their_data(robot_run):
+    """Rerun fits a plot's y axis to its data's exact extremes: the collisions' total ran
+    along the top edge. Invisible series just beyond the data make the axis hold it whole."""
+    _, records, content = robot_run
+    energy = content[(f'/{ENERGY}', 'Scalars:scalars')]
+    collisions = content[(f'/{COLLISIONS}', 'Scalars:scalars')]
+    energy_room = content[(f'/{ENERGY_HEADROOM}', 'Scalars:scalars')]
+    collisions_room = content[(f'/{COLLISIONS_HEADROOM}', 'Scalars:scalars')]
+    assert sorted(energy_room) == sorted(collisions_room) == sorted(energy)
+    assert max(abs(v) for (v,) in energy.values()) > 1.0  # the drives changed the energy
+    for step in energy:
+        seen = [v for k, (v,) in energy.items() if k <= step]
+        above, below = energy_room[step]
+        room = max(0.08 * (max(seen) - min(seen)), 0.5)
+        assert above == pytest.approx(max(seen) + room) and below == pytest.approx(
+            min(seen) - room)
+        most = max(max(row) for k, row in collisions.items() if k <= step)
+        assert collisions_room[step] == [pytest.approx(most * 1.08 + 1.0)]
+    # Drawn in no colour, at no width.
+    assert content[(f'/{ENERGY_HEADROOM}', 'SeriesLines:colors')][None] == [0, 0]
+    assert content[(f'/{COLLISIONS_HEADROOM}', 'SeriesLines:widths')][None] == [0.0]
+
+
+def test_a_views_headroom_follows_the_last_seconds_it_shows():
+    room = Headroom(window=30.0)
+    assert room.add(0, 10.0, 0.0) == (10.5, 9.5, 1.0)
+    assert room.add(10 * 10**9, 20.0, 5.0) == (20.8, 9.2, 6.4)
+    # 40 s later the first rows are out of the window.
+    assert room.add(40 * 10**9, 0.0, 5.0) == (21.6, -1.6, 6.4)
+    assert room.add(45 * 10**9, 0.0, 5.0) == (0.5, -0.5, 6.4)

@@ -85,7 +85,7 @@ from ball_world.recording.rerun_agents import AGENTS, heading_arrows
 from ball_world.recording.rerun_labels import LabelPlacer
 from ball_world.recording.rerun_outlet import new_stream, Outlet, OutletFailed, parse_view
 from ball_world.recording.rerun_scale import padded, ruler
-from ball_world.recording.rerun_scans import scan_layers, SCANS
+from ball_world.recording.rerun_scans import scan_layers, SCANS, VIEW_MAX_POINTS
 from ball_world.step_record import PACKAGE_NAME
 
 APPLICATION_ID = PACKAGE_NAME
@@ -104,6 +104,9 @@ CLOCK = 'arena/clock'
 ENERGY = 'plots/energy_change'
 COLLISIONS = 'plots/collisions'
 MOMENTUM = 'plots/momentum'
+#: Invisible series that keep room above and below a plot's data (see Headroom).
+ENERGY_HEADROOM = 'plots/energy_change/headroom'
+COLLISIONS_HEADROOM = 'plots/collisions/headroom'
 REAL_TIME_FACTOR = 'plots/real_time_factor'
 
 SIM_TIME = 'sim_time'
@@ -168,6 +171,11 @@ IMPULSE_COLOR = (225, 0, 130)
 
 #: A velocity arrow is the velocity times this many seconds.
 VELOCITY_SECONDS = 0.25
+
+#: Room kept above and below a plot's data, as a fraction of its range (Headroom); the energy
+#: change's at least this many percent.
+HEADROOM = 0.08
+ENERGY_HEADROOM_MIN = 0.5
 
 #: The real-time factor is measured over this much wall time (plus the step just before).
 RTF_WINDOW = 1.0
@@ -351,6 +359,43 @@ def energy_legend(energy0):
     if energy0 <= 0.0:
         return 'kinetic energy [J] (0 J at step 0)'
     return f'change from {energy0:.6g} J at step 0'
+
+
+class Headroom:
+    """Values just beyond a plot's data, for an invisible series that keeps them in view.
+
+    Rerun's time series view fits its y axis to the data's exact extremes, so a curve at
+    its highest (the collisions' total, always) ran along the plot's top edge, half cut off.
+    Invisible series a little above and below the data (HEADROOM of its range, the energy
+    change at least +-ENERGY_HEADROOM_MIN %) make the fitted axis hold it whole. Over the
+    last `window` s of log time (a view's plots show that much), else the whole segment.
+    """
+
+    def __init__(self, window=None):
+        self.window_ns = None if window is None else round(window * 1e9)
+        self.rows = deque()  # (log ns, energy, collisions)
+        self.extremes = None  # without a window: (energy low, high, collisions high)
+
+    def clear(self):
+        self.rows.clear()
+        self.extremes = None
+
+    def add(self, time_ns, energy, collisions):
+        """(energy above, energy below, collisions above) for a new row."""
+        if self.window_ns is None:
+            low, high, most = self.extremes or (energy, energy, collisions)
+            self.extremes = low, high, most = min(low, energy), max(high, energy), max(
+                most, collisions)
+        else:
+            rows = self.rows
+            rows.append((time_ns, energy, collisions))
+            while rows[0][0] < time_ns - self.window_ns:
+                rows.popleft()
+            energies = [row[1] for row in rows]
+            low, high = min(energies), max(energies)
+            most = max(row[2] for row in rows)
+        room = max(HEADROOM * (high - low), ENERGY_HEADROOM_MIN)
+        return high + room, low - room, most * (1.0 + HEADROOM) + 1.0
 
 
 class RealTimeFactor:
@@ -594,6 +639,8 @@ class _Feed:
         self._scans = {}  # agent name -> (scan, x, y, yaw): a view's scans for the next frame
         self._clock_due = None  # a file's next clock line, log ns
         self._clock_rows = []  # a file's clock lines not sent yet: (step, log ns, text)
+        self._headroom = Headroom(VIEW_PLOT_SECONDS if self.live else None)
+        self._headroom_rows = []  # (step, log ns, energy above, below, collisions above)
         self._clock_looks = False  # a file's clock looks (colour, no radius) are logged
         self._impulses = []  # (expires log ns, origin, vector, label, label point) on screen
         #                      or due
@@ -613,6 +660,7 @@ class _Feed:
         self._labels = LabelPlacer(self._segment.view)
         self._scans = {}
         self._clock_due = None
+        self._headroom.clear()
         self._totals[:] = 0
         self._energy0 = None
         self._shown_names = None
@@ -634,9 +682,11 @@ class _Feed:
         per segment like the walls: a reset may change the scene."""
         ticks, places, texts = ruler(scene_bounds(world))
         self._emit('log', SCALE, rr.LineStrips2D(
-            ticks, radii=rr.Radius.ui_points(1.0), colors=WALL_COLOR, draw_order=20.0))
+            ticks, radii=rr.Radius.ui_points(1.0), colors=WALL_COLOR, draw_order=20.0),
+            static=self.live)  # static for a view: a late page still has it
         self._emit('log', SCALE_LABELS, rr.Points2D(
-            places, radii=0.0, labels=texts, show_labels=True, colors=WALL_COLOR))
+            places, radii=0.0, labels=texts, show_labels=True, colors=WALL_COLOR),
+            static=self.live)
 
     def write_step(self, record):
         """Log the step if it is one to log; a file sends its buffer when it is full."""
@@ -710,6 +760,10 @@ class _Feed:
             names='real-time factor', colors=(180, 120, 230)), static=True)
         self._emit('log', MOMENTUM, rr.SeriesLines(
             names=['x', 'y'], colors=[(230, 80, 80), (80, 200, 90)]), static=True)
+        for entity, count in ((ENERGY_HEADROOM, 2), (COLLISIONS_HEADROOM, 1)):
+            self._emit('log', entity, rr.SeriesLines(
+                names=[' '] * count, colors=[(0, 0, 0, 0)] * count, widths=[0.0] * count),
+                static=True)
 
     def _emit(self, name, *args, **kwargs):
         """Queue an SDK call on the destination (a failure surfaces at flush)."""
@@ -811,10 +865,13 @@ class _Feed:
 
     def _buffer_plots(self, record, rtf, step, positions=None, velocities=None, labels=None):
         """The step's row (with its balls for a file; a view sends those in frames), added in
-        one operation (_Pending)."""
+        one operation (_Pending), and the plots' headroom."""
+        energy = energy_change(record.kinetic_energy, self._energy0)
+        self._headroom_rows.append((step, record.log_time_ns, *self._headroom.add(
+            record.log_time_ns, energy, float(self._totals.max(initial=0)))))
         self._pending.add((
             step, record.log_time_ns, positions, velocities, labels,
-            energy_change(record.kinetic_energy, self._energy0), self._totals.copy(),
+            energy, self._totals.copy(),
             np.asarray(record.momentum, dtype=np.float64),
             rtf if rtf is not None and math.isfinite(rtf) else None))
 
@@ -896,6 +953,17 @@ class _Feed:
         self._emit('log', CLOCK, rr.Points2D(
             [self._segment.clock_point], radii=0.0, labels=[clock_text(record, rtf)],
             show_labels=True, colors=CLOCK_COLOR))
+
+    def _send_headroom(self):
+        rows, self._headroom_rows = self._headroom_rows, []
+        if not rows:
+            return
+        steps, times, above, below, collisions = zip(*rows)
+        index = self._index(steps, times)
+        self._emit('send_columns', ENERGY_HEADROOM, index, rr.Scalars.columns(
+            scalars=np.column_stack((above, below)).astype(np.float64)))
+        self._emit('send_columns', COLLISIONS_HEADROOM, index, rr.Scalars.columns(
+            scalars=np.asarray(collisions, dtype=np.float64)))
 
     def _send_clock(self):
         """A file's clock lines since the last send, as columns; its looks once."""
@@ -994,7 +1062,8 @@ class _Feed:
         """
         self._set_time(step, log_time_ns)
         for name, (scan, x, y, yaw) in self._scans.items():
-            self._emit('log', f'{SCANS}/{name}', *scan_layers(scan, x, y, yaw))
+            self._emit('log', f'{SCANS}/{name}', *scan_layers(
+                scan, x, y, yaw, VIEW_MAX_POINTS if self.live else None))
         self._scans = {}
 
     def _arrow(self, origin, dvx, dvy):
@@ -1033,6 +1102,7 @@ class _Feed:
     def _send(self):
         """Send the buffered steps as one columnar chunk per entity."""
         self._send_clock()
+        self._send_headroom()
         pending = self._pending
         if not len(pending):
             return

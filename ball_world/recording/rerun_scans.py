@@ -18,14 +18,19 @@ RAY_ALPHA = 90
 #: At most this many rays per scan (every k-th beam; every hit point is drawn): 360 rays of
 #: two robots filled the arena, and cost a software-rendered web viewer its frame rate.
 MAX_RAYS = 72
+#: A live view's hit points per scan at most: a view is sent what it can show (two robots'
+#: full scans were 80% of what a view got, ten times a second).
+VIEW_MAX_POINTS = 180
 #: Under the balls (30) and the trails (10); the hit points over the balls.
 RAY_ORDER = 5.0
 HIT_ORDER = 35.0
 
 
-def scan_layers(scan, x, y, yaw):
-    """rr archetypes of one scan taken at (x, y) facing yaw: the rays and the hit points."""
-    hits = hit_points(scan, x, y, yaw).astype(np.float32)
+def scan_layers(scan, x, y, yaw, max_points=None):
+    """rr archetypes of one scan taken at (x, y) facing yaw: the rays and the hit points
+    (every return, or of every k-th beam so that at most max_points are drawn)."""
+    every = 1 if max_points is None else max(1, -(-len(scan.ranges) // max_points))
+    hits = hit_points(_every(scan, every), x, y, yaw).astype(np.float32)
     every = max(1, -(-len(scan.ranges) // MAX_RAYS))
     ends = hit_points(_every(scan, every), x, y, yaw).astype(np.float32)
     rays = np.empty((len(ends), 2, 2), dtype=np.float32)
