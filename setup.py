@@ -16,6 +16,10 @@ setup(
         ('share/' + package_name + '/config', glob('config/*.yaml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/rviz', glob('rviz/*.rviz')),
+        # Worlds to start from and the two nav2 maps they use (Apache-2.0, see maps/README.md).
+        ('share/' + package_name + '/worlds', glob('worlds/*.yaml')),
+        ('share/' + package_name + '/maps', glob('maps/*.yaml') + glob('maps/*.pgm')
+         + ['maps/README.md']),
     ],
     install_requires=['setuptools', 'numpy'],
     zip_safe=True,

@@ -3,6 +3,9 @@
 The node is a thin ROS shell around a Simulation; re-simulation and tests drive the same
 class directly. Keeping the clock, the order of impulses and edits and the record layout
 here is what makes a live run and its re-simulation bit-identical.
+
+A world with a map is built from the map's bytes (core.occupancy_map), read from its files
+once (map_files) or taken from a recording: every reset of a run uses the same map.
 """
 from collections import deque
 from dataclasses import dataclass
@@ -13,22 +16,27 @@ import numpy as np
 
 from ball_world import __version__
 from ball_world.core import limits
-from ball_world.core.agents import agent_names, Agents, CommandRejected, frames, Limits
+from ball_world.core import odometry
+from ball_world.core.agents import (agent_names, Agents, CommandRejected, frame_clash,
+                                    frames, Limits)
 from ball_world.core.edits import (check_placement, check_speeds, EditRefused, Entities,
-                                   INVALID_POSE, MAX_SPAWN_BATCH, Neighbours, TOO_MANY)
+                                   INVALID_POSE, MAX_SPAWN_BATCH, NAME_INVALID, Neighbours,
+                                   TOO_MANY)
 from ball_world.core.impulses import ImpulseRejected, lookup_ball, velocity_after
 from ball_world.core.limits import MAX_SIM_TIME_NS
+from ball_world.core.occupancy_map import MapError
 from ball_world.core.parameters import checked
-from ball_world.core.scenario import build_world, step_duration_ns
+from ball_world.core.scenario import build_scene, ScenarioError, step_duration_ns
 from ball_world.core.world import World
 from ball_world.msgs.agent_cdr import encode_odometry, encode_tf_message
 from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
                                  encode_vector3_stamped)
 from ball_world.msgs.impulse_batch import encode_impulses
+from ball_world.msgs.map_cdr import encode_occupancy_grid
 from ball_world.msgs.twist_cdr import encode_twist, encode_twist_stamped
 from ball_world.scans import AgentScans, check as check_scans
 from ball_world.step_record import (AgentFrame, AppliedCommand, AppliedEdit, AppliedImpulse,
-                                    PendingEvents, RunInfo, STATS_FIELDS, StepRecord,
+                                    Bumper, PendingEvents, RunInfo, STATS_FIELDS, StepRecord,
                                     WorldSnapshot)
 
 DEFAULT_TOPICS = {'balls': '/balls', 'state': '/state', 'stats': '/stats',
@@ -52,19 +60,56 @@ class BuiltWorld:
     parameters: dict
     world: object
     dt_ns: int
+    occupancy_map: object = None  # core.occupancy_map.OccupancyMap, when `map` names one
+    cells: object = None  # its core.solid_cells.CellQueries
 
 
-def build(parameters):
-    """Check the parameters and build their world (raises ScenarioError); touches nothing."""
+def load_map(parameters):
+    """The OccupancyMap `map` names, read from its files (None for no map).
+
+    Raises ScenarioError naming `map` with the one line map_files gives: the node's start
+    refuses a missing image or a bad YAML as it refuses any other parameter.
+    """
+    path = checked(parameters)['map']
+    if not path:
+        return None
+    from ball_world.map_files import load_map_file
+    try:
+        return load_map_file(path)
+    except MapError as error:
+        raise ScenarioError('map', str(error)) from None
+
+
+def build(parameters, occupancy_map=None):
+    """Check the parameters and build their world (raises ScenarioError).
+
+    occupancy_map: the map `map` names, already loaded (the node's, or a recording's copy);
+    when None and `map` names one, it is read from its files here.
+    """
     parameters = checked(parameters)
-    world = build_world(parameters)
+    if parameters['map'] and occupancy_map is None:
+        occupancy_map = load_map(parameters)
+    elif not parameters['map']:
+        occupancy_map = None
+    world, cells = build_scene(parameters, occupancy_map)
     agent_names(parameters, len(world))
     check_scans(parameters)
-    return BuiltWorld(parameters=parameters, world=world, dt_ns=step_duration_ns(parameters))
+    return BuiltWorld(parameters=parameters, world=world, dt_ns=step_duration_ns(parameters),
+                      occupancy_map=occupancy_map, cells=cells)
 
 
 def _ignore(events):
     """write_pending of a sink that does not record edits (a viewer, a test's collector)."""
+
+
+@dataclass(frozen=True)
+class _AgentStep:
+    """What a step did to the agents (names in agent order): the collision impulses each
+    took, (A, 2) world frame, and the noisy odometry's advance (core.odometry.Step) or None."""
+
+    names: tuple
+    impulses: np.ndarray
+    odometry: object
 
 
 @dataclass(frozen=True)
@@ -85,8 +130,12 @@ class Simulation:
     with the next step's stamp too.
     """
 
-    def __init__(self, parameters, sinks=(), topics=None, on_sink_failure=None, built=None):
+    def __init__(self, parameters, sinks=(), topics=None, on_sink_failure=None, built=None,
+                 occupancy_map=None):
         self.sinks = list(sinks)
+        # The map every build of this run uses (a recording's copy in re-simulation), so a
+        # reset never reads the map's files again.
+        self.occupancy_map = occupancy_map if built is None else built.occupancy_map
         self.topics = dict(topics or DEFAULT_TOPICS)
         self.on_sink_failure = on_sink_failure
         self.segment = -1
@@ -111,19 +160,28 @@ class Simulation:
         file never goes back in time.
         """
         if built is None:
-            built = build(parameters)
+            built = build(parameters, self.occupancy_map)
         self._hand_over_pending()
         parameters, world, dt_ns = built.parameters, built.world, built.dt_ns
         self.parameters = parameters
         self.world = world
         self.dt_ns = dt_ns
         self.frame_id = str(parameters['frame_id'])
+        self.occupancy_map = built.occupancy_map
+        self.cells = built.cells
+        # /map of the segment: encoded once, at its start (step 0's simulation time).
+        self.map_cdr = None if built.occupancy_map is None else encode_occupancy_grid(
+            0, self.frame_id, built.occupancy_map)
         self.entities = Entities(len(world))
         self._names = tuple(self.entities.names)
         self.agents = Agents(agent_names(parameters, len(world)),
                              Limits.from_parameters(parameters))
         self._drive = None  # the agents' impulses for the next step, once applied
         self._agent_frames = None  # ((names, frame_id), odom frames, body frames) last used
+        alphas = parameters['agent.odom.noise']
+        self._odometry_noise = (odometry.OdometryNoise(parameters['random.seed'])
+                                if odometry.enabled(alphas) else None)
+        self._contact = None  # what the last step did to the agents (_AgentStep), or None
         self._commands = []  # commands taken since the last step
         self._scans = AgentScans(parameters)
         self._world_changed = False
@@ -143,7 +201,7 @@ class Simulation:
             radii=world.radii.copy(), masses=world.masses.copy(),
             walls=world.walls.segments.copy(), positions=world.positions.copy(),
             velocities=world.velocities.copy(), dt_ns=dt_ns, frame_id=self.frame_id,
-            names=self._names)
+            names=self._names, occupancy_map=self.occupancy_map, map_cdr=self.map_cdr)
         self._each_sink(lambda sink: sink.start_segment(snapshot, info))
         return self.record(stats=None)
 
@@ -157,22 +215,26 @@ class Simulation:
         bit the recorded run's. Raises ValueError for balls or an exact-mode state the
         World refuses. Meant for a Simulation without sinks.
         """
-        built = build(parameters)
+        built = build(parameters, self.occupancy_map)
         base = built.world
         world = World(state.positions.copy(), state.velocities.copy(), state.radii.copy(),
                       state.masses.copy(), walls=base.walls.segments, backend=base.backend,
-                      mode=base.mode)
+                      mode=base.mode, solid_cells=base.solid_cells)
         if state.exact is not None:
             world.restore_carried_state(state.exact)
         # The agents are the state's (the parameters name those the segment began with).
         self.reset({**built.parameters, 'agents': []},
-                   BuiltWorld({**built.parameters, 'agents': []}, world, built.dt_ns))
+                   BuiltWorld({**built.parameters, 'agents': []}, world, built.dt_ns,
+                              built.occupancy_map, built.cells))
         self.parameters = built.parameters
         self.entities = Entities.restored(state.names, state.retired, len(base))
         self._names = tuple(self.entities.names)
         commands = dict(state.commands)
+        odometry_poses = dict(zip(state.agents, state.odometry or ()))
+        covariances = dict(zip(state.agents, state.odometry_covariances or ()))
         for name, yaw in zip(state.agents, state.yaws):
-            self.agents.restore(name, yaw, commands.get(name))
+            self.agents.restore(name, yaw, commands.get(name), odometry_poses.get(name),
+                                covariances.get(name))
         self.step_index = state.step
         self.segment = segment
         self.log_offset_ns = log_offset_ns
@@ -408,9 +470,13 @@ class Simulation:
                     raise EditRefused(TOO_MANY, f'the world holds {limits.MAX_BALLS:,} balls, '
                                                 'the most it can')
                 name = self.entities.new_name(request.name, request.allow_renaming, taken)
+                clash = request.agent and frame_clash(
+                    self.frame_id, str(self.parameters['frame_prefix']), (name,))
+                if clash:
+                    raise EditRefused(NAME_INVALID, f'an agent named {name}: {clash}')
                 what = f"ball '{name}' at"
                 check_placement(world, self.entities, self.arena, ball.x, ball.y,
-                                ball.radius, what, near=near)
+                                ball.radius, what, near=near, cells=self.cells)
                 self._check_against_new(ball, accepted, placed, what)
                 low = min(smallest, ball.radius)
                 high = max(largest, ball.radius)
@@ -490,7 +556,8 @@ class Simulation:
         for value in (vx, vy):
             if not math.isfinite(value):
                 raise EditRefused(INVALID_POSE, f'velocity ({vx}, {vy}) is not finite')
-        check_placement(world, self.entities, self.arena, x, y, radius, what, skip=index)
+        check_placement(world, self.entities, self.arena, x, y, radius, what, skip=index,
+                        cells=self.cells)
         mass = float(world.masses[index])
         old = world.velocities[index]
         energy = world.kinetic_energy() + 0.5 * mass * (
@@ -533,12 +600,53 @@ class Simulation:
         _, rejected = self.apply_drive()
         rejected += self.apply_queued()
         self._drive = None
-        stats = self.world.step(self.dt_ns * 1e-9)
-        if len(self.agents):
-            self.agents.turn(self.dt_ns, (self.step_index + 1) * self.dt_ns)
+        world = self.world
+        agents = self.agents
+        before = None
+        if len(agents):
+            # The agents as the step takes them, every impulse applied: what the bumper
+            # measures the collisions against, and the true pose the odometry starts from.
+            indices = self._agent_indices()
+            before = (indices, world.velocities[indices], world.positions[indices],
+                      agents.yaws())
+        stats = world.step(self.dt_ns * 1e-9)
+        end_ns = (self.step_index + 1) * self.dt_ns
+        if before is not None:
+            agents.turn(self.dt_ns, end_ns)
+            self._contact = self._agents_stepped(*before)
         self.step_index += 1
         record = self.record(stats, real_time_factor)
         return record, rejected
+
+    def _agent_indices(self):
+        index_of = self.index_of
+        return np.array([index_of[name] for name in self.agents.names], dtype=np.int64)
+
+    def _agents_stepped(self, indices, velocities, positions, yaws):
+        """What the step did to the agents: the collision impulses they took (world frame)
+        and, with noisy odometry, its advance (core.odometry).
+
+        Within World.step velocities change only in collisions (no gravity, no friction;
+        every impulse was applied before it), so m (v after - v before) is the impulse the
+        agent received from balls, walls and map cells, in either backend and mode alike.
+        """
+        world = self.world
+        masses = world.masses[indices]
+        impulses = masses[:, None] * (world.velocities[indices] - velocities)
+        advanced = None
+        if self._odometry_noise is not None:
+            agents = self.agents
+            before = np.column_stack((positions, yaws))
+            after = np.column_stack((world.positions[indices], agents.yaws()))
+            agents.start_odometry(before)
+            poses, covariances = agents.odometry()
+            moved = np.flatnonzero((before != after).any(axis=1)).tolist()
+            normals = self._odometry_noise.normals(agents.names, self.step_index + 1, moved)
+            advanced = odometry.advance(self.parameters['agent.odom.noise'], poses,
+                                        covariances, before, after, normals,
+                                        self.dt_ns * 1e-9)
+            agents.set_odometry(advanced.poses, advanced.covariances)
+        return _AgentStep(self.agents.names, impulses, advanced)
 
     def record(self, stats, real_time_factor=None):
         """Pack the state, and what was applied since the last step, for every sink."""
@@ -569,6 +677,7 @@ class Simulation:
         self._applied = []
         self._edits = []
         self._world_changed = False
+        self._contact = None
         self.last_log_ns = record.log_time_ns
         self.last_record = record
         self._each_sink(lambda sink: sink.write_step(record))
@@ -585,17 +694,18 @@ class Simulation:
         return self.world.carried_state()
 
     def _agent_frame(self, positions, velocities, stamp_ns):
-        """The agents now (rows, headings, odom and /tf bytes), or None without agents.
+        """The agents now (rows, headings, odom, ground truth, bumper and /tf bytes), or None
+        without agents.
 
-        The odom twist is in the body frame (REP 105): the world velocity turned by -yaw,
-        and the yaw rate of the step that just ended.
+        Twists are in the body frame (REP 105): the world velocity turned by -yaw, and the
+        yaw rate of the step that just ended. Without odometry noise odom is the ground
+        truth, bit for bit; with it, odom and /tf carry the odometry's pose (core.odometry).
         """
         agents = self.agents
         if not len(agents):
             return None
         names = agents.names
-        index_of = self.index_of
-        indices = np.array([index_of[name] for name in names], dtype=np.int64)
+        indices = self._agent_indices()
         yaws = agents.yaws()
         cos, sin = np.cos(yaws), np.sin(yaws)
         moving = velocities[indices]
@@ -611,20 +721,69 @@ class Simulation:
             self._agent_frames = (key, tuple(p[0] for p in pairs),
                                   tuple(p[1] for p in pairs))
             count = len(names)
-            static = encode_tf_message(stamp_ns, (self.frame_id,) * count,
-                                       self._agent_frames[1], np.zeros((count, 2)),
-                                       np.zeros(count))
+            if self.parameters['agent.odom.tf_static']:
+                static = encode_tf_message(stamp_ns, (self.frame_id,) * count,
+                                           self._agent_frames[1], np.zeros((count, 2)),
+                                           np.zeros(count))
         _, odom_frames, base_frames = self._agent_frames
         located = positions[indices]
+        truth = tuple(encode_odometry(stamp_ns, (self.frame_id,) * len(names), base_frames,
+                                      located, yaws, twists))
+        poses = covariances = None
+        if self._odometry_noise is None:  # odometry is the ground truth, as it always was
+            odom = tuple(encode_odometry(stamp_ns, odom_frames, base_frames, located, yaws,
+                                         twists))
+            tf = encode_tf_message(stamp_ns, odom_frames, base_frames, located, yaws)
+        else:
+            agents.start_odometry(np.column_stack((located, yaws)))
+            poses, covariances = agents.odometry()
+            odom, tf = self._noisy_odometry(stamp_ns, odom_frames, base_frames, poses,
+                                            covariances, twists)
         return AgentFrame(
             names=names, indices=indices, yaws=yaws, twists=twists, odom_frames=odom_frames,
-            base_frames=base_frames,
-            odom_cdr=tuple(encode_odometry(stamp_ns, odom_frames, base_frames, located, yaws,
-                                           twists)),
-            tf_cdr=encode_tf_message(stamp_ns, odom_frames, base_frames, located, yaws),
-            tf_static_cdr=static,
+            base_frames=base_frames, odom_cdr=odom, tf_cdr=tf, tf_static_cdr=static,
+            ground_truth_cdr=truth, bumpers=self._bumpers(names, base_frames, yaws, stamp_ns),
             scans=self._scans.take(self.world, names, indices, yaws, base_frames,
-                                   self.step_index, stamp_ns, self.dt_ns))
+                                   self.step_index, stamp_ns, self.dt_ns),
+            odometry=poses, odometry_covariances=covariances)
+
+    def _noisy_odometry(self, stamp_ns, odom_frames, base_frames, poses, covariances, twists):
+        """(odom bytes of each agent, /tf bytes) from the noisy odometry's state.
+
+        Agents that had not started (a new world, a spawn) have just started at their true
+        pose. The twist is the true one plus the error of the step that ended here, if any.
+        """
+        agents = self.agents
+        advanced = self._contact.odometry if self._contact is not None else None
+        if advanced is not None and self._contact.names == agents.names:
+            twists = twists + advanced.twist_errors
+            twist_covariances = odometry.message_covariance(advanced.twist_covariances)
+        else:
+            twist_covariances = np.zeros((len(poses), 36))
+        odom = tuple(encode_odometry(
+            stamp_ns, odom_frames, base_frames, poses[:, :2], poses[:, 2], twists,
+            odometry.message_covariance(covariances), twist_covariances))
+        return odom, encode_tf_message(stamp_ns, odom_frames, base_frames, poses[:, :2],
+                                       poses[:, 2])
+
+    def _bumpers(self, names, base_frames, yaws, stamp_ns):
+        """The Bumper of each agent that took a collision impulse in the step that ended
+        here, in its base_link frame at the step's end heading (agent order)."""
+        contact = self._contact
+        if contact is None or contact.names != names:
+            return ()
+        impulses = contact.impulses
+        hit = np.flatnonzero((impulses != 0.0).any(axis=1))
+        if not len(hit):
+            return ()
+        cos, sin = np.cos(yaws[hit]), np.sin(yaws[hit])
+        jx, jy = impulses[hit, 0], impulses[hit, 1]
+        forward = (cos * jx + sin * jy).tolist()
+        left = (cos * jy - sin * jx).tolist()
+        frames_hit = [base_frames[row] for row in hit.tolist()]
+        messages = encode_impulses(stamp_ns, frames_hit, forward, left)
+        return tuple(Bumper(names[row], frame, x, y, cdr) for row, frame, x, y, cdr in zip(
+            hit.tolist(), frames_hit, forward, left, messages))
 
     def _each_sink(self, action):
         """Run action on every sink; a sink that raises is dropped and reported once.

@@ -69,6 +69,18 @@ class AppliedCommand:
 
 
 @dataclass(frozen=True)
+class Bumper:
+    """The collision impulse an agent took in a step (balls, walls, map cells; its drive and
+    pushes excluded), N s, in its base_link frame at the step's end heading."""
+
+    name: str  # the agent's entity name
+    frame_id: str  # <p><name>/base_link
+    x: float  # forward
+    y: float  # left
+    cdr: bytes  # geometry_msgs/msg/Vector3Stamped, as published on <name>/bumper
+
+
+@dataclass(frozen=True)
 class AgentFrame:
     """The agents at the end of a step: names, rows in the arrays, headings (rad)."""
 
@@ -78,13 +90,25 @@ class AgentFrame:
     twists: np.ndarray  # (A, 3) vx, vy in the body frame (m/s), yaw rate (rad/s)
     odom_frames: tuple  # <p><name>/odom of each agent
     base_frames: tuple  # <p><name>/base_link of each agent
-    odom_cdr: tuple  # nav_msgs/Odometry of each agent, CDR, as published on <name>/odom
-    tf_cdr: bytes  # tf2_msgs/TFMessage: every odom -> base_link, as published on /tf
+    # nav_msgs/Odometry of each agent, CDR, as published on <name>/odom: the ground truth
+    # without agent.odom.noise, the drifting odometry with it (core.odometry)
+    odom_cdr: tuple
+    tf_cdr: bytes  # tf2_msgs/TFMessage: every odom -> base_link (odom's poses), on /tf
     # /tf_static (frame_id -> each odom frame, identity) when the set of agents changed with
     # this record (a segment's first record included), else None.
     tf_static_cdr: Optional[bytes] = None
     # The agents' lidar scans (ball_world.scans.AgentScan) when this step is a scan step.
     scans: tuple = ()
+    # nav_msgs/Odometry of each agent's true pose and twist (header frame_id, child
+    # base_link), as published on <name>/ground_truth; () where not known (read back from
+    # an older recording).
+    ground_truth_cdr: tuple = ()
+    # Bumper of each agent hit in the step that ended here, agent order (none at step 0).
+    bumpers: tuple = ()
+    # With agent.odom.noise: the odometry's state after this step, agent order: poses (A, 3)
+    # x, y, yaw and covariances (A, 6) (core.odometry), which a split file resumes from.
+    odometry: Optional[np.ndarray] = None
+    odometry_covariances: Optional[np.ndarray] = None
 
 
 @dataclass(frozen=True)
@@ -99,6 +123,10 @@ class WorldSnapshot:
     dt_ns: int
     frame_id: str
     names: Optional[tuple] = None  # entity names in pose order (ball_<i> when None)
+    # The map (core.occupancy_map.OccupancyMap: its files' bytes and its grid) and its
+    # nav_msgs/OccupancyGrid bytes as published on `map` at the segment start; None without.
+    occupancy_map: Optional[object] = None
+    map_cdr: Optional[bytes] = None
 
 
 @dataclass(frozen=True)

@@ -109,7 +109,13 @@ def test_other_readers_see_cmd_vel_odom_and_tf_with_their_types(tmp_path):
         '/tf': 'tf2_msgs/msg/TFMessage', '/tf_static': 'tf2_msgs/msg/TFMessage',
         # Every agent scans (agent.scan.samples defaults to 360): issue 22's lidar.
         '/ball_0/scan': 'sensor_msgs/msg/LaserScan', '/ball_3/scan': 'sensor_msgs/msg/LaserScan',
-        '/rover/scan': 'sensor_msgs/msg/LaserScan'}
+        '/rover/scan': 'sensor_msgs/msg/LaserScan',
+        # The truth beside the odometry (Stage's base_pose_ground_truth).
+        '/ball_0/ground_truth': 'nav_msgs/msg/Odometry',
+        '/ball_3/ground_truth': 'nav_msgs/msg/Odometry',
+        '/rover/ground_truth': 'nav_msgs/msg/Odometry'}
+    truth = decoded['/ball_3/ground_truth'][1][-1][1]
+    assert (truth.header.frame_id, truth.child_frame_id) == ('world', 'ball_3/base_link')
     first_command = decoded['/ball_0/cmd_vel'][1][0]
     assert first_command[1].linear.x == 1.5 and first_command[1].linear.z == 0.25
     assert first_command[0].log_time == 2 * 20_000_000  # the step it took effect

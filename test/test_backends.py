@@ -201,7 +201,7 @@ def test_candidate_lists_that_outgrow_their_buffers_are_regrown_and_stay_identic
     for worlds, grown in ((cluster, numba_backend.PAIRS),
                           (between_rails, numba_backend.NEAR_WALLS)):
         run_pair(worlds, 60, rng, 0)
-        pair_rows, wall_rows, lists = worlds[1]._stepper._prepared[7:10]
+        pair_rows, wall_rows, lists = worlds[1]._stepper.buffers
         balls = len(worlds[1])
         assert lists[numba_backend.FRESH] == 1
         assert len(pair_rows) >= lists[numba_backend.PAIRS]

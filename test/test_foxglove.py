@@ -120,8 +120,8 @@ def test_markers_follow_reset_worlds_of_other_sizes(tmp_path):
 
 def test_clock_is_recorded_per_step_only_while_publish_clock_is_on(tmp_path):
     path = tmp_path / 'run.mcap'
-    truth = record(path, first={**FIRST, 'publish_clock': True}, second=SECOND,
-                   steps=(10, 10))
+    truth = record(path, first={**FIRST, 'publish_clock': True},
+                   second={**SECOND, 'publish_clock': False}, steps=(10, 10))
     clock = decoded(path, '/clock')
     first_segment = [r for r in truth.records if segment_of(truth, r.log_time_ns) == 0]
     # the node's /clock carries simulation time (back to 0 at a reset), logged at the step
@@ -133,7 +133,8 @@ def test_clock_is_recorded_per_step_only_while_publish_clock_is_on(tmp_path):
         assert (connection.msgtype, qos.reliability.name, qos.depth) == \
             ('rosgraph_msgs/msg/Clock', 'BEST_EFFORT', 1)
         assert connection.msgcount == len(first_segment)
-    record(tmp_path / 'off.mcap', steps=(3, 3))
+    record(tmp_path / 'off.mcap', first={**FIRST, 'publish_clock': False},
+           second={**SECOND, 'publish_clock': False}, steps=(3, 3))
     assert '/clock' not in Recording(tmp_path / 'off.mcap').topics
 
 
@@ -160,9 +161,9 @@ def test_layout_is_valid_json_naming_recorded_topics_and_stats_by_index(recorded
     scene = config['3D!world']
     assert scene['followTf'] == 'world'
     # /ball_0/odom and /ball_0/scan are there when ball_0 is an agent (test_agent_views and
-    # test_scans check them).
-    assert set(scene['topics']) - {'/ball_0/odom', '/ball_0/scan'} == {'/markers', '/balls'} \
-        <= set(topics)
+    # test_scans check them), /map with a map (test_map_views).
+    assert set(scene['topics']) - {'/ball_0/odom', '/ball_0/scan', '/map'} \
+        == {'/markers', '/balls'} <= set(topics)
     assert all(settings['visible'] for settings in scene['topics'].values())
     plotted = []
     for panel_id, panel in config.items():

@@ -121,6 +121,21 @@ class LaunchConfiguration(_Recorder):
     def __init__(self, variable_name, *, default=None):
         self.variable_name = variable_name
 
+    def perform(self, context):
+        return context.launch_configurations[self.variable_name]
+
+
+class OpaqueFunction(_Recorder):
+    def __init__(self, *, function, args=None, kwargs=None, **left_over_kwargs):
+        self.function, self.args, self.kwargs = function, list(args or []), dict(kwargs or {})
+
+
+class _Context:
+    """What an OpaqueFunction's function reads of launch's LaunchContext."""
+
+    def __init__(self, configuration):
+        self.launch_configurations = dict(configuration)
+
 
 #: Keyword arguments launch_ros's Node passes on to ExecuteProcess and Action (Jazzy).
 EXECUTE_PROCESS_KWARGS = {'condition', 'output', 'emulate_tty', 'additional_env', 'env',
@@ -137,13 +152,15 @@ class Node(_Recorder):
             raise TypeError(f'Node() got unexpected keyword arguments {sorted(unknown)}')
         self.executable, self.package, self.namespace = executable, package, namespace
         self.arguments, self.remappings = list(arguments or []), list(remappings or [])
+        self.parameters = list(parameters or [])
         self.condition = kwargs.get('condition')
 
 
 def _stand_in_modules():
     modules = {}
     for name, classes in {
-            'launch': [LaunchDescription], 'launch.actions': [DeclareLaunchArgument],
+            'launch': [LaunchDescription],
+            'launch.actions': [DeclareLaunchArgument, OpaqueFunction],
             'launch.conditions': [IfCondition], 'launch.substitutions': [LaunchConfiguration],
             'launch_ros': [], 'launch_ros.actions': [Node]}.items():
         module = types.ModuleType(name)
@@ -180,21 +197,38 @@ def _is_true(text):
     return value in ('true', '1')
 
 
-def started(description, **arguments):
-    """Executables the description starts, given launch arguments (defaults for the rest)."""
+def configured(description, **arguments):
+    """The launch configuration: the arguments given, the defaults for the rest."""
     configuration = {a.name: a.default_value for a in description.entities
                      if isinstance(a, DeclareLaunchArgument)}
     unknown = set(arguments) - set(configuration)
     assert not unknown, f'not a launch argument: {unknown}'
     configuration.update(arguments)
-    return [n.executable for n in description.entities if isinstance(n, Node) and (
+    return configuration
+
+
+def nodes(description, **arguments):
+    """The Nodes of the description, its OpaqueFunctions run as launch runs them."""
+    context = _Context(configured(description, **arguments))
+    found = []
+    for entity in description.entities:
+        if isinstance(entity, OpaqueFunction):
+            found += entity.function(context, *entity.args, **entity.kwargs)
+        elif isinstance(entity, Node):
+            found.append(entity)
+    return found
+
+
+def started(description, **arguments):
+    """Executables the description starts, given launch arguments (defaults for the rest)."""
+    configuration = configured(description, **arguments)
+    return [n.executable for n in nodes(description, **arguments) if (
         n.condition is None or _is_true(_expand(n.condition.predicate_expression,
                                                 configuration)))]
 
 
 def rviz_node(description):
-    (node,) = [n for n in description.entities
-               if isinstance(n, Node) and n.executable == 'rviz2']
+    (node,) = [n for n in nodes(description) if n.executable == 'rviz2']
     return node
 
 
@@ -219,8 +253,7 @@ def test_launch_gives_rviz_the_installed_configuration(description):
 
 
 def test_launch_points_rviz_at_the_worlds_namespace(description, rviz):
-    (world,) = [n for n in description.entities
-                if isinstance(n, Node) and n.executable == 'ball_world']
+    (world,) = [n for n in nodes(description) if n.executable == 'ball_world']
     node = rviz_node(description)
     assert isinstance(node.namespace, LaunchConfiguration)
     assert node.namespace.variable_name == world.namespace.variable_name
@@ -230,3 +263,35 @@ def test_launch_points_rviz_at_the_worlds_namespace(description, rviz):
              if 'Topic' in d}
     assert named == set(description.rviz_topics)
     assert dict(node.remappings) == {topic: topic.lstrip('/') for topic in named}
+
+
+def world_parameters(description, **arguments):
+    (world,) = [n for n in nodes(description, **arguments) if n.executable == 'ball_world']
+    return world.parameters
+
+
+def test_launch_takes_an_installed_world_by_name_with_its_installed_map(description):
+    share = Path(sys.prefix) / 'share' / 'ball_world'
+    default, *rest = world_parameters(description)
+    assert isinstance(default, LaunchConfiguration) and default.variable_name == 'config'
+    assert [type(p) for p in rest] == [dict]  # only the record.* values over the defaults
+    for name, map_name in (('sandbox', 'tb3_sandbox'), ('depot', 'depot')):
+        _, world, map_override, record = world_parameters(description, world=name)
+        assert Path(world) == share / 'worlds' / f'{name}.yaml'
+        assert Path(world).read_text() == (ROOT / 'worlds' / f'{name}.yaml').read_text(), (
+            'the installed world is not the one in worlds/: run make setup')
+        # The world names its map relative to the repository; installed, the map is the
+        # package's copy, whatever the working directory.
+        assert map_override == {'map': str(share / 'maps' / f'{map_name}.yaml')}
+        assert Path(map_override['map']).is_file()
+        assert set(record) == {'record.mcap', 'record.rerun'}
+
+
+def test_launch_takes_a_world_by_path_and_refuses_an_unknown_name(description, tmp_path):
+    world = tmp_path / 'mine.yaml'
+    world.write_text('/**:\n  ros__parameters:\n    map: maps/mine.yaml\n')
+    _, path, record = world_parameters(description, world=str(world))
+    assert path == str(world)  # its map stays relative to the working directory
+    assert set(record) == {'record.mcap', 'record.rerun'}
+    with pytest.raises(RuntimeError, match='installed: depot, sandbox'):
+        world_parameters(description, world='warehouse')

@@ -13,6 +13,15 @@ and can be pushed); what it adds is a heading and a drive:
   change dv is limited to max_accel * dt. It reaches the world
   as an impulse J = m dv through the Simulation's impulse queue, with the same checks as any
   impulse and recorded as one.
+- Two drives (agent.drive). `omni` (holonomic, the default) follows forward and left as
+  above. `diff` is a differential drive, the unicycle of every wheeled base: `left` is
+  ignored, and the velocity is kept along the heading. Its change along the heading (the
+  motors) is limited to max_accel * dt; any sideways velocity (a collision of the last step,
+  or the old velocity seen from a heading that turned) is removed whole by the same impulse,
+  because what stops a wheeled base from sliding sideways is the grip of its wheels, not its
+  motors. So after the drive's impulse the velocity is along the heading (to rounding), a
+  collision during the step may push it sideways for that step only, and a diff-drive agent
+  commanded sideways stays where it is.
 - A command is in force for cmd_timeout seconds of simulated time from the step it took
   effect; after that (and before any command) the agent brakes to rest at max_accel and stops
   turning, as turtlesim's turtles do. cmd_timeout 0 holds the last command.
@@ -39,6 +48,10 @@ _SETTLED = 1e-12
 _START_NAME = re.compile(r'ball_(0|[1-9][0-9]{0,8})')
 #: since_ns of an agent that has had no command yet.
 _NO_COMMAND = -1
+#: agent.drive's values: holonomic (today's drive) and differential (a unicycle).
+OMNI = 'omni'
+DIFF = 'diff'
+DRIVES = (OMNI, DIFF)
 
 
 class CommandRejected(ValueError):
@@ -57,13 +70,15 @@ class Limits:
     max_accel: float  # m/s^2
     max_yaw_rate: float  # rad/s
     cmd_timeout: float  # s of simulated time; 0: hold the last command
+    drive: str = OMNI  # OMNI or DIFF
 
     @classmethod
     def from_parameters(cls, parameters):
         return cls(max_speed=parameters['agent.max_speed'],
                    max_accel=parameters['agent.max_accel'],
                    max_yaw_rate=parameters['agent.max_yaw_rate'],
-                   cmd_timeout=parameters['agent.cmd_timeout'])
+                   cmd_timeout=parameters['agent.cmd_timeout'],
+                   drive=parameters.get('agent.drive', OMNI))
 
 
 @dataclass(frozen=True)
@@ -113,6 +128,22 @@ def frames(prefix, name):
     return f'{prefix}{name}/odom', f'{prefix}{name}/base_link'
 
 
+def frame_clash(frame_id, prefix, names):
+    """Why frame_id cannot be the frame of the agents `names` under `prefix`, or None.
+
+    frame_id is the parent of every agent's odom frame (/tf_static); were it one of the
+    agents' own frames, tf2 would get a transform from a frame to itself, or a loop.
+    `names` is any collection of names (a set is fastest).
+    """
+    if not frame_id.startswith(prefix):
+        return None
+    name, _, kind = frame_id[len(prefix):].rpartition('/')
+    if kind in ('odom', 'base_link') and name in names:
+        return (f"'{frame_id[:64]}' is agent {name}'s own frame; frame_id must be a frame "
+                'above the agents (world, map)')
+    return None
+
+
 def agent_names(parameters, count):
     """The agents of a new world of `count` balls, checked (ParameterError naming `agents`).
 
@@ -131,6 +162,10 @@ def agent_names(parameters, count):
         if name in seen:
             raise ParameterError('agents', f"'{name}' is listed twice")
         seen.add(name)
+    clash = frame_clash(parameters.get('frame_id', 'world'),
+                        parameters.get('frame_prefix', ''), seen)
+    if clash:
+        raise ParameterError('frame_id', clash)
     return requested
 
 
@@ -150,6 +185,10 @@ class Agents:
         self._yaws = np.zeros(count)
         self._commands = np.zeros((count, 3))  # vx, vy, wz of the last command
         self._since = np.full(count, _NO_COMMAND, dtype=np.int64)
+        # Noisy odometry (core.odometry): each agent's odometry pose (x, y, yaw), NaN until it
+        # starts at the agent's true pose, and its covariance (odometry.COVARIANCE_ENTRIES).
+        self._odometry = np.full((count, 3), np.nan)
+        self._covariance = np.zeros((count, 6))
         self.commands_taken = 0
 
     def __len__(self):
@@ -177,6 +216,8 @@ class Agents:
         self._yaws = np.append(self._yaws, wrapped(float(yaw)))
         self._commands = np.vstack((self._commands, np.zeros((1, 3))))
         self._since = np.append(self._since, np.int64(_NO_COMMAND))
+        self._odometry = np.vstack((self._odometry, np.full((1, 3), np.nan)))
+        self._covariance = np.vstack((self._covariance, np.zeros((1, 6))))
 
     def remove(self, name):
         """Forget an agent (its ball was deleted); a name that is no agent is ignored."""
@@ -188,10 +229,13 @@ class Agents:
         self._yaws = np.delete(self._yaws, row)
         self._commands = np.delete(self._commands, row, axis=0)
         self._since = np.delete(self._since, row)
+        self._odometry = np.delete(self._odometry, row, axis=0)
+        self._covariance = np.delete(self._covariance, row, axis=0)
 
-    def restore(self, name, yaw, command=None):
+    def restore(self, name, yaw, command=None, odometry=None, covariance=None):
         """Make `name` an agent with heading yaw and its last Command, as they were at a
-        step of a recorded run (a split file resumes there): both kept bit for bit."""
+        step of a recorded run (a split file resumes there): both kept bit for bit, and so
+        are its noisy odometry's pose (x, y, yaw) and covariance when given."""
         if name not in self._row:
             self.add(name)
         row = self._row[name]
@@ -199,6 +243,26 @@ class Agents:
         if command is not None:
             self._commands[row] = (command.vx, command.vy, command.wz)
             self._since[row] = int(command.since_ns)
+        if odometry is not None:
+            self._odometry[row] = odometry
+            self._covariance[row] = covariance
+
+    def odometry(self):
+        """(poses (A, 3), covariances (A, 6)) of the noisy odometry, copies, agent order."""
+        return self._odometry.copy(), self._covariance.copy()
+
+    def start_odometry(self, true_poses):
+        """Agents whose odometry has not started (new ones) start at their true pose
+        (A, 3), with covariance 0: the odom frame is where the agent was then."""
+        fresh = np.isnan(self._odometry[:, 0])
+        if fresh.any():
+            self._odometry[fresh] = true_poses[fresh]
+            self._covariance[fresh] = 0.0
+
+    def set_odometry(self, poses, covariances):
+        """The odometry after a step (core.odometry.advance), agent order."""
+        self._odometry = poses
+        self._covariance = covariances
 
     def set_yaw(self, name, yaw):
         self._yaws[self._row[name]] = wrapped(float(yaw))
@@ -252,25 +316,19 @@ class Agents:
         present = rows >= 0
         active = self._in_force(end_ns)
         forward = np.where(active, self._commands[:, 0], 0.0)
-        left = np.where(active, self._commands[:, 1], 0.0)
-        speed = np.hypot(forward, left)
-        fast = speed > limits.max_speed
-        scale = np.divide(limits.max_speed, speed, out=np.ones_like(speed), where=fast)
-        forward, left = forward * scale, left * scale
         yaws = self.headings_after(dt_ns, end_ns)
         cos, sin = np.cos(yaws), np.sin(yaws)
-        target_x = cos * forward - sin * left
-        target_y = sin * forward + cos * left
         moving = velocities[np.where(present, rows, 0)]
-        dvx = target_x - moving[:, 0]
-        dvy = target_y - moving[:, 1]
-        change = np.hypot(dvx, dvy)
         reach = limits.max_accel * (dt_ns * 1e-9)
-        over = change > reach
-        shrink = np.divide(reach, change, out=np.ones_like(change), where=over)
-        dvx, dvy = dvx * shrink, dvy * shrink
+        if limits.drive == DIFF:
+            dvx, dvy, change, target = _unicycle(forward, cos, sin, moving, limits.max_speed,
+                                                 reach)
+        else:
+            left = np.where(active, self._commands[:, 1], 0.0)
+            dvx, dvy, change, target = _holonomic(forward, left, cos, sin, moving,
+                                                  limits.max_speed, reach)
         mass = masses[np.where(present, rows, 0)]
-        due = present & ~(change <= _SETTLED * np.hypot(target_x, target_y))
+        due = present & ~(change <= _SETTLED * target)
         jx, jy = (mass * dvx).tolist(), (mass * dvy).tolist()
         names = self._names
         return [(names[row], jx[row], jy[row]) for row in np.flatnonzero(due).tolist()]
@@ -278,3 +336,39 @@ class Agents:
     def turn(self, dt_ns, end_ns):
         """Advance every heading over the step ending end_ns by its clamped yaw rate."""
         self._yaws = self.headings_after(dt_ns, end_ns)
+
+
+def _holonomic(forward, left, cos, sin, moving, max_speed, reach):
+    """omni: (dvx, dvy, |dv| before the limit, target speed) toward the body command.
+
+    The command is clamped to max_speed along its direction, turned into the world by the
+    end heading (cos, sin), and the change of velocity limited to `reach` (max_accel dt).
+    """
+    speed = np.hypot(forward, left)
+    fast = speed > max_speed
+    scale = np.divide(max_speed, speed, out=np.ones_like(speed), where=fast)
+    forward, left = forward * scale, left * scale
+    target_x = cos * forward - sin * left
+    target_y = sin * forward + cos * left
+    dvx = target_x - moving[:, 0]
+    dvy = target_y - moving[:, 1]
+    change = np.hypot(dvx, dvy)
+    over = change > reach
+    shrink = np.divide(reach, change, out=np.ones_like(change), where=over)
+    return dvx * shrink, dvy * shrink, change, np.hypot(target_x, target_y)
+
+
+def _unicycle(forward, cos, sin, moving, max_speed, reach):
+    """diff: (dvx, dvy, |dv| before the limit, target speed) of a wheeled base.
+
+    Along the heading the speed moves toward `forward` (clamped to max_speed) by at most
+    `reach`; across it the velocity is removed whole (the wheels' grip, not the motors).
+    """
+    forward = np.clip(forward, -max_speed, max_speed)
+    along = cos * moving[:, 0] + sin * moving[:, 1]
+    across = cos * moving[:, 1] - sin * moving[:, 0]
+    gain = np.clip(forward - along, -reach, reach)
+    change = np.hypot(forward - along, across)
+    dvx = cos * gain + sin * across
+    dvy = sin * gain - cos * across
+    return dvx, dvy, change, np.abs(forward)

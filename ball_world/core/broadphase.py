@@ -15,9 +15,10 @@ and memory for every world inside `core.limits`, without a Python loop over ball
 - Grids never have more than CELLS_PER_BALL cells per ball (plus CELLS_SLACK): when the
   balls spread far apart (no arena), cells grow instead, so keys cannot overflow and
   memory stays linear however large the coordinates.
-- Walls are rasterised into the cells of each level they pass within reach of, column by
-  column; each ball then meets only the walls of its own cell. A thousand walls cost the
-  cells they cross, not N x M distance tests.
+- Walls (and a map's boundary runs) are not in these grids: `core.static_geometry` indexes
+  them once per World in buckets sized by the geometry, and each ball asks the buckets its
+  reach covers. Tens of thousands of segments cost what lies near the balls, not N x M
+  distance tests, nor a rasterisation on every rebuild.
 - `NeighbourLists` keeps the candidates, widened by a skin, for as long as no ball can have
   moved far enough to close the skin, so the grids are rebuilt every few substeps.
 
@@ -33,6 +34,10 @@ every hot path.
 import numpy as np
 
 from ball_world.core import rules
+# SLACK (the relative widening of cells and reaches, far above the rounding of cell
+# coordinates, so that a pair exactly at its reach is never lost to rounding), `widened`
+# and `expand` are the static geometry's, shared.
+from ball_world.core.static_geometry import expand as _expand, SLACK, StaticGeometry, widened
 
 _EMPTY = np.empty(0, dtype=np.intp)
 #: Largest radius over smallest radius within one level of the hierarchical grid.
@@ -42,9 +47,6 @@ CELLS_PER_BALL = 4
 CELLS_SLACK = 1024
 #: Empty columns and rows around each grid, so that neighbour look-ups stay in the table.
 PAD = 2
-#: Relative widening of cells and reaches, far above the rounding of cell coordinates, so
-#: that a pair exactly at its reach is never lost to rounding.
-SLACK = 1e-9
 
 
 def take_rows(array, index):
@@ -72,11 +74,6 @@ def radius_levels(radii):
     return np.searchsorted(np.array(thresholds), radii, side='right'), len(thresholds) + 1
 
 
-def widened(length, scale):
-    """`length` plus SLACK of itself and of the coordinates' magnitude `scale`."""
-    return length + SLACK * (length + scale)
-
-
 def grid_shape(extent_x, extent_y, cell, count):
     """(cell, columns, rows) of a grid over the extent: cells at least `cell` wide, doubled
     until the grid has at most CELLS_PER_BALL * count + CELLS_SLACK cells."""
@@ -86,27 +83,6 @@ def grid_shape(extent_x, extent_y, cell, count):
     while (extent_x / cell + 1.0) * (extent_y / cell + 1.0) > budget:
         cell *= 2.0
     return cell, int(extent_x / cell) + 1, int(extent_y / cell) + 1
-
-
-def _cell_ranges(a, b, reach, origin, cell, cells):
-    """First and last cell (arrays) within reach of each interval [min(a, b), max(a, b)] along
-    one axis, clipped to the grid's `cells`: numba_backend._cell_range for arrays."""
-    first = np.floor(np.clip((np.minimum(a, b) - reach - origin) / cell, -1, cells))
-    last = np.floor(np.clip((np.maximum(a, b) + reach - origin) / cell, -1, cells))
-    return (np.maximum(first.astype(np.intp), 0),
-            np.minimum(last.astype(np.intp), cells - 1))
-
-
-def _expand(owners, low, high):
-    """For each owner k and each i in [low[k], high[k]): the pair (owner, i), as two arrays."""
-    counts = high - low
-    total = int(counts.sum())
-    if total == 0:
-        return _EMPTY, _EMPTY
-    first = np.repeat(owners, counts)
-    offsets = np.cumsum(counts) - counts
-    second = np.repeat(low - offsets, counts) + np.arange(total)
-    return first, second
 
 
 class LevelGrid:
@@ -177,46 +153,6 @@ class LevelGrid:
                                 np.take(self.starts, keys), np.take(self.starts, keys + 1))
         return first, np.take(self.balls, second)
 
-    def wall_cells(self, walls, reach):
-        """(wall, cell key) for every cell of this grid within `reach` of a wall segment.
-
-        Column by column: the part of the segment whose x lies within reach of the column
-        gives the rows, widened by reach. Conservative: it may name a cell slightly out of
-        reach, never miss one within it.
-        """
-        reach = widened(reach, self.scale)
-        ox, oy = self.origin
-        cell = self.cell
-        x0 = walls.starts[:, 0]
-        y0 = walls.starts[:, 1]
-        x1 = walls.ends[:, 0]
-        y1 = walls.ends[:, 1]
-        first_col, last_col = _cell_ranges(x0, x1, reach, ox, cell, self.nx)
-        wall, col = _expand(np.arange(len(walls)), first_col,
-                            np.maximum(last_col + 1, first_col))
-        if len(wall) == 0:
-            return _EMPTY, _EMPTY
-        x0 = np.take(x0, wall)
-        y0 = np.take(y0, wall)
-        dx = np.take(x1, wall) - x0
-        dy = np.take(y1, wall) - y0
-        # Segment parameters where it enters and leaves the column's x-interval.
-        left = ox + col * cell - reach - x0
-        right = ox + (col + 1) * cell + reach - x0
-        vertical = dx == 0.0
-        safe_dx = np.where(vertical, 1.0, dx)
-        ta = left / safe_dx
-        tb = right / safe_dx
-        t_low = np.where(vertical, 0.0, np.clip(np.minimum(ta, tb), 0.0, 1.0))
-        t_high = np.where(vertical, 1.0, np.clip(np.maximum(ta, tb), 0.0, 1.0))
-        ya = y0 + t_low * dy
-        yb = y0 + t_high * dy
-        first_row, last_row = _cell_ranges(ya, yb, reach, oy, cell, self.ny)
-        entry, row = _expand(np.arange(len(wall)), first_row,
-                             np.maximum(last_row + 1, first_row))
-        keys = (np.take(col, entry) + PAD) * self.stride + row + PAD
-        return np.take(wall, entry), keys
-
 
 class HierarchicalGrid:
     """The balls in one grid per radius level, built for one margin; see the module doc."""
@@ -267,34 +203,6 @@ class HierarchicalGrid:
         order = np.argsort(a * len(self.positions) + b)
         return np.take(a, order), np.take(b, order)
 
-    def wall_pairs(self, walls):
-        """(ball, wall) with the ball closer than r + margin to the segment, sorted."""
-        balls_out = []
-        walls_out = []
-        for grid, largest in zip(self.levels, self.largest):
-            wall, keys = grid.wall_cells(walls, largest + self.margin)
-            entry, position = _expand(np.arange(len(wall)), np.take(grid.starts, keys),
-                                      np.take(grid.starts, keys + 1))
-            balls_out.append(np.take(grid.balls, position))
-            walls_out.append(np.take(wall, entry))
-        if not balls_out:
-            return _EMPTY, _EMPTY
-        ball = np.concatenate(balls_out)
-        wall = np.concatenate(walls_out)
-        points = take_rows(self.positions, ball)
-        sx, sy, _ = rules.wall_offset(points[:, 0], points[:, 1],
-                                      np.take(walls.starts[:, 0], wall),
-                                      np.take(walls.starts[:, 1], wall),
-                                      np.take(walls.directions[:, 0], wall),
-                                      np.take(walls.directions[:, 1], wall),
-                                      np.take(walls.lengths, wall))
-        reach = np.take(self.radii, ball) + self.margin
-        near = np.flatnonzero(sx * sx + sy * sy < reach * reach)
-        ball = np.take(ball, near)
-        wall = np.take(wall, near)
-        order = np.argsort(ball * len(walls) + wall)
-        return np.take(ball, order), np.take(wall, order)
-
 
 def grid_pairs(positions, radii, margin, previous=None):
     """Pairs (a, b), a < b, sorted, with |x_a - x_b| < r_a + r_b + margin, in O(N).
@@ -309,10 +217,11 @@ def grid_pairs(positions, radii, margin, previous=None):
 
 
 def wall_pairs(positions, radii, walls, margin):
-    """(ball, wall) index arrays, sorted, of every ball within r + margin of a wall."""
+    """(ball, wall) index arrays, sorted, of every ball within r + margin of a wall (a
+    core.world.Walls): the static geometry's bucket index of those walls, asked once."""
     if len(positions) == 0 or len(walls) == 0:
         return _EMPTY, _EMPTY
-    return HierarchicalGrid(positions, radii, margin).wall_pairs(walls)
+    return StaticGeometry(walls).near_pairs(positions, radii, margin)
 
 
 class NeighbourLists:
@@ -332,8 +241,11 @@ class NeighbourLists:
         self.builds = 0
         self._grid = None
 
-    def update(self, positions, radii, walls, moved):
-        """Account for `moved` metres of travel; rebuild if the skin may be closed."""
+    def update(self, positions, radii, static, moved):
+        """Account for `moved` metres of travel; rebuild if the skin may be closed.
+
+        `static` is the World's core.static_geometry.StaticGeometry (walls and map runs).
+        """
         self.moved += moved
         if 2.0 * self.moved < self.skin:
             return False
@@ -342,12 +254,12 @@ class NeighbourLists:
         self.ball_a, self.ball_b = grid.pairs()
         self.reach2 = rules.reach_squared(np.take(radii, self.ball_a),
                                           np.take(radii, self.ball_b))
-        self.wall_ball, wall = grid.wall_pairs(walls) if len(walls) else (_EMPTY, _EMPTY)
+        self.wall_ball, wall = static.near_pairs(positions, radii, self.skin)
         self.wall_index = wall
         self.wall_radius = np.take(radii, self.wall_ball)
-        self.wall_start = take_rows(walls.starts, wall)
-        self.wall_direction = take_rows(walls.directions, wall)
-        self.wall_length = np.take(walls.lengths, wall)
+        self.wall_start = take_rows(static.starts, wall)
+        self.wall_direction = take_rows(static.directions, wall)
+        self.wall_length = np.take(static.lengths, wall)
         self.moved = 0.0
         self.builds += 1
         return True

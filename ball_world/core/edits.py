@@ -368,12 +368,21 @@ def check_speeds(energy, min_mass, min_radius, dt_ns, what):
                                         f'{limit:.3g} m/s it can step')
 
 
-def check_placement(world, entities, arena, x, y, radius, what, skip=None, near=None):
-    """A ball of `radius` at (x, y) fits: inside, overlapping no other ball and no wall.
+def check_placement(world, entities, arena, x, y, radius, what, skip=None, near=None,
+                    cells=None):
+    """A ball of `radius` at (x, y) fits: inside, overlapping no other ball, no wall and no
+    solid cell of the map.
 
-    near: Neighbours of the world's balls, when many balls are placed in one go.
+    near: Neighbours of the world's balls, when many balls are placed in one go. cells: the
+    map's core.solid_cells.CellQueries, or None without a map.
     """
     _check_pose(x, y, radius, arena, what)
+    if cells is not None:
+        hit = cells.first_overlap(x, y, radius)
+        if hit is not None:
+            raise EditRefused(INVALID_POSE, f'{what} ({number_text(x)}, {number_text(y)}) with '
+                                            f'radius {number_text(radius)} m overlaps '
+                                            f'{cells.describe(hit)}')
     hit = first_overlap(x, y, radius, world.positions, world.radii, world.walls, skip, near)
     if hit is not None:
         kind, index = hit

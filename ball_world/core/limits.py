@@ -38,3 +38,15 @@ MAX_DT = 3600.0
 MAX_SIM_TIME_NS = (2**31 - 1) * 10**9
 #: Length of a frame id or an entity name, characters.
 MAX_NAME_LENGTH = 256
+#: Cells of a map (core.occupancy_map): 4096 x 4096, eight times a 2-million-cell warehouse
+#: at 3 cm. Its grid, solid cells and /map message take about 16 MB each at this size, and
+#: decoding it about 200 MB for a moment; every cell is encoded and recorded with numpy.
+MAX_MAP_CELLS = 16_777_216
+#: Bytes of a map's image file: the largest map as a 16-bit ASCII PGM (up to 6 bytes a cell,
+#: 100 MB) or an uncompressed colour PNG fits.
+MAX_MAP_IMAGE_BYTES = 128 << 20
+#: Bytes of a map's YAML file (nav2's are about 150).
+MAX_MAP_YAML_BYTES = 64 << 10
+#: Smallest map resolution, m per cell (SLAM maps use 1 to 10 cm; a ball is at least
+#: MIN_RADIUS).
+MIN_MAP_RESOLUTION = 1e-3

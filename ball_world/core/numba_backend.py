@@ -27,7 +27,7 @@ import hashlib
 
 import numpy as np
 
-from ball_world.core import broadphase, limits, rules, stepping
+from ball_world.core import broadphase, limits, rules, static_geometry, stepping
 from ball_world.core.broadphase import (CELLS_PER_BALL, CELLS_SLACK, grid_shape, LEVEL_RATIO,
                                         PAD, SLACK, widened)
 from ball_world.core.rules import (advance, pair_approaching, pair_response, pair_touching,
@@ -49,8 +49,9 @@ SKIN_RADII = 2.0
 #: Lists are rebuilt a millionth before the skin could close: rounding never decides.
 LISTS_MARGIN = 1.0 - 1e-6
 #: Entries of seed_step's `lists`: rows of candidate pairs and of ball-wall pairs in the
-#: buffers (or rows needed, when they outgrew them), and whether the buffers hold them.
-PAIRS, NEAR_WALLS, FRESH = range(3)
+#: buffers (or rows needed, when they outgrew them), whether the buffers hold them, and how
+#: many times they were built (the stamp of the static index's search).
+PAIRS, NEAR_WALLS, FRESH, EPOCH = range(4)
 #: Columns of the packed wall array the kernels take.
 WALL_COLUMNS = ('start_x', 'start_y', 'end_x', 'end_y', 'w_x', 'w_y', 'length')
 
@@ -87,7 +88,7 @@ def _hash_code(digest, code):
 def _fingerprint():
     """A number that changes whenever code or constants the kernels inline change."""
     digest = hashlib.sha256()
-    for module in (rules, stepping, broadphase):
+    for module in (rules, stepping, broadphase, static_geometry):
         for name, value in sorted(vars(module).items()):
             if getattr(value, '__module__', None) == module.__name__ and hasattr(
                     value, '__code__'):
@@ -288,48 +289,52 @@ def _cell_range(low, high, reach, origin, cell, cells):
 
 
 @_compile
-def _candidate_walls(x, radii, margin, walls, wall_scale, level_starts, level_largest, low,
-                     cell, shape, starts, cell_balls, scale):
-    """(ball, wall) with the ball closer than r + margin to the segment, unsorted: each
-    wall rasterised, column by column, into the cells of each level within reach of it."""
+def _candidate_walls(x, radii, margin, walls, index_grid, index_shape, index_first,
+                     index_items, seen, epoch, scale):
+    """(ball, wall) with the ball closer than r + margin to the segment, in canonical order:
+    each ball, in index order, asks the static buckets its reach covers (one contiguous run
+    of items per column, core.static_geometry.SegmentIndex), meets each wall once (`seen`
+    holds the stamp epoch * N + ball of the last ball that met it), and sorts its few walls.
+    """
     found = np.empty((64, 2), dtype=np.int64)
     count = 0
-    for k in range(cell.shape[0]):
-        nx, ny, stride, base = shape[k, 0], shape[k, 1], shape[k, 2], shape[k, 3]
-        reach = widened(level_largest[k] + margin, max(scale, wall_scale))
-        size = cell[k]
-        for w in range(walls.shape[0]):
-            x0, y0, x1, y1 = walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3]
-            first_col, last_col = _cell_range(min(x0, x1), max(x0, x1), reach, low[k, 0], size,
-                                              nx)
-            dx = x1 - x0
-            dy = y1 - y0
-            for col in range(first_col, last_col + 1):
-                left = low[k, 0] + col * size - reach - x0
-                right = low[k, 0] + (col + 1) * size + reach - x0
-                if dx == 0.0:
-                    t_low = 0.0
-                    t_high = 1.0
-                else:
-                    t_low = min(max(min(left / dx, right / dx), 0.0), 1.0)
-                    t_high = min(max(max(left / dx, right / dx), 0.0), 1.0)
-                ya = y0 + t_low * dy
-                yb = y0 + t_high * dy
-                first_row, last_row = _cell_range(min(ya, yb), max(ya, yb), reach, low[k, 1],
-                                                  size, ny)
-                for row in range(first_row, last_row + 1):
-                    key = base + (col + PAD) * stride + row + PAD
-                    for s in range(starts[key], starts[key + 1]):
-                        i = cell_balls[s]
-                        sx, sy, _ = wall_offset(x[i, 0], x[i, 1], walls[w, 0], walls[w, 1],
-                                                walls[w, 4], walls[w, 5], walls[w, 6])
-                        reach_i = radii[i] + margin
-                        if sx * sx + sy * sy < reach_i * reach_i:
-                            if count == found.shape[0]:
-                                found = _doubled(found)
-                            found[count, 0] = i
-                            found[count, 1] = w
-                            count += 1
+    if index_items.shape[0] == 0:
+        return found[:0]
+    n = x.shape[0]
+    origin_x = index_grid[0]
+    origin_y = index_grid[1]
+    size = index_grid[2]
+    widen = max(scale, index_grid[3])
+    columns = index_shape[0]
+    rows = index_shape[1]
+    for i in range(n):
+        stamp = epoch * n + i
+        reach = widened(radii[i] + margin, widen)
+        first_col, last_col = _cell_range(x[i, 0], x[i, 0], reach, origin_x, size, columns)
+        first_row, last_row = _cell_range(x[i, 1], x[i, 1], reach, origin_y, size, rows)
+        reach_i = radii[i] + margin
+        begin = count
+        for col in range(first_col, last_col + 1):
+            base = col * rows
+            for s in range(index_first[base + first_row], index_first[base + last_row + 1]):
+                w = index_items[s]
+                if seen[w] == stamp:
+                    continue
+                seen[w] = stamp
+                sx, sy, _ = wall_offset(x[i, 0], x[i, 1], walls[w, 0], walls[w, 1],
+                                        walls[w, 4], walls[w, 5], walls[w, 6])
+                if sx * sx + sy * sy < reach_i * reach_i:
+                    if count == found.shape[0]:
+                        found = _doubled(found)
+                    # Insertion into the ball's sorted run (a handful of walls).
+                    j = count
+                    while j > begin and found[j - 1, 1] > w:
+                        found[j, 0] = i
+                        found[j, 1] = found[j - 1, 1]
+                        j -= 1
+                    found[j, 0] = i
+                    found[j, 1] = w
+                    count += 1
     return found[:count]
 
 
@@ -366,16 +371,16 @@ def _canonical(found, rows):
 
 
 @_compile
-def build_candidates(x, radii, walls, wall_scale, margin, members, level_starts,
-                     level_largest):
+def build_candidates(x, radii, walls, index_grid, index_shape, index_first, index_items, seen,
+                     epoch, margin, members, level_starts, level_largest):
     """Candidate pairs and ball-wall pairs within `margin` of touching, in canonical order."""
     low, cell, shape, starts, cell_balls, cell_keys, scale = build_grids(
         x, members, level_starts, level_largest, margin)
     pairs = _candidate_pairs(x, radii, margin, level_starts, low, cell, shape, starts,
                              cell_balls, cell_keys)
-    near_walls = _candidate_walls(x, radii, margin, walls, wall_scale, level_starts,
-                                  level_largest, low, cell, shape, starts, cell_balls, scale)
-    return _canonical(pairs, x.shape[0]), _canonical(near_walls, x.shape[0])
+    near_walls = _candidate_walls(x, radii, margin, walls, index_grid, index_shape,
+                                  index_first, index_items, seen, epoch, scale)
+    return _canonical(pairs, x.shape[0]), near_walls
 
 
 @_compile
@@ -555,9 +560,9 @@ def lists_stale(x, anchor, skin):
 
 
 @_compile
-def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, wall_scale, members,
-              level_starts, level_largest, skin, pair_rows, wall_rows, lists, anchor, best,
-              totals):
+def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, index_grid, index_shape,
+              index_first, index_items, seen, members, level_starts, level_largest, skin,
+              pair_rows, wall_rows, lists, anchor, best, totals):
     """One seed-mode step, planned and split exactly as numpy_backend.NumpyStepper.step.
 
     The candidates are Verlet lists with `skin`, built with the balls at `anchor`, kept
@@ -569,6 +574,10 @@ def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, wall_scale, memb
     rows they need in lists[PAIRS] and lists[NEAR_WALLS], for the caller to grow the
     buffers. Counts into `totals` (zeroed first). Returns STEP_DONE, or STEP_REFUSED having
     put positions and velocities back as they were.
+
+    `walls` packs every static segment (walls, then map runs: pack_walls), and index_* is
+    their bucket index (core.static_geometry.SegmentIndex); `seen` (one entry per segment)
+    is the candidate search's scratch, stamped with lists[EPOCH], which counts the builds.
     """
     totals[:] = 0
     speed, energy = speed_and_energy(v, masses)
@@ -587,8 +596,11 @@ def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, wall_scale, memb
     while done < count:
         move(x, v, h)
         if not fresh or lists_stale(x, anchor, skin):
-            candidates, near_walls = build_candidates(x, radii, walls, wall_scale, skin,
-                                                      members, level_starts, level_largest)
+            lists[EPOCH] += 1
+            candidates, near_walls = build_candidates(x, radii, walls, index_grid, index_shape,
+                                                      index_first, index_items, seen,
+                                                      lists[EPOCH], skin, members,
+                                                      level_starts, level_largest)
             anchor[:] = x
             fresh = True
             rebuilt = True
@@ -630,11 +642,11 @@ def ensure_fresh_cache():
     return True
 
 
-def pack_walls(walls):
-    """The walls as one (M, 7) array in WALL_COLUMNS order, and the largest |coordinate|."""
-    packed = np.column_stack((walls.starts, walls.ends, walls.directions, walls.lengths))
-    scale = float(np.abs(walls.segments).max()) if len(walls) else 0.0
-    return np.ascontiguousarray(packed, dtype=np.float64).reshape(-1, 7), scale
+def pack_walls(static):
+    """Every static segment (a core.static_geometry.StaticGeometry: walls, then map runs) as
+    one (M, 7) array in WALL_COLUMNS order."""
+    packed = np.column_stack((static.starts, static.ends, static.directions, static.lengths))
+    return np.ascontiguousarray(packed, dtype=np.float64).reshape(-1, 7)
 
 
 def radius_classes(radii):
@@ -664,21 +676,30 @@ class NumbaStepper:
     def step(self, world, dt, travel, totals):
         """One seed-mode step; counts into `totals` (zeroed first); STEP_DONE or STEP_REFUSED."""
         if self._prepared is None:
-            walls, wall_scale = pack_walls(world.walls)
+            static = world.static
+            index = static.index
             n = len(world)
-            self._prepared = (float(world.masses.min()), walls, wall_scale,
+            self._prepared = (float(world.masses.min()), pack_walls(static), index.grid,
+                              index.shape, index.first, index.items,
+                              np.full(len(static), -1, np.int64),
                               *radius_classes(world.radii), SKIN_RADII * world.min_radius,
                               np.empty((4 * n, 2), dtype=np.int64),
-                              np.empty((n, 2), dtype=np.int64), np.zeros(3, dtype=np.int64),
+                              np.empty((n, 2), dtype=np.int64), np.zeros(4, dtype=np.int64),
                               np.empty((n, 2)), np.full(n, -1, np.int64))
-        (min_mass, walls, wall_scale, members, level_starts, largest, skin, pair_rows,
-         wall_rows, lists, anchor, best) = self._prepared
+        (min_mass, walls, index_grid, index_shape, index_first, index_items, seen, members,
+         level_starts, largest, skin, pair_rows, wall_rows, lists, anchor, best) = self._prepared
         status = seed_step(world.positions, world.velocities, world.radii, world.masses,
-                           min_mass, dt, travel, walls, wall_scale, members, level_starts,
-                           largest, skin, pair_rows, wall_rows, lists, anchor, best, totals)
+                           min_mass, dt, travel, walls, index_grid, index_shape, index_first,
+                           index_items, seen, members, level_starts, largest, skin, pair_rows,
+                           wall_rows, lists, anchor, best, totals)
         if not lists[FRESH] and status == STEP_DONE:
             self._grow(pair_rows, wall_rows, lists)
         return status
+
+    @property
+    def buffers(self):
+        """(pair_rows, wall_rows, lists) of seed_step, once a step has made them."""
+        return self._prepared[-5:-2]
 
     def _grow(self, pair_rows, wall_rows, lists):
         """Buffers for lists that outgrew them, with room to spare; the next step rebuilds."""

@@ -188,7 +188,7 @@ class NumpyStepper:
         done = 0
         while done < count:
             move(x, v, h)
-            self.lists.update(x, world.radii, world.walls, speed * h)
+            self.lists.update(x, world.radii, world.static, speed * h)
             contacts = find_contacts(x, self.lists)
             fastest = resolve(v, world.masses, contacts, self.best, totals)
             done += 1

@@ -42,6 +42,9 @@ MAX_SPEED = 1e6
 _NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
 #: Most agents a world may have (each costs a subscription and two messages per step).
 MAX_AGENTS = 10_000
+#: Largest alpha of agent.odom.noise: a variance of 10 times the motion squared already
+#: makes odometry useless; beyond it a value is a mistake.
+MAX_ODOMETRY_ALPHA = 10.0
 
 
 class ParameterError(ValueError):
@@ -239,6 +242,26 @@ def _box(arena):
 def _frame(frame_id):
     if not frame_id.strip():
         return 'must name a frame (tf2 has no empty frame id)'
+    if frame_id.endswith('/'):
+        return f"{frame_id[:64]!r} ends with '/': a tf2 frame id names a frame, not a prefix"
+    return _frame_text(frame_id)
+
+
+def _prefix(prefix):
+    return _frame_text(prefix) if prefix else None
+
+
+def _frame_text(text):
+    """Why `text` cannot begin or be part of a tf2 frame id, or None: tf2 refuses a leading
+    '/' (ROS 1's global names), and whitespace or an empty segment ('a//b') would make
+    frames that look alike and are not."""
+    if text.startswith('/'):
+        return (f"{text[:64]!r} starts with '/', which tf2 refuses in a frame id (frames "
+                "are not ROS names: write it without the '/')")
+    if any(character.isspace() for character in text):
+        return f'{text[:64]!r} contains whitespace, which no frame id should'
+    if '//' in text:
+        return f"{text[:64]!r} has an empty segment ('//')"
     return None
 
 
@@ -266,6 +289,12 @@ PARAMETERS = (
               'of four walls, m; empty: no box.', sizes=(0, 4), rule=_box, **_XY),
     Parameter('walls', DOUBLE_ARRAY, [], 'More wall segments, flat x1, y1, x2, y2, ... in m.',
               multiple_of=4, max_size=4 * limits.MAX_WALLS, **_XY),
+    Parameter('map', STRING, '', "A map in nav2_map_server's format: the YAML's path "
+              '(relative to the working directory; its image relative to the YAML). Occupied '
+              'cells, and everything outside the image, are solid walls; /map publishes it. '
+              "'': no map.", AT_START, max_length=MAX_PATH_LENGTH),
+    Parameter('map.unknown_solid', BOOL, True, 'Unknown cells (-1) of the map are solid too (a '
+              'map is closed where nobody looked).'),
     Parameter('balls.x', DOUBLE_ARRAY, [], 'Explicit balls: x of each centre, m.', **_BALLS,
               **_XY),
     Parameter('balls.y', DOUBLE_ARRAY, [], 'Explicit balls: y of each centre, m.', **_BALLS,
@@ -299,7 +328,7 @@ PARAMETERS = (
               'driven by <name>/cmd_vel), e.g. [ball_0].', max_size=MAX_AGENTS),
     Parameter('frame_prefix', STRING, '', "Prefix of the agents' frames (<p><name>/odom, "
               '<p><name>/base_link), so two worlds on one graph do not clash.', AT_START,
-              max_length=limits.MAX_NAME_LENGTH),
+              max_length=limits.MAX_NAME_LENGTH, rule=_prefix),
     Parameter('agent.max_speed', DOUBLE, 2.0, 'Agents: the largest commanded speed followed, '
               'm/s.', ON_RESET, 0.0, 1000.0),
     Parameter('agent.max_accel', DOUBLE, 4.0, 'Agents: how fast the velocity follows the '
@@ -308,6 +337,18 @@ PARAMETERS = (
               'rad/s.', ON_RESET, 0.0, 1000.0),
     Parameter('agent.cmd_timeout', DOUBLE, 0.5, 'Agents: simulated s without a command before '
               'an agent brakes to rest; 0 holds the last command.', ON_RESET, 0.0, 3600.0),
+    Parameter('agent.drive', STRING, 'omni', "Agents: 'omni' follows linear.x and linear.y "
+              "(holonomic); 'diff' is a differential drive (unicycle): linear.y ignored, the "
+              'velocity kept along the heading.', choices=('omni', 'diff')),
+    Parameter('agent.odom.noise', DOUBLE_ARRAY, [0.0, 0.0, 0.0, 0.0], 'Agents: alpha1..alpha4 '
+              'of the odometry motion model (Probabilistic Robotics 5.4; variances per step): '
+              'rotation noise from rotation and from translation, translation noise from '
+              'translation and from rotation; seeded by random.seed, the agent and the step. '
+              'All 0: odometry is the ground truth.', sizes=(4,), low=0.0,
+              high=MAX_ODOMETRY_ALPHA),
+    Parameter('agent.odom.tf_static', BOOL, True, 'Agents: publish frame_id -> <p><name>/odom '
+              '(identity) on /tf_static; false when a localization node (AMCL, slam_toolbox) '
+              'publishes map -> odom.'),
     Parameter('agent.cmd_vel_stamped', BOOL, False, 'Agents: take geometry_msgs/msg/'
               'TwistStamped on cmd_vel instead of Twist.', AT_START),
     Parameter('agent.scan.samples', INTEGER, 360, "Agents' lidar: beams per scan; 0: no "
@@ -326,7 +367,9 @@ PARAMETERS = (
               'simulated time.', ON_RESET, 1e-3, 1e6),
     Parameter('agent.scan.noise_stddev', DOUBLE, 0.01, "Agents' lidar: Gaussian range noise, "
               'm, seeded by random.seed, the agent and the step.', ON_RESET, 0.0, 1000.0),
-    Parameter('publish_clock', BOOL, False, 'Publish /clock after each step.', AT_ONCE),
+    Parameter('publish_clock', BOOL, True, 'Publish /clock (simulation time) with each step, '
+              'before its /tf, as Gazebo and Stage do: clients with use_sim_time follow it.',
+              AT_ONCE),
     Parameter('markers.rate_hz', DOUBLE, 10.0, 'Wall-clock rate of the RViz markers; 0 turns '
               'them off. The node lowers it when markers would take over 5% of its time.',
               AT_ONCE, 0.0, 1000.0),

@@ -13,8 +13,15 @@ Random balls come from numpy's PCG64 generator seeded with `random.seed`, so the
 parameters give the same world on any machine with the same numpy. The random numbers are
 drawn in blocks, but consumed in the same order and transformed with the same arithmetic as
 one `rng.uniform(low, high)` call each, so worlds are identical to those of earlier versions.
+
+A map (`map`, core.occupancy_map) adds solid cells: explicit balls may not overlap them (nor
+reach outside the grid), and random balls go in free cells (inside `arena` if one is given):
+a free cell is drawn uniformly, then a point uniformly inside it, so the balls are uniform
+over the free area and the same seed gives the same world. The world is built from the
+loaded map, never from files: the node loads it once, a re-simulation from the recording.
 """
 import math
+from typing import NamedTuple, Optional
 
 import numpy as np
 
@@ -22,13 +29,14 @@ from ball_world.core import limits
 from ball_world.core.broadphase import grid_pairs, wall_pairs
 from ball_world.core.parameters import (BALL_FIELDS, checked, DEFAULTS, list_text,
                                         number_text, ParameterError)
+from ball_world.core.solid_cells import CellQueries
 from ball_world.core.world import BACKENDS, numba_installed, Walls, World
 
 #: ScenarioError is the parameter table's error: a world is refused by naming a parameter.
 ScenarioError = ParameterError
 
-__all__ = ['BALL_FIELDS', 'build_world', 'DEFAULTS', 'describe', 'ScenarioError',
-           'step_duration_ns']
+__all__ = ['BALL_FIELDS', 'build_scene', 'build_world', 'DEFAULTS', 'describe', 'Scene',
+           'ScenarioError', 'step_duration_ns']
 
 #: Placement tries per random ball before giving up on fitting them all.
 PLACEMENT_TRIES = 2000
@@ -114,7 +122,7 @@ def _first_ball_overlap(positions, radii):
     return int(a[first]), int(b[first])
 
 
-def _explicit_balls(params, arena, walls):
+def _explicit_balls(params, arena, walls, cells):
     """The `balls.*` parameters, checked: equal lengths, inside, not overlapping."""
     columns = {name: np.array(params[name], dtype=np.float64) for name in BALL_FIELDS}
     n = len(columns['balls.x'])
@@ -137,6 +145,14 @@ def _explicit_balls(params, arena, walls):
                                            f'{number_text(radius[i])} is not inside the arena '
                                            f'{list_text(arena)}')
     positions = np.stack((x, y), axis=1)
+    if cells is not None:
+        hit = cells.first_overlapping_ball(positions, radius)
+        if hit is not None:
+            i, what = hit
+            raise ScenarioError('balls.x', f'ball {i} at ({number_text(x[i])}, '
+                                           f'{number_text(y[i])}) with radius '
+                                           f'{number_text(radius[i])} overlaps '
+                                           f'{cells.describe(what)}')
     overlap = _first_wall_overlap(positions, radius, walls)
     if overlap is not None:
         i, k = overlap
@@ -206,8 +222,39 @@ def _clear_of_walls(x, y, r, walls):
     return bool(np.all(dx * dx + dy * dy >= r * r))
 
 
-def _random_balls(params, arena, walls, placed):
-    """`random.count` balls placed uniformly in the arena, overlapping nothing."""
+class _Region(NamedTuple):
+    """Where random balls go: the arena box, or a map's free cells (inside the arena)."""
+
+    name: str  # 'the arena', "the map's free area"
+    area: float  # m^2
+    cells: Optional[CellQueries]  # the map's, or None
+    free: Optional[np.ndarray]  # flat indices of the free cells to draw from
+
+
+def _region(params, arena, cells):
+    count = params['random.count']
+    if cells is None:
+        if arena is None:
+            raise ScenarioError('random.count', f'{count} random balls need an arena to be '
+                                                'placed in; set arena or random.count: 0')
+        xmin, ymin, xmax, ymax = arena
+        return _Region('the arena', (xmax - xmin) * (ymax - ymin), None, None)
+    name = "the map's free area" + (' inside the arena' if arena is not None else '')
+    free = cells.free(arena)
+    if not len(free):
+        raise ScenarioError('random.count', f'{count} random balls need free cells, and '
+                                            f'{name} is empty; set random.count: 0')
+    return _Region(name, cells.free_area(arena), cells, free)
+
+
+def _inside(arena, x, y, r):
+    xmin, ymin, xmax, ymax = arena
+    return xmin + r <= x <= xmax - r and ymin + r <= y <= ymax - r
+
+
+def _random_balls(params, arena, walls, placed, cells=None):
+    """`random.count` balls placed uniformly in the arena or the map's free cells,
+    overlapping nothing."""
     count = params['random.count']
     rmin, rmax = params['random.radius']
     speed = params['random.speed']
@@ -215,9 +262,7 @@ def _random_balls(params, arena, walls, placed):
     empty = (np.empty((0, 2)), np.empty((0, 2)), np.empty(0), np.empty(0))
     if count == 0:
         return empty
-    if arena is None:
-        raise ScenarioError('random.count', f'{count} random balls need an arena to be placed '
-                                            'in; set arena or random.count: 0')
+    region = _region(params, arena, cells)
     for r in (rmin, rmax):
         mass = density * math.pi * r * r
         if not limits.MIN_MASS <= mass <= limits.MAX_MASS:
@@ -225,20 +270,21 @@ def _random_balls(params, arena, walls, placed):
                                                   f'a mass of {mass:.3g} kg, outside '
                                                   f'{number_text(limits.MIN_MASS)} to '
                                                   f'{number_text(limits.MAX_MASS)} kg')
-    xmin, ymin, xmax, ymax = arena
-    if 2 * rmin > min(xmax - xmin, ymax - ymin):
-        raise ScenarioError('random.radius', f'balls of radius {number_text(rmin)} do not fit '
-                                             'in the arena')
+    if arena is not None:
+        xmin, ymin, xmax, ymax = arena
+        if 2 * rmin > min(xmax - xmin, ymax - ymin):
+            raise ScenarioError('random.radius', f'balls of radius {number_text(rmin)} do not '
+                                                 'fit in the arena')
     mean_area = math.pi * (rmax ** 3 - rmin ** 3) / (3 * (rmax - rmin)) if rmax > rmin \
         else math.pi * rmin * rmin
-    fraction = count * mean_area / ((xmax - xmin) * (ymax - ymin))
+    fraction = count * mean_area / region.area
     if fraction > MAX_RANDOM_AREA_FRACTION:
         raise ScenarioError('random.count', f'{count:,} random balls would cover about '
-                                            f'{fraction:.0%} of the arena; random placement '
-                                            f'cannot fit more than '
+                                            f'{fraction:.0%} of {region.name}; random '
+                                            f'placement cannot fit more than '
                                             f'{MAX_RANDOM_AREA_FRACTION:.0%}: lower '
-                                            'random.count or random.radius, or enlarge the '
-                                            'arena')
+                                            'random.count or random.radius, or enlarge '
+                                            f'{region.name}')
     positions, _, radii, _ = placed
     occupancy = _Occupancy(2.0 * max(rmax, float(radii.max()) if len(radii) else rmax))
     for (x, y), r in zip(positions.tolist(), radii.tolist()):
@@ -251,8 +297,15 @@ def _random_balls(params, arena, walls, placed):
         r = uniform(rmin, rmax)
         for _ in range(min(PLACEMENT_TRIES, budget)):
             budget -= 1
-            x = uniform(xmin + r, max(xmin + r, xmax - r))
-            y = uniform(ymin + r, max(ymin + r, ymax - r))
+            if cells is None:
+                x = uniform(xmin + r, max(xmin + r, xmax - r))
+                y = uniform(ymin + r, max(ymin + r, ymax - r))
+            else:
+                x, y = _in_free_cell(uniform, region)
+                if arena is not None and not _inside(arena, x, y, r):
+                    continue
+                if cells.first_overlap(x, y, r) is not None:
+                    continue
             if occupancy.overlaps(x, y, r):
                 continue
             if len(walls) and not _clear_of_walls(x, y, r, walls):
@@ -261,13 +314,24 @@ def _random_balls(params, arena, walls, placed):
         else:
             raise ScenarioError('random.count', f'placed only {i} of {count} random balls '
                                                 'without overlap; lower random.count or '
-                                                'random.radius, or enlarge the arena')
+                                                f'random.radius, or enlarge {region.name}')
         occupancy.add(x, y, r)
         heading = uniform(0.0, 2.0 * math.pi)
         magnitude = uniform(0.0, speed)
         out[i] = (x, y, magnitude * math.cos(heading), magnitude * math.sin(heading), r,
                   density * math.pi * r * r)
     return out[:, 0:2], out[:, 2:4], out[:, 4], out[:, 5]
+
+
+def _in_free_cell(uniform, region):
+    """A point drawn uniformly in a free cell drawn uniformly (uniform over the free area)."""
+    free = region.free
+    pick = min(int(uniform(0.0, float(len(free)))), len(free) - 1)
+    row, column = divmod(int(free[pick]), region.cells.cells.columns)
+    cells = region.cells.cells
+    x = cells.origin_x + (column + uniform(0.0, 1.0)) * cells.resolution
+    y = cells.origin_y + (row + uniform(0.0, 1.0)) * cells.resolution
+    return x, y
 
 
 def _check_world_limits(params, box, walls, explicit_count, radii):
@@ -304,8 +368,35 @@ def _check_speeds(world, params, dt_ns):
                               'or raise the smallest radius or mass')
 
 
-def build_world(params):
-    """Build the World the parameters describe, or raise ScenarioError naming the culprit."""
+class Scene(NamedTuple):
+    """A built world and what placing balls in it asks of its map (None without one)."""
+
+    world: World
+    cells: Optional[CellQueries]
+
+
+def build_world(params, occupancy_map=None):
+    """Build the World the parameters describe, or raise ScenarioError naming the culprit.
+
+    occupancy_map: the loaded map (core.occupancy_map.OccupancyMap) when `map` names one.
+    """
+    return build_scene(params, occupancy_map).world
+
+
+def map_cells(params, occupancy_map):
+    """CellQueries of the map's solid cells (None without a map), checked against `map`."""
+    params = checked(params)
+    if not params['map']:
+        return None
+    if occupancy_map is None:
+        raise ScenarioError('map', 'names a map, but none was loaded (the world is built from '
+                                   "the map's files read by ball_world.map_files, or from a "
+                                   "recording's copy)")
+    return CellQueries(occupancy_map.solid_cells(params['map.unknown_solid']))
+
+
+def build_scene(params, occupancy_map=None):
+    """The World the parameters describe and its map's CellQueries (see build_world)."""
     params = checked(params)
     dt_ns = step_duration_ns(params)
     box, arena = _arena_walls(params)
@@ -315,17 +406,19 @@ def build_world(params):
     radii_bound = np.array(params['balls.radius']
                            + ([rmin, rmax] if params['random.count'] else []))
     _check_world_limits(params, box, walls, explicit_count, radii_bound)
-    explicit = _explicit_balls(params, arena, walls)
-    extra = _random_balls(params, arena, walls, explicit)
+    cells = map_cells(params, occupancy_map)
+    explicit = _explicit_balls(params, arena, walls, cells)
+    extra = _random_balls(params, arena, walls, explicit, cells)
     positions, velocities, radii, masses = (
         np.concatenate((a, b)) for a, b in zip(explicit, extra))
     if params['physics.mode'] == 'exact' and not numba_installed():
         raise ScenarioError('physics.mode', "'exact' needs the numba package (pip install "
                                             "numba); use 'seed'")
     world = World(positions, velocities, radii, masses, walls=np.concatenate((box, walls)),
-                  backend=_physics_backend(params), mode=params['physics.mode'])
+                  backend=_physics_backend(params), mode=params['physics.mode'],
+                  solid_cells=None if cells is None else cells.cells)
     _check_speeds(world, params, dt_ns)
-    return world
+    return Scene(world, cells)
 
 
 def physics_backend(params):

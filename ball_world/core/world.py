@@ -13,6 +13,9 @@ Choices the seed leaves open, made here:
 - Segment walls: inside a segment the seed's wall rule applies as written; beyond an end
   point the contact normal is the direction from that end point to the ball's centre, and
   the velocity is reflected about it.
+- A map's solid cells are walls too: the boundary of the solid region as merged runs of
+  cell edges (core.static_geometry), whose end points are true corners, so the same two
+  rules hold at a cell's edge (inside a run) and at a convex corner (its end point).
 - Tunnelling: a step is split into equal substeps so that no ball moves more than
   `MAX_TRAVEL` (half) of the smallest radius in one substep. A ball that was not touching
   a wall cannot reach its far side then, and two balls close by at most half the sum of
@@ -36,6 +39,7 @@ import numpy as np
 
 from ball_world.core import limits
 from ball_world.core.broadphase import dot_rows
+from ball_world.core.static_geometry import StaticGeometry
 from ball_world.core.stepping import (BACKENDS, MAX_TRAVEL, numba_installed, reachable_speed,
                                       resolve_backend, speed_limit, STEP_REFUSED, StepStats,
                                       SubstepLimitExceeded, travel_per_substep)
@@ -141,7 +145,8 @@ def _stepper(backend):
 
 
 class World:
-    """N balls (positions, velocities, radii, masses) and M wall segments, as numpy arrays.
+    """N balls (positions, velocities, radii, masses), M wall segments and an optional map's
+    solid cells, as numpy arrays.
 
     Ball i is row i of every array. The step never reorders balls; only `remove_balls`
     renumbers them (the others keep their relative order). Change the balls through the
@@ -150,10 +155,15 @@ class World:
     `backend` is 'numpy', 'numba' or 'auto' (numba where installed); `self.backend` is
     always the concrete one, and the choice never changes a trajectory. `mode` is one of
     MODES; 'exact' needs numba whatever the backend.
+
+    `solid_cells` (a core.solid_cells.SolidCells, or None) makes a map's solid cells walls:
+    the boundary of the solid region, in merged runs, numbered after `walls`
+    (core.static_geometry builds `static`, the one index of all static geometry, once). A
+    World without one steps bit for bit as it always did.
     """
 
     def __init__(self, positions, velocities, radii, masses, walls=(), backend='auto',
-                 mode='seed'):
+                 mode='seed', solid_cells=None):
         if mode not in MODES:
             raise ValueError(f'unknown mode {mode!r}; expected one of {", ".join(MODES)}')
         if mode == 'exact' and not numba_installed():
@@ -163,6 +173,8 @@ class World:
             positions, velocities, radii, masses)
         _check_world(self.radii)
         self.walls = Walls(walls)
+        self.solid_cells = solid_cells.checked() if solid_cells is not None else None
+        self.static = StaticGeometry(self.walls, self.solid_cells)
         self.backend = resolve_backend(backend)
         self._stepper = _stepper(self.backend)
         self._edited()

@@ -14,10 +14,11 @@ templates are cached per set of frame names (agents are few and change rarely).
 Agents are planar: a pose is (x, y) with z 0 and a heading (yaw about z, as a quaternion with
 w >= 0, core/orientation.py), a twist (vx, vy, wz) with the other components 0.
 
-Covariances are all zeros, a documented choice: odometry here is ground truth, exact to the
-bit, and a zero covariance says "known exactly" (Stage and Flatland's ground-truth odometry do
-the same). Consumers that need a positive-definite covariance (a Kalman filter fusing it) should
-treat it as a measurement of their own choosing.
+Covariances of ground truth are zeros, a documented choice: it is exact to the bit, and a zero
+covariance says "known exactly" (Stage and Flatland's ground-truth odometry do the same); so is
+odom without agent.odom.noise. With noise, odom carries the motion model's covariances
+(core.odometry). Consumers that need a positive-definite covariance from ground truth (a
+Kalman filter fusing it) should treat it as a measurement of their own choosing.
 """
 import functools
 import struct
@@ -167,13 +168,13 @@ def _odometry_batch(frame_ids: tuple, child_frame_ids: tuple) -> _Batch:
 
 
 def encode_odometry(stamp_ns: int, frame_ids, child_frame_ids, positions, yaws,
-                    twists) -> list:
+                    twists, pose_covariances=None, twist_covariances=None) -> list:
     """nav_msgs/msg/Odometry of each agent: one message's bytes per agent, in order.
 
     Agent i: header (stamp_ns, frame_ids[i]), child_frame_ids[i], pose (x, y, 0) with the
     heading yaws[i] as a quaternion, twist (vx, vy, 0) and (0, 0, wz) from twists[i], which are
-    in the child frame (REP 105: odometry's twist is in the body frame). Covariances are zeros
-    (see the module's docstring).
+    in the child frame (REP 105: odometry's twist is in the body frame). Covariances: (N, 36)
+    row-major 6x6 each when given, else zeros (see the module's docstring).
     """
     frame_ids, child_frame_ids = _frame_pairs(frame_ids, child_frame_ids)
     positions, yaws, twists = _planar(positions, yaws, twists, len(frame_ids))
@@ -181,6 +182,10 @@ def encode_odometry(stamp_ns: int, frame_ids, child_frame_ids, positions, yaws,
     twist = values[:, _ODOM_TWIST]
     twist[:, 0:2] = twists[:, 0:2]
     twist[:, 5] = twists[:, 2]
+    if pose_covariances is not None:
+        values[:, _ODOM_POSE_COVARIANCE] = pose_covariances
+    if twist_covariances is not None:
+        values[:, _ODOM_TWIST_COVARIANCE] = twist_covariances
     return _odometry_batch(frame_ids, child_frame_ids).fill(stamp_ns, values)
 
 

@@ -8,9 +8,14 @@ Per step, with `<ns>` the node's namespace (that of `balls`):
 - before the step's `balls`: every command an agent took, as received, on
   `<ns>/<name>/cmd_vel` (Twist, or TwistStamped with agent.cmd_vel_stamped), at the log time
   of the first step it acted on;
-- after it: `<ns>/<name>/odom` of every agent, `/tf`, and `/tf_static` when the set of agents
-  changed (a segment's first step included), as the node publishes them; at a scan step,
-  `<ns>/<name>/scan` of every agent with a scanner (ball_world.scans).
+- after it: `<ns>/<name>/odom` and `<ns>/<name>/ground_truth` of every agent, `/tf`, and
+  `/tf_static` when the set of agents changed (a segment's first step included; never with
+  agent.odom.tf_static false), as the node publishes them; `<ns>/<name>/bumper` of every
+  agent hit in the step; at a scan step, `<ns>/<name>/scan` of every agent with a scanner
+  (ball_world.scans).
+
+The reader's step roles (agent_role) are cmd_vel, odom and /tf; scans, ground truth and
+bumpers are read as topics of their own (AGENT_MESSAGE_KINDS), beside the steps.
 """
 import re
 
@@ -26,12 +31,18 @@ ODOM = 'odom'
 TF = 'tf'
 TF_STATIC = 'tf_static'
 SCAN = 'scan'
+GROUND_TRUTH = 'ground_truth'
+BUMPER = 'bumper'
+#: Per-agent topics a re-simulation compares byte for byte, read beside the steps.
+AGENT_MESSAGE_KINDS = (SCAN, GROUND_TRUTH, BUMPER)
 TF_TOPIC = '/tf'
 TF_STATIC_TOPIC = '/tf_static'
 TYPES = {COMMAND: 'geometry_msgs/msg/Twist', ODOM: 'nav_msgs/msg/Odometry',
          TF: 'tf2_msgs/msg/TFMessage', TF_STATIC: 'tf2_msgs/msg/TFMessage',
-         SCAN: 'sensor_msgs/msg/LaserScan'}
+         SCAN: 'sensor_msgs/msg/LaserScan', GROUND_TRUTH: 'nav_msgs/msg/Odometry',
+         BUMPER: 'geometry_msgs/msg/Vector3Stamped'}
 STAMPED_COMMAND = 'geometry_msgs/msg/TwistStamped'
+_NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
 _AGENT_TOPIC = re.compile(r'(?P<namespace>.*)/(?P<name>[A-Za-z][A-Za-z0-9_]*)/'
                           r'(?P<kind>cmd_vel|odom)')
 
@@ -53,18 +64,32 @@ def before_step(record, namespace, parameters):
 
 
 def after_step(record, namespace):
-    """(topic, type, role, bytes) of the agents' odom, /tf and /tf_static of this step."""
+    """(topic, type, role, bytes) of the agents' odom, ground truth, /tf, /tf_static,
+    bumpers and scans of this step."""
     frame = record.agents
     if frame is None:
         return []
     messages = [(f'{namespace}/{name}/{ODOM}', TYPES[ODOM], ODOM, data)
                 for name, data in zip(frame.names, frame.odom_cdr)]
+    messages += [(f'{namespace}/{name}/{GROUND_TRUTH}', TYPES[GROUND_TRUTH], GROUND_TRUTH,
+                  data) for name, data in zip(frame.names, frame.ground_truth_cdr)]
     messages.append((TF_TOPIC, TYPES[TF], TF, frame.tf_cdr))
     if frame.tf_static_cdr is not None:
         messages.append((TF_STATIC_TOPIC, TYPES[TF_STATIC], TF_STATIC, frame.tf_static_cdr))
+    messages += [(f'{namespace}/{bumper.name}/{BUMPER}', TYPES[BUMPER], BUMPER, bumper.cdr)
+                 for bumper in frame.bumpers]
     messages += [(f'{namespace}/{scan.name}/{SCAN}', TYPES[SCAN], SCAN, scan.cdr)
                  for scan in frame.scans]
     return messages
+
+
+def agent_message(topic):
+    """(kind, agent name) of a recorded scan, ground truth or bumper topic, or None."""
+    head, _, kind = topic.rpartition('/')
+    name = head.rpartition('/')[2]
+    if kind in AGENT_MESSAGE_KINDS and _NAME.fullmatch(name):
+        return kind, name
+    return None
 
 
 def agent_role(topic, namespaces):

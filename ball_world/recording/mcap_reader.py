@@ -25,7 +25,10 @@ order, with which radii and masses, so impulses find their ball by name and ever
 carries the balls as they were at its step.
 """
 import bisect
+import dataclasses
 from dataclasses import dataclass
+import functools
+import hashlib
 import heapq
 import io
 import json
@@ -38,8 +41,8 @@ import zlib
 
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
-from mcap.records import (Attachment, Channel, Chunk, ChunkIndex, DataEnd, Footer, Header,
-                          Message, Metadata, MetadataIndex, Schema, Statistics)
+from mcap.records import (Attachment, AttachmentIndex, Channel, Chunk, ChunkIndex, DataEnd,
+                          Footer, Header, Message, Metadata, MetadataIndex, Schema, Statistics)
 from mcap.stream_reader import breakup_chunk
 from mcap.summary import Summary
 import numpy as np
@@ -47,14 +50,16 @@ import yaml
 
 from ball_world.core import limits
 from ball_world.core.edits import NAME_PATTERN
+from ball_world.core.occupancy_map import load_map, MapError, MapFiles
 from ball_world.core.parameters import checked, ParameterError
 from ball_world.core.scenario import build_world, step_duration_ns
 from ball_world.msgs.cdr import (decode_pose_array, decode_state, decode_state_layout,
                                  decode_string, decode_vector3_stamped)
+from ball_world.msgs.map_cdr import encode_occupancy_grid
 from ball_world.recording import agent_topics
 from ball_world.recording.files import open_regular
-from ball_world.recording.mcap_writer import (EVENT_ROLES, flatten_parameters, METADATA_NAME,
-                                              NODE_NAME, STEP_TOPICS)
+from ball_world.recording.mcap_writer import (EVENT_ROLES, flatten_parameters, MAP_KEYS,
+                                              METADATA_NAME, NODE_NAME, STEP_TOPICS)
 from ball_world.recording.resume import parse_resume, ResumeState
 from ball_world.step_record import (AppliedEdit, AppliedImpulse, PendingEvents, RunInfo,
                                     STATS_FIELDS, StepRecord, WorldSnapshot)
@@ -106,8 +111,14 @@ _SUMMARY_PARSERS = {
     Opcode.CHANNEL: Channel.read,
     Opcode.CHUNK_INDEX: ChunkIndex.read,
     Opcode.METADATA_INDEX: MetadataIndex.read,
+    Opcode.ATTACHMENT_INDEX: AttachmentIndex.read,
     Opcode.STATISTICS: Statistics.read,
 }
+#: Longest name of a map file a segment may give (core.parameters' longest path).
+MAX_MAP_NAME = 4096
+#: Largest attachment read as a map file: the largest map image (core.limits).
+MAX_MAP_ATTACHMENT = limits.MAX_MAP_IMAGE_BYTES
+_SHA256 = re.compile(r'[0-9a-f]{64}')
 
 
 class RecordingError(Exception):
@@ -306,6 +317,8 @@ def _fill_summary(summary, section):
                 summary.chunk_indexes.append(record)
             elif isinstance(record, MetadataIndex):
                 summary.metadata_indexes.append(record)
+            elif isinstance(record, AttachmentIndex):
+                summary.attachment_indexes.append(record)
             else:
                 summary.statistics = record
         position = body_at + length
@@ -462,6 +475,76 @@ def parse_edits(messages, impulse_count):
     return tuple(edits)
 
 
+# The map's files ---------------------------------------------------------------------
+
+def _map_reference(values):
+    """(YAML name, image name, YAML SHA-256, image SHA-256) from segment metadata, or None."""
+    present = [key for key in MAP_KEYS if key in values]
+    if not present:
+        return None
+    if len(present) != len(MAP_KEYS):
+        missing = [key for key in MAP_KEYS if key not in values]
+        raise RecordingError(f"it names a map but lacks '{missing[0]}'")
+    names = [values[key] for key in MAP_KEYS[:2]]
+    hashes = [values[key] for key in MAP_KEYS[2:]]
+    for key, name in zip(MAP_KEYS, names):
+        if not isinstance(name, str) or not name or len(name) > MAX_MAP_NAME \
+                or not name.isprintable():
+            raise RecordingError(f"'{key}' is not a file name: {_text(name)}")
+    for key, digest in zip(MAP_KEYS[2:], hashes):
+        if not isinstance(digest, str) or not _SHA256.fullmatch(digest):
+            raise RecordingError(f"'{key}' is not a SHA-256 digest: {_text(digest)}")
+    return (*names, *hashes)
+
+
+def _map_names(metadata):
+    """The map file names the 'ball_world' metadata records give (attachments to read)."""
+    return {record.metadata[key] for record in metadata for key in MAP_KEYS[:2]
+            if key in record.metadata}
+
+
+def _attached(attachments, name, digest):
+    """The bytes of the attachment called `name` whose SHA-256 is `digest`, or None."""
+    for attachment_name, data in attachments:
+        if attachment_name == name and hashlib.sha256(data).hexdigest() == digest:
+            return data
+    return None
+
+
+def _with_map_files(segments, attachments):
+    """The segments, each that names a map holding its files' bytes (RecordingError when
+    the file does not have them)."""
+    found = []
+    for segment in segments:
+        reference = segment.map_reference
+        if reference is not None:
+            yaml_name, image_name, yaml_digest, image_digest = reference
+            yaml_bytes = _attached(attachments, yaml_name, yaml_digest)
+            image_bytes = _attached(attachments, image_name, image_digest)
+            for name, data in ((yaml_name, yaml_bytes), (image_name, image_bytes)):
+                if data is None:
+                    raise RecordingError(f'segment {segment.index}: its map file '
+                                         f'{_text(name)} is not attached to the recording')
+            segment = dataclasses.replace(segment, map_files=MapFiles(
+                yaml_name=yaml_name, yaml_bytes=yaml_bytes, image_name=image_name,
+                image_bytes=image_bytes))
+        found.append(segment)
+    return found
+
+
+@functools.lru_cache(maxsize=4)
+def _loaded_map(files):
+    return load_map(files)
+
+
+def _decoded_map(files, segment_index):
+    """core.occupancy_map.load_map of a recording's map files, decoded once per map."""
+    try:
+        return _loaded_map(files)
+    except MapError as error:
+        raise RecordingError(f'segment {segment_index}: its recorded map: {error}') from None
+
+
 # What a recording holds ---------------------------------------------------------------
 
 @dataclass(frozen=True)
@@ -477,6 +560,24 @@ class Segment:
     topics: dict  # logical name -> recorded topic
     # Where a split file continues the segment (its first step is resume.step + 1).
     resume: Optional[ResumeState] = None
+    # The map's files, when the parameters name one: (YAML name, image name, their SHA-256)
+    # from the metadata, and their bytes, found among the file's attachments.
+    map_reference: Optional[tuple] = None
+    map_files: Optional[MapFiles] = None
+
+    @property
+    def occupancy_map(self):
+        """The recorded map, decoded (once per distinct map), or None without one."""
+        if self.map_files is None:
+            return None
+        return _decoded_map(self.map_files, self.index)
+
+    def map_cdr(self):
+        """The /map bytes the node published at the segment start, or None."""
+        occupancy_map = self.occupancy_map
+        if occupancy_map is None:
+            return None
+        return encode_occupancy_grid(0, self.frame_id, occupancy_map)
 
     @classmethod
     def from_metadata(cls, values):
@@ -523,9 +624,15 @@ class Segment:
                 text, what, MAX_PARAMETERS_TEXT))
         except ValueError as error:
             raise RecordingError(f'the state it resumes from: {error}') from None
+        map_reference = _map_reference(values)
+        if bool(parameters['map']) != (map_reference is not None):
+            raise RecordingError(
+                f"the parameters name the map {_text(parameters['map'])} but it keeps no copy "
+                "of the map's files" if parameters['map'] else
+                "it names map files but its parameters have no 'map'")
         return cls(index=index, log_offset_ns=log_offset_ns, dt_ns=dt_ns, frame_id=frame_id,
                    package_version=version, parameters=parameters, topics=_topics(values),
-                   resume=resume)
+                   resume=resume, map_reference=map_reference)
 
     def expected_balls(self):
         """How many balls the parameters make (explicit and random), without building."""
@@ -682,6 +789,8 @@ class Recording:
         if not segments:
             raise RecordingError(f"no '{METADATA_NAME}' metadata record: not a ball_world "
                                  'recording')
+        segments = _with_map_files(segments, self._attachments)
+        del self._attachments
         self.segments = sorted(segments, key=lambda s: s.log_offset_ns)
         self._offsets = [s.log_offset_ns for s in self.segments]
         self.roles = {}  # recorded topic -> step role, for the topics steps() reads
@@ -708,6 +817,11 @@ class Recording:
         self.metadata = [_read_record(stream, index.offset, self.size, Opcode.METADATA)[0]
                          for index in summary.metadata_indexes
                          if index.name == METADATA_NAME]
+        wanted = _map_names(self.metadata)
+        self._attachments = [
+            (record.name, record.data) for index in summary.attachment_indexes
+            if index.name in wanted and index.data_size <= MAX_MAP_ATTACHMENT
+            for record in _read_record(stream, index.offset, self.size, Opcode.ATTACHMENT)]
         self.compressions = {index.compression for index in summary.chunk_indexes}
         self.chunk_count = len(summary.chunk_indexes)
         self._chunk_indexes = list(summary.chunk_indexes)
@@ -721,6 +835,7 @@ class Recording:
         self.header = None
         self.has_summary = False
         self.schemas, self.channels, self.metadata = {}, {}, []
+        self._attachments = []  # (name, bytes) of the attachments that may be map files
         self.compressions, self.chunk_count = set(), 0
         self._counts = {}
         self.start_ns = self.end_ns = None
@@ -740,6 +855,8 @@ class Recording:
                 self.channels[record.id] = record
             elif isinstance(record, Metadata) and record.name == METADATA_NAME:
                 self.metadata.append(record)
+            elif isinstance(record, Attachment) and len(record.data) <= MAX_MAP_ATTACHMENT:
+                self._attachments.append((record.name, record.data))
             elif isinstance(record, Header):
                 self.header = record
         if scan.corrupt:
@@ -989,8 +1106,8 @@ class _StepBuilder:
 # Feeding sinks -------------------------------------------------------------------------
 
 def segment_world(segment):
-    """The World a segment's parameters build (raises scenario.ScenarioError)."""
-    return build_world(segment.parameters)
+    """The World a segment's parameters (and recorded map) build (raises ScenarioError)."""
+    return build_world(segment.parameters, segment.occupancy_map)
 
 
 def snapshot_and_info(segment, first_step=None):
@@ -1017,7 +1134,8 @@ def snapshot_and_info(segment, first_step=None):
     snapshot = WorldSnapshot(radii=radii, masses=masses,
                              walls=world.walls.segments.copy(), positions=positions,
                              velocities=velocities, dt_ns=segment.dt_ns,
-                             frame_id=segment.frame_id, names=names)
+                             frame_id=segment.frame_id, names=names,
+                             occupancy_map=segment.occupancy_map, map_cdr=segment.map_cdr())
     info = RunInfo(parameters=dict(segment.parameters), topics=dict(segment.topics),
                    segment=segment.index, log_offset_ns=segment.log_offset_ns,
                    package_version=segment.package_version)

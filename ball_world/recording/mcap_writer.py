@@ -13,6 +13,12 @@ the step they were applied before, interleaved with that step's impulses in the 
 were applied (each edit's impulses_before says so too); with the parameters they make the
 run re-simulable through any number of spawns, deletions and state sets.
 
+A world with a map (`map`) keeps the map in the recording: its YAML and image as MCAP
+attachments, under the names the run gave them, once per file (each split file carries
+them), with the segment metadata naming them and their SHA-256 (MAP_KEYS), so resim, info
+and to_rrd need no map file; and `map`, the nav_msgs/OccupancyGrid the node latched, at each
+segment (and split file) start, transient local, for `ros2 bag play` and Foxglove.
+
 Two topics are recorded for viewers and players only (the tools never read them back):
 `markers`, the MarkerArray the node publishes for RViz (a sphere per ball sized by its
 radius, the walls as a line list), so Foxglove's 3D panel shows the world from the file
@@ -30,6 +36,7 @@ flush() is complete; `ball_world_repair` turns such a file into a complete one.
 """
 import array
 import dataclasses
+import hashlib
 import json
 import os
 
@@ -82,6 +89,7 @@ LAZY_ROLES = ('edits',)
 VIEW_TOPICS = {
     'markers': 'visualization_msgs/msg/MarkerArray',
     'clock': 'rosgraph_msgs/msg/Clock',
+    'map': 'nav_msgs/msg/OccupancyGrid',
 }
 TOPIC_TYPES = {**STEP_TOPICS, **VIEW_TOPICS}
 #: The clock topic is absolute, whatever the node's namespace (as the node publishes it).
@@ -134,12 +142,16 @@ ROLE_QOS = {
     'edits': offered_qos_profiles(1000),
     'markers': offered_qos_profiles(1, durability='transient_local'),
     'clock': offered_qos_profiles(1, reliability='best_effort'),
+    # The map: as nav2_map_server offers it (transient local), so `ros2 bag play` latches it.
+    'map': offered_qos_profiles(1, durability='transient_local'),
     # The agents' topics (recording.agent_topics), as ros/agents.py offers them.
     agent_topics.COMMAND: offered_qos_profiles(100),
     agent_topics.ODOM: offered_qos_profiles(10),
     agent_topics.TF: offered_qos_profiles(100),
     agent_topics.TF_STATIC: offered_qos_profiles(1, durability='transient_local'),
     agent_topics.SCAN: offered_qos_profiles(10),
+    agent_topics.GROUND_TRUTH: offered_qos_profiles(10),
+    agent_topics.BUMPER: offered_qos_profiles(10),
 }
 
 _SEQUENCE_MODULO = 2 ** 32  # MCAP message sequence numbers are uint32
@@ -178,17 +190,21 @@ def plain(value):
 def parameters_document(parameters):
     """The params-file dict {'ball_world': {'ros__parameters': {...}}} for `parameters`.
 
-    Dotted names nest ('balls.x' -> balls: {x: ...}), as users write them. Empty lists are
+    Dotted names nest ('balls.x' -> balls: {x: ...}), as users write them, except under a
+    name that has a value itself ('map': '...', 'map.unknown_solid': ...). Empty lists are
     kept: rcl reads them as unset, which the node takes as the (empty) default.
     """
     tree = {}
     for name in sorted(parameters):
         value = '' if name in NOT_REPEATED else plain(parameters[name])
         node = tree
-        *path, leaf = name.split('.')
-        for part in path:
-            node = node.setdefault(part, {})
-        node[leaf] = value
+        parts = name.split('.')
+        # A name that is also another's prefix ('map' and 'map.unknown_solid') keeps the
+        # rest of the longer one as a dotted key, as rcl reads it: sorted, the shorter
+        # comes first and is a value, not a mapping to nest into.
+        while len(parts) > 1 and isinstance(node.get(parts[0], {}), dict):
+            node = node.setdefault(parts.pop(0), {})
+        node['.'.join(parts)] = value
     return {NODE_NAME: {'ros__parameters': tree}}
 
 
@@ -208,23 +224,50 @@ def flatten_parameters(document):
     return flat
 
 
-def segment_topics(info, clock):
-    """The recorded topic of each role in a segment: step roles, markers, and /clock if on.
+def segment_topics(info, clock, has_map=False):
+    """The recorded topic of each role in a segment: step roles, markers, /clock if on, and
+    `map` in a world with a map.
 
     A role the run does not name (markers, or edits in runs fed from recordings made before
     edits were recorded) lives beside `balls`, as the node names them all relatively.
     """
     namespace = info.topics['balls'].rpartition('/')[0]
     topics = {role: info.topics.get(role, f'{namespace}/{role}')
-              for role in (*STEP_TOPICS, 'markers')}
+              for role in (*STEP_TOPICS, 'markers', *(('map',) if has_map else ()))}
     if clock:
         topics['clock'] = CLOCK_TOPIC
     return topics
 
 
+#: The map's files are kept as MCAP attachments, named as the run named them; the segment's
+#: metadata names them (these keys) with the SHA-256 of their bytes.
+MAP_KEYS = ('map_yaml', 'map_image', 'map_yaml_sha256', 'map_image_sha256')
+#: Media types of the attachments, by the image's first bytes.
+_IMAGE_MEDIA_TYPES = {b'P2': 'image/x-portable-graymap', b'P5': 'image/x-portable-graymap',
+                      b'P3': 'image/x-portable-pixmap', b'P6': 'image/x-portable-pixmap',
+                      b'\x89P': 'image/png'}
+YAML_MEDIA_TYPE = 'application/yaml'
+
+
+def map_metadata(files):
+    """The segment metadata values that name a map's attachments (core MapFiles)."""
+    return {'map_yaml': files.yaml_name, 'map_image': files.image_name,
+            'map_yaml_sha256': hashlib.sha256(files.yaml_bytes).hexdigest(),
+            'map_image_sha256': hashlib.sha256(files.image_bytes).hexdigest()}
+
+
+def map_attachments(files):
+    """(name, media type, bytes) of the attachments that keep a map's files."""
+    image_type = _IMAGE_MEDIA_TYPES.get(bytes(files.image_bytes[:2]),
+                                        'application/octet-stream')
+    return ((files.yaml_name, YAML_MEDIA_TYPE, files.yaml_bytes),
+            (files.image_name, image_type, files.image_bytes))
+
+
 def segment_metadata(world, info, topics):
     """The 'ball_world' metadata record of one segment: all values are strings."""
     document = parameters_document(info.parameters)
+    occupancy_map = getattr(world, 'occupancy_map', None)
     return {
         'segment': str(info.segment),
         'log_offset_ns': str(info.log_offset_ns),
@@ -236,6 +279,7 @@ def segment_metadata(world, info, topics):
         'parameters': yaml.dump(document, Dumper=_ParamsDumper, sort_keys=False),
         'parameters_json': json.dumps(document),
         'topics': json.dumps(topics),
+        **(map_metadata(occupancy_map.files) if occupancy_map is not None else {}),
         **(info.resume or {}),
     }
 
@@ -310,6 +354,7 @@ class McapSink:
         self._agent_parameters = {}  # the segment's parameters (agent.cmd_vel_stamped)
         self._world = None  # the segment's WorldSnapshot: its walls and frame for markers
         self._markers = None if markers_period_ns is None else _Markers(markers_period_ns)
+        self._attached = set()  # (YAML bytes, image bytes) of the maps attached to this file
         self._file = claim.writer()
         self._closed = False
         # Chunks are cut here, between steps, never by the Writer in the middle of one.
@@ -382,7 +427,8 @@ class McapSink:
         self._world = world
         self._clock = bool(info.parameters.get('publish_clock'))
         self._agent_parameters = info.parameters
-        topics = segment_topics(info, self._clock)
+        occupancy_map = world.occupancy_map
+        topics = segment_topics(info, self._clock, occupancy_map is not None)
         self._topics = topics
         self._roles = {role: self._channel(topic, role) for role, topic in topics.items()
                        if role not in LAZY_ROLES}
@@ -390,8 +436,28 @@ class McapSink:
         # record sits between the two segments' messages.
         self._writer.flush()
         self._pending = 0
+        start_ns = segment_start_ns(world, info)
+        if occupancy_map is not None:
+            self._attach_map(occupancy_map.files, start_ns)
         self._writer.add_metadata(METADATA_NAME, segment_metadata(world, info, topics))
-        self._restart_markers(world, segment_start_ns(world, info))
+        self._restart_markers(world, start_ns)
+        if occupancy_map is not None and world.map_cdr is not None:
+            # /map as the node latched it, at the segment's (or this file's) first log time,
+            # so `ros2 bag play` and Foxglove have the map from the file alone.
+            self._add('map', start_ns, world.map_cdr)
+
+    def _attach_map(self, files, log_time_ns):
+        """Keep the map's files in this file as attachments, once per file per map.
+
+        Each file of a split recording has its own copy: each stands alone.
+        """
+        key = (files.yaml_bytes, files.image_bytes)
+        if key in self._attached:
+            return
+        for name, media_type, data in map_attachments(files):
+            self._writer.add_attachment(create_time=0, log_time=log_time_ns, name=name,
+                                        media_type=media_type, data=data)
+        self._attached.add(key)
 
     def _restart_markers(self, world, log_time_ns):
         """Clear the old world in viewers and record the new one's markers at its next step.

@@ -18,6 +18,8 @@ Layout of the recording (application id 'ball_world'):
   Arrows2D of length 0 at the same points (see _Feed._log_balls).
 - `arena/walls` (LineStrips2D), once per segment at its first step: not static in a file,
   because a reset may change the walls and static data would rewrite the earlier segments.
+- `arena/map` (a map's cells as a SegmentationImage under its origin and scale, rerun_map),
+  static, once: the map cannot change during a run.
 - `arena/impulses` (Arrows2D): each applied impulse for IMPULSE_SECONDS of simulated time,
   in IMPULSE_COLOR (no ball has it; readable on the viewer's light and dark themes), at the
   point where it was applied, pointing along the velocity change. Its length is the
@@ -83,6 +85,7 @@ import rerun.blueprint as rrb
 from ball_world.core.parameters import BY_NAME
 from ball_world.recording.rerun_agents import AGENTS, heading_arrows
 from ball_world.recording.rerun_labels import LabelPlacer
+from ball_world.recording.rerun_map import map_bounds, map_entities
 from ball_world.recording.rerun_outlet import new_stream, Outlet, OutletFailed, parse_view
 from ball_world.recording.rerun_scale import padded, ruler
 from ball_world.recording.rerun_scans import scan_layers, SCANS, VIEW_MAX_POINTS
@@ -247,13 +250,16 @@ def recording_id(parameters):
 
 
 def scene_bounds(world):
-    """(xmin, ymin, xmax, ymax) around the walls and the balls, with a small margin."""
+    """(xmin, ymin, xmax, ymax) around the walls, the balls and the map, with a small
+    margin."""
     walls = np.asarray(world.walls, dtype=np.float64).reshape(-1, 4)
     boxes = [np.column_stack((np.minimum(walls[:, 0:2], walls[:, 2:4]),
                               np.maximum(walls[:, 0:2], walls[:, 2:4])))]
     if len(world.radii):
         reach = np.asarray(world.radii)[:, None]
         boxes.append(np.column_stack((world.positions - reach, world.positions + reach)))
+    if getattr(world, 'occupancy_map', None) is not None:
+        boxes.append(np.array([map_bounds(world.occupancy_map)]))
     boxes = np.concatenate(boxes)
     if len(boxes) == 0:
         return (-1.0, -1.0, 1.0, 1.0)
@@ -646,6 +652,7 @@ class _Feed:
         #                      or due
         self._impulses_changed = False
         self._trail = deque()  # (log ns, positions) of the trail's steps
+        self._map_files = None  # the files of the map logged (static), if any
         self._closed = False
 
     # Sink protocol ----------------------------------------------------------------------
@@ -675,7 +682,18 @@ class _Feed:
             strips, radii=rr.Radius.ui_points(1.5), colors=WALL_COLOR, draw_order=20.0),
             static=self.live)
         self._emit('log', IMPULSES, rr.Arrows2D.cleared(), rr.Points2D.cleared())
+        self._log_map(world)
         self._log_ruler(world)
+
+    def _log_map(self, world):
+        """The map (rerun_map), static, once: `map` is read-only, every segment has the
+        same one."""
+        occupancy_map = getattr(world, 'occupancy_map', None)
+        if occupancy_map is None or occupancy_map.files == self._map_files:
+            return
+        self._map_files = occupancy_map.files
+        for path, archetype in map_entities(occupancy_map, WALL_COLOR):
+            self._emit('log', path, archetype, static=True)
 
     def _log_ruler(self, world):
         """Ticks and labels in metres along the bottom and left of the scene (rerun_scale),

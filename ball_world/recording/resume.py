@@ -12,7 +12,11 @@ A world with agents (core.agents) adds what drives them on: `agents`, their name
 order, `yaws`, their headings (float64, base64), and of those that were given one the last
 command, which may still be in force: `commanded` (names), `commands` (vx, vy, wz each,
 float64, base64) and `since_ns` (the simulation time it took effect). A state without agents
-has none of these keys, as before agents existed. CommandsInForce follows the records of a
+has none of these keys, as before agents existed. With noisy odometry (agent.odom.noise,
+core.odometry) two more keys hold its state, which drifts from the truth and so cannot be
+made again from the balls: `odometry`, each agent's odometry pose (x, y, yaw; float64,
+base64), and `odometry_covariance`, its six covariance entries (core.odometry
+COVARIANCE_ENTRIES; float64, base64). CommandsInForce follows the records of a
 segment to know the commands, which a StepRecord carries only at the step they were given.
 
 In exact mode a third value, `resume_exact`, holds what exact mode carries from step k to
@@ -50,6 +54,7 @@ RESUME_EXACT = 'resume_exact'
 _ARRAYS = {'positions': 2, 'velocities': 2, 'radii': 1, 'masses': 1}
 _FIELDS = frozenset(('names', 'retired', *_ARRAYS))
 _AGENT_FIELDS = frozenset(('agents', 'yaws', 'commanded', 'commands', 'since_ns'))
+_ODOMETRY_FIELDS = frozenset(('odometry', 'odometry_covariance'))
 _BOUNDS = {'positions': (-limits.COORDINATE_LIMIT, limits.COORDINATE_LIMIT),
            'radii': (limits.MIN_RADIUS, limits.MAX_RADIUS),
            'masses': (limits.MIN_MASS, limits.MAX_MASS)}
@@ -80,6 +85,9 @@ class ResumeState:
     agents: tuple = ()  # agent names, in agent order (core.agents.Agents.names)
     yaws: tuple = ()  # their headings, rad, in the same order
     commands: tuple = ()  # ((name, core.agents.Command), ...): the last command of each
+    # Noisy odometry: each agent's pose (x, y, yaw) and covariance entries, agent order.
+    odometry: tuple = ()
+    odometry_covariances: tuple = ()
     # Exact mode: what step `step` hands the next (core.exact_carry.CarriedState; maybe
     # NOTHING_KEPT). None when the file does not say (seed mode, or an older writer).
     exact: Optional[CarriedState] = None
@@ -133,6 +141,9 @@ def resume_metadata(record, retired, commands=None):
             commands=_encode([(commands[n].vx, commands[n].vy, commands[n].wz)
                               for n in given]),
             since_ns=[commands[name].since_ns for name in given])
+        if record.agents.odometry is not None:
+            state.update(odometry=_encode(record.agents.odometry),
+                         odometry_covariance=_encode(record.agents.odometry_covariances))
     values = {RESUME_STEP: str(record.step), RESUME_STATE: json.dumps(state)}
     if getattr(record, 'exact', None) is not None:
         values[RESUME_EXACT] = exact_metadata(record.exact)
@@ -199,10 +210,12 @@ def parse_resume(values, parse_json):
     if not isinstance(step_text, str) or not step_text.isdigit() or len(step_text) > 19:
         raise ValueError(f"'{RESUME_STEP}' is {repr(step_text)[:40]}, not a step number")
     state = parse_json(values.get(RESUME_STATE), f"'{RESUME_STATE}'")
-    if not isinstance(state, dict) or set(state) not in (_FIELDS, _FIELDS | _AGENT_FIELDS):
+    if not isinstance(state, dict) or set(state) not in (
+            _FIELDS, _FIELDS | _AGENT_FIELDS, _FIELDS | _AGENT_FIELDS | _ODOMETRY_FIELDS):
         raise ValueError(f"'{RESUME_STATE}' does not hold exactly "
                          f"{', '.join(sorted(_FIELDS))} (and with agents "
-                         f"{', '.join(sorted(_AGENT_FIELDS))})")
+                         f"{', '.join(sorted(_AGENT_FIELDS))}, and with noisy odometry "
+                         f"{', '.join(sorted(_ODOMETRY_FIELDS))})")
     names = _names(state['names'], 'names')
     if len(names) > limits.MAX_BALLS or len(set(names)) != len(names):
         raise ValueError(f'names lists {len(names):,} balls, or one twice')
@@ -281,5 +294,12 @@ def _agents(state, names):
                          f'{len(given)} agents commanded')
     commands = tuple((name, Command(*(float(v) for v in row), since[i]))
                      for i, (name, row) in enumerate(zip(given, values.reshape(-1, 3))))
-    return {'agents': agents, 'yaws': tuple(float(yaw) for yaw in yaws),
-            'commands': commands}
+    found = {'agents': agents, 'yaws': tuple(float(yaw) for yaw in yaws),
+             'commands': commands}
+    if 'odometry' in state:
+        poses = _array(state, 'odometry', len(agents), 3, None, 'agents')
+        if len(poses) and not np.abs(poses[:, 2]).max() <= math.pi:
+            raise ValueError('odometry holds a yaw outside [-pi, pi]')
+        covariances = _array(state, 'odometry_covariance', len(agents), 6, None, 'agents')
+        found.update(odometry=tuple(poses), odometry_covariances=tuple(covariances))
+    return found

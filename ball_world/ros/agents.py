@@ -1,10 +1,11 @@
-"""The agents' ROS topics: <name>/cmd_vel in, <name>/odom, <name>/scan, /tf, /tf_static out.
+"""The agents' ROS topics: <name>/cmd_vel in; <name>/odom, <name>/ground_truth, <name>/bumper,
+<name>/scan, /tf, /tf_static out.
 
 The node creates one AgentTopics and calls it at four points: sync() when the set of balls
 changes, drain() before each step, publish() after it, and report() for the progress line.
 Nothing here decides anything: commands go to Simulation.command (core.agents checks them),
-and the odom and /tf bytes are the StepRecord's, made once for the publishers and the
-recording alike (raw CDR, like `balls`).
+and the odom, ground truth, bumper and /tf bytes are the StepRecord's, made once for the
+publishers and the recording alike (raw CDR, like `balls`).
 
 Names are relative (`<name>/cmd_vel` resolves under the node's namespace, so `-r __ns:=/sim2`
 gives /sim2/ball_0/cmd_vel); /tf and /tf_static are absolute, as tf2 listens on them, and
@@ -26,9 +27,10 @@ made without rclpy's default QoS-event handlers (warnings about an incompatible 
 only an executor would run. That node takes no command-line arguments (a `__node:=` rename
 must not give two nodes one name): its namespace is the world node's.
 """
+from dataclasses import dataclass
 import time
 
-from geometry_msgs.msg import Twist, TwistStamped
+from geometry_msgs.msg import Twist, TwistStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
@@ -52,6 +54,21 @@ TF_STATIC_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
+@dataclass
+class _AgentEntities:
+    """One agent's subscription and publishers."""
+
+    cmd_vel: object
+    odom: object
+    ground_truth: object
+    bumper: object
+    scan: object = None  # when agents have scanners
+
+    def all(self):
+        return [entity for entity in (self.odom, self.ground_truth, self.bumper, self.scan)
+                if entity is not None]
+
+
 class AgentTopics:
     """Subscriptions and publishers of every agent of the node's Simulation."""
 
@@ -61,8 +78,7 @@ class AgentTopics:
         self.stamped = stamped
         self._message_type = TwistStamped if stamped else Twist
         self._decode = self._decode_stamped if stamped else decode_twist
-        self._topics = {}  # agent name -> (subscription, odom publisher)
-        self._scans = {}  # agent name -> <name>/scan publisher (when agents have scanners)
+        self._topics = {}  # agent name -> _AgentEntities
         self._tf = None
         self._tf_static = None
         self._warned_at = -WARN_PERIOD
@@ -89,11 +105,11 @@ class AgentTopics:
                             start_parameter_services=False)
         node = self._io
         for name in [name for name in self._topics if name not in names]:
-            subscription, publisher = self._topics.pop(name)
-            node.destroy_subscription(subscription)
-            node.destroy_publisher(publisher)
-            if name in self._scans:
-                node.destroy_publisher(self._scans.pop(name))
+            entities = self._topics.pop(name)
+            node.destroy_subscription(entities.cmd_vel)
+            for publisher in entities.all():
+                node.destroy_publisher(publisher)
+        scanning = self.simulation.parameters['agent.scan.samples'] > 0
         for name in names:
             if name in self._topics:
                 continue
@@ -101,16 +117,20 @@ class AgentTopics:
                 self._message_type, f'{name}/cmd_vel',
                 lambda data, name=name: self.take(name, data), CMD_VEL_QOS, raw=True,
                 event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
-            publisher = node.create_publisher(
-                Odometry, f'{name}/odom', ODOM_QOS,
-                event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
-            self._topics[name] = (subscription, publisher)
-            if self.simulation.parameters['agent.scan.samples'] > 0:
-                self._scans[name] = node.create_publisher(LaserScan, f'{name}/scan', ODOM_QOS)
+            self._topics[name] = _AgentEntities(
+                subscription, self._publisher(Odometry, f'{name}/odom'),
+                self._publisher(Odometry, f'{name}/ground_truth'),
+                self._publisher(Vector3Stamped, f'{name}/bumper'),
+                self._publisher(LaserScan, f'{name}/scan') if scanning else None)
         if names and self._tf is None:
             self._tf = self.node.create_publisher(TFMessage, '/tf', TF_QOS)
             self._tf_static = self.node.create_publisher(TFMessage, '/tf_static',
                                                          TF_STATIC_QOS)
+
+    def _publisher(self, message_type, topic):
+        return self._io.create_publisher(
+            message_type, topic, ODOM_QOS,
+            event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
     def destroy(self):
         """Leave the graph (the world node is closing)."""
@@ -124,7 +144,7 @@ class AgentTopics:
         if node is None:
             return []
         return [node.resolve_topic_name(f'{name}/{topic}') for name in self._topics
-                for topic in ('cmd_vel', 'odom')]
+                for topic in ('cmd_vel', 'odom', 'ground_truth', 'bumper')]
 
     def take(self, name, data):
         """One cmd_vel message for agent `name`: decoded, checked, given to the Simulation."""
@@ -151,7 +171,8 @@ class AgentTopics:
         As the node does for impulses: the executor hands over one message per wait, too
         few for a flood; take_message is what it calls itself (rclpy Jazzy).
         """
-        for name, (subscription, _) in list(self._topics.items()):
+        for name, entities in list(self._topics.items()):
+            subscription = entities.cmd_vel
             with subscription.handle:
                 while True:
                     taken = subscription.handle.take_message(subscription.msg_type, True)
@@ -159,8 +180,10 @@ class AgentTopics:
                         break
                     self.take(name, taken[0])
 
-    def publish(self, record):
-        """Publish a step's odom of every agent, its /tf, and /tf_static when it changed."""
+    def publish(self, record, tf=True):
+        """Publish a step's odom and ground truth of every agent, its bumpers, scans and /tf,
+        and /tf_static when it changed. tf False holds /tf back (the node publishes it
+        later, publish_tf: a reset's first /tf waits for its /clock, see ros/node.py)."""
         frame = record.agents
         if frame is None:
             return
@@ -168,13 +191,22 @@ class AgentTopics:
             self.sync()
         topics = self._topics
         for name, data in zip(frame.names, frame.odom_cdr):
-            topics[name][1].publish(data)
-        self._tf.publish(frame.tf_cdr)
+            topics[name].odom.publish(data)
+        for name, data in zip(frame.names, frame.ground_truth_cdr):
+            topics[name].ground_truth.publish(data)
+        for bumper in frame.bumpers:
+            topics[bumper.name].bumper.publish(bumper.cdr)
         for scan in frame.scans:
-            publisher = self._scans.get(scan.name)
-            if publisher is None:  # scanners turned on by a reset
-                publisher = self._scans[scan.name] = self.node.create_publisher(
-                    LaserScan, f'{scan.name}/scan', ODOM_QOS)
-            publisher.publish(scan.cdr)
+            entities = topics[scan.name]
+            if entities.scan is None:  # scanners turned on by a reset
+                entities.scan = self._publisher(LaserScan, f'{scan.name}/scan')
+            entities.scan.publish(scan.cdr)
         if frame.tf_static_cdr is not None:
             self._tf_static.publish(frame.tf_static_cdr)
+        if tf:
+            self.publish_tf(record)
+
+    def publish_tf(self, record):
+        """Publish a step's /tf (every odom -> base_link)."""
+        if record.agents is not None:
+            self._tf.publish(record.agents.tf_cdr)

@@ -6,6 +6,7 @@ messages into queued impulses (or counted rejections), serves ~/reset, ~/pause a
 ~/step, and hands every step to the recording sinks.
 """
 import difflib
+import math
 import os
 import signal
 import sys
@@ -13,6 +14,7 @@ import threading
 import time
 
 from geometry_msgs.msg import PoseArray, Vector3Stamped
+from nav_msgs.msg import OccupancyGrid
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
@@ -27,6 +29,7 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from ball_world.core import parameters as table
+from ball_world.core.agents import frame_clash
 from ball_world.core.alloc import tune_allocator
 from ball_world.core.exact import EventBudgetExceeded
 from ball_world.core.impulses import check_impulse, ImpulseRejected
@@ -34,6 +37,7 @@ from ball_world.core.pacing import MAX_LAG, steps_due
 from ball_world.core.scenario import describe, ScenarioError, step_duration_ns
 from ball_world.core.stepping import SubstepLimitExceeded
 from ball_world.msgs.cdr import decode_vector3_stamped, encode_clock
+from ball_world.msgs.map_cdr import encode_occupancy_grid
 from ball_world.msgs.markers import MarkerBuilder
 from ball_world.recording.writer_thread import BackgroundSink
 from ball_world.ros.agents import AgentTopics
@@ -62,12 +66,21 @@ REJECTION_WARNING_PERIOD = 5.0
 #: Longest wait of the stepping timer, s: slower rates are kept by a due time, so any rate
 #: down to 1e-300 Hz is a valid timer (rcl timers hold at most 2^63 ns).
 MAX_TIMER_PERIOD = 0.1
+#: Wall seconds a segment's first /clock (at start and after a reset) waits after the last
+#: /tf, and its first /tf after that /clock, at least: the time jump must reach a
+#: use_sim_time client (and clear its tf2 buffer) after the old timeline's transforms and
+#: before the new one's. See _release_held and docs/clock_and_tf.md.
+TF_HOLD = 0.05
 
 STEP_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
 MARKER_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+#: What nav2_map_server offers on map: reliable, transient local, so RViz, Foxglove and a
+#: Nav2 costmap that subscribe late still get it.
+MAP_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: Edits are few and each matters: reliable, with room for a burst of spawns.
 EDITS_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 IMPULSE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=IMPULSE_QUEUE_DEPTH,
@@ -210,6 +223,9 @@ class BallWorld(Node):
         self.clock_pub = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
         self.edits_pub = self.create_publisher(String, 'edits', EDITS_QOS)
         self.entities_pub = self.create_publisher(String, 'entity_names', MARKER_QOS)
+        self.map_pub = None
+        if self.simulation.occupancy_map is not None:
+            self.map_pub = self.create_publisher(OccupancyGrid, 'map', MAP_QOS)
         self._impulse_sub = self.create_subscription(
             Vector3Stamped, 'impulse', self._on_impulse, IMPULSE_QOS, raw=True)
         # Calls that take long (a reset builds its world on a thread) run as coroutines in
@@ -245,7 +261,9 @@ class BallWorld(Node):
         self.create_timer(REPORT_PERIOD, self._report, clock=self._steady)
         self._window = (time.monotonic(), 0)
         self._start_wall = time.monotonic()
-        self._publish(self.simulation.last_record)
+        self._held = []  # ('clock' or 'tf', record) not published yet: see _release_held
+        self._publish(self.simulation.last_record, first=True)
+        self._publish_map()
         summary, names = self._startup_lines(values)
         self.get_logger().info(summary)
         self.get_logger().debug(names)
@@ -255,11 +273,15 @@ class BallWorld(Node):
         (debug: `--ros-args --log-level ball_world:=debug` shows it)."""
         simulation = self.simulation
         published = [self.resolve_topic_name(name) for name in TOPICS_OUT]
+        if self.map_pub is not None:
+            published.append(self.resolve_topic_name('map'))
         if values['publish_clock']:
             published.append('/clock')
         services = [self.resolve_service_name(name) for name in SERVICES]
         standard = ', '.join(self.interfaces.names)
-        summary = (f'world: {describe(simulation.world, simulation.dt_ns)}; rate '
+        occupancy_map = simulation.occupancy_map
+        map_text = '' if occupancy_map is None else f'; map {occupancy_map.describe()}'
+        summary = (f'world: {describe(simulation.world, simulation.dt_ns)}{map_text}; rate '
                    f"{values['rate_hz']:g} Hz{' (paused at step 0)' if self.paused else ''}; "
                    f'node {self.get_fully_qualified_name()}')
         names = (f"publishing {', '.join(published)}; subscribed to "
@@ -292,6 +314,8 @@ class BallWorld(Node):
             self._timer.timer_period_ns = tick_ns
 
     def _on_timer(self):
+        if self._held and not self._release_held():
+            return  # no step before the segment's first /clock and /tf are out
         if self.paused or self.finished:
             return
         now = time.monotonic()
@@ -332,6 +356,8 @@ class BallWorld(Node):
 
     def step_once(self):
         """Advance one step, publish it, stop at max_steps or at the end of ROS time."""
+        while self._held:  # a step asked for: the segment's first /clock and /tf go first
+            self._release_held(now=math.inf)
         simulation = self.simulation
         if simulation.out_of_time:
             self.get_logger().info(
@@ -362,13 +388,60 @@ class BallWorld(Node):
             self.finished = True
         return record
 
-    def _publish(self, record):
+    def _publish(self, record, first=False):
+        """Publish a step: /clock first, then the step's topics and /tf.
+
+        A segment's first record (first: at start, after a reset) is the simulation time
+        jumping back: its /clock and /tf are held (_release_held) so that a use_sim_time
+        client handles the jump after every /tf of the old timeline and before any of the new.
+        """
+        clock = self.get_parameter('publish_clock').value
+        hold = first and clock and record.agents is not None
+        if clock and not hold:
+            self.clock_pub.publish(encode_clock(record.stamp_ns))
         self.balls_pub.publish(record.balls_cdr)
         self.state_pub.publish(record.state_cdr)
         self.stats_pub.publish(record.stats_cdr)
-        self.agent_topics.publish(record)
-        if self.get_parameter('publish_clock').value:
-            self.clock_pub.publish(encode_clock(record.stamp_ns))
+        self.agent_topics.publish(record, tf=not hold)
+        self._held = [('clock', record), ('tf', record)] if hold else []
+        self._held_due = time.monotonic() + TF_HOLD
+
+    def _release_held(self, now=None):
+        """Publish the held /clock, then the held /tf, each once its time has come; return
+        whether nothing is held any more.
+
+        Why: DDS does not order two topics, and a client's executor takes the subscriptions
+        that are ready in an order of its own (rclpy: the node's first subscription first,
+        which for a use_sim_time node is /clock). Sent together, the /clock that jumps back
+        could be handled before the old timeline's last /tf, or after the new one's first:
+        either way a use_sim_time tf2 buffer, which clears itself at the jump, ends up
+        holding transforms of the other timeline (dropped as TF_OLD_DATA, or kept and
+        looked up as the latest). Held TF_HOLD apart, and to timer ticks (no step is taken
+        meanwhile), each goes out after the one before it has had time to arrive.
+        """
+        now = time.monotonic() if now is None else now
+        while self._held and now >= self._held_due:
+            kind, record = self._held.pop(0)
+            if kind == 'clock':
+                self.clock_pub.publish(encode_clock(record.stamp_ns))
+            else:
+                self.agent_topics.publish_tf(record)
+            self._held_due = now + TF_HOLD
+        return not self._held
+
+    def _publish_map(self):
+        """Publish the segment's /map (latched: transient local), if the world has a map.
+
+        The bytes are the Simulation's, encoded once at the segment start, unless frame_id
+        changed since: then the map goes out again in the new frame.
+        """
+        simulation = self.simulation
+        if self.map_pub is None or simulation.map_cdr is None:
+            return
+        data = simulation.map_cdr
+        if simulation.frame_id != simulation.parameters['frame_id']:
+            data = encode_occupancy_grid(0, simulation.frame_id, simulation.occupancy_map)
+        self.map_pub.publish(data)
 
     # Markers ----------------------------------------------------------------------------
 
@@ -466,8 +539,10 @@ class BallWorld(Node):
         record = self.simulation.reset(None, built=built)
         discarded = self.simulation.last_discarded
         self._start_wall = time.monotonic()
+        self._next_due = None  # the new world's schedule starts at the next tick
         self._world_edited()
-        self._publish(record)
+        self._publish(record, first=True)
+        self._publish_map()
         message = (f'reset to step 0: {describe(self.simulation.world, self.simulation.dt_ns)}'
                    f"; discarded {discarded} queued impulse{'' if discarded == 1 else 's'}")
         self.get_logger().info(message)
@@ -529,9 +604,11 @@ class BallWorld(Node):
         """
         future = Future()
 
+        occupancy_map = self.simulation.occupancy_map  # `map` is read-only: loaded once
+
         def work():
             try:
-                future.set_result(build(values))
+                future.set_result(build(values, occupancy_map))
             except Exception as error:  # noqa: B902 - every outcome must reach the service
                 future.set_exception(error)
             self._wake.trigger()
@@ -587,12 +664,17 @@ class BallWorld(Node):
                 step_duration_ns(candidate)
             except ScenarioError as error:
                 return SetParametersResult(successful=False, reason=str(error))
+        clash = 'frame_id' in changes and frame_clash(
+            changes['frame_id'], str(candidate['frame_prefix']), set(self.simulation.agents.names))
+        if clash:
+            return SetParametersResult(successful=False, reason=f"parameter 'frame_id': {clash}")
         if 'rate_hz' in changes:
             self._schedule(changes['rate_hz'])
             self._window = (time.monotonic(), self.steps_done)
         if 'frame_id' in changes:
             self.simulation.frame_id = changes['frame_id']
             self._rebuild_markers()
+            self._publish_map()
         if 'markers.rate_hz' in changes:
             self._set_markers_rate(changes['markers.rate_hz'])
         return SetParametersResult(successful=True)

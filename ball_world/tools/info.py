@@ -158,6 +158,7 @@ def describe(recording):
         recording.segments[recording.segment_at(first_balls.log_time_ns)].check_ball_count(
             count)
         lines.append(f'balls:       {count}')
+    lines.extend(_map_lines(recording))
     lines.append(f'messages:    {recording.message_count}')
     for info in recording.topics.values():
         lines.append(f'  {_shown(info.topic)}  {_shown(info.type)}  {info.message_count}')
@@ -165,6 +166,33 @@ def describe(recording):
     lines.extend(_edit_lines(recording))
     lines.extend(_agent_lines(recording))
     lines.extend(_energy_lines(recording))
+    return lines
+
+
+def _map_lines(recording):
+    """The map each segment was built with (its files are attached to the recording)."""
+    lines = []
+    seen = set()
+    for segment in recording.segments:
+        occupancy_map = segment.occupancy_map
+        if occupancy_map is None:
+            continue
+        unknown_solid = segment.parameters['map.unknown_solid']
+        key = (occupancy_map.files, unknown_solid)
+        if key in seen:
+            continue
+        seen.add(key)
+        occupied, free, unknown = occupancy_map.counts
+        solid = occupied + (unknown if unknown_solid else 0)
+        files = occupancy_map.files
+        lines.append(f'map:         {_shown(files.yaml_name)} and {_shown(files.image_name)} '
+                     f'(attached): {occupancy_map.width:,} x {occupancy_map.height:,} cells of '
+                     f'{occupancy_map.yaml.resolution:g} m at ({occupancy_map.origin[0]:g}, '
+                     f'{occupancy_map.origin[1]:g}) m, {occupancy_map.yaml.mode}')
+        lines.append(f'             {occupied:,} occupied, {free:,} free, {unknown:,} unknown; '
+                     f"{solid:,} solid cells (unknown {'solid' if unknown_solid else 'free'})"
+                     + ('' if len(recording.segments) == 1 else
+                        f' from segment {segment.index}'))
     return lines
 
 

@@ -4,7 +4,10 @@ Why not `ros2 bag play`: it is not in the ROS wheels, and a recording is enough 
 the run. The recorded CDR bytes are published as they are (no decode, no re-encode), at the
 recorded log-time spacing divided by --rate, on the recorded topics with the reliability,
 durability and depth their publishers offered. --clock publishes /clock with the recorded
-log time before each step, so nodes with use_sim_time follow the replay.
+log time before each step, so nodes with use_sim_time follow the replay. Topics recorded
+as transient local (the map, /tf_static, markers) are published so again; with
+--start-offset, their last message before the offset is published first, so the map is
+there from the start.
 
 One thread: between messages the executor waits (spin_once with the time left as timeout),
 so services such as the parameter ones answer and Ctrl-C / SIGTERM end the replay at once,
@@ -111,11 +114,14 @@ class Player:
         self.rate = rate
         self.begin_ns = (recording.start_ns or 0) + round(start_offset * 1e9)
         self.publishers = {}
+        self.latched = set()  # topics recorded as transient local (the map, /tf_static)
         for topic in self.topics:
             info = recording.topics[topic]
+            profile = qos_profile(info.offered_qos_profiles)
             self.publishers[topic] = node.create_publisher(
-                message_class(info.type), prefix + topic,
-                qos_profile(info.offered_qos_profiles))
+                message_class(info.type), prefix + topic, profile)
+            if profile.durability == DurabilityPolicy.TRANSIENT_LOCAL:
+                self.latched.add(topic)
         self.clock = None
         if clock:
             self.clock = node.create_publisher(message_class(CLOCK_TYPE), '/clock',
@@ -142,11 +148,17 @@ class Player:
         start = None
         last_clock = None
         published = 0
+        held = {}  # latched topics' last message before --start-offset: played first
         for message in self.recording.messages(self.topics):
             if message.log_time_ns < self.begin_ns:
+                if message.topic in self.latched:
+                    held[message.topic] = message
                 continue
             if start is None:
                 start = time.monotonic()
+                for earlier in held.values():  # /map, /tf_static: what a late joiner needs
+                    self.publishers[earlier.topic].publish(earlier.data)
+                    published += 1
             self.sleep_until(start + (message.log_time_ns - self.begin_ns) / 1e9 / self.rate)
             if self.clock is not None and message.log_time_ns != last_clock:
                 self.clock.publish(encode_clock(message.log_time_ns))

@@ -6,10 +6,12 @@ edits (spawn, delete, set_state) are applied in the order the node applied them 
 impulses_before says how many of the step's impulses came before it), through the same
 Simulation calls the node makes; and every recorded pose, state row and stats entry (except
 the real-time factor, which depends on the wall clock), every impulse and every edit
-message, and every agent's recorded scan (<name>/scan, its seeded noise included), must be
-bit-identical to the re-simulated one. A segment's closing record (edits, and the impulses
-they applied, made after its last step: mcap_reader.RecordedStep.closing) is made the same
-way, without a step, and checked the same way. An edit the re-simulation refuses,
+message, and every agent's recorded scan (<name>/scan, its seeded noise included), ground
+truth and bumper, must be bit-identical to the re-simulated one; odom and /tf too (with
+agent.odom.noise the drifting odometry, its seeded noise included). A segment's closing
+record (edits, and the impulses they applied, made after its last step:
+mcap_reader.RecordedStep.closing) is made the same way, without a step, and checked the same
+way. An edit the re-simulation refuses,
 or a spawn that gets another name, is a difference too. Exit status: 0 all identical, 1 a
 difference, 2 an unreadable recording or parameters that no longer build a world (one line
 on stderr).
@@ -36,6 +38,7 @@ from ball_world.core.edits import Ball, EditRefused
 from ball_world.core.scenario import ScenarioError
 from ball_world.msgs.agent_cdr import decode_laser_scan, decode_odometry
 from ball_world.msgs.cdr import decode_state_layout, decode_vector3_stamped
+from ball_world.recording import agent_topics
 from ball_world.recording.mcap_reader import RecordingError
 from ball_world.recording.recording_set import open_recording
 from ball_world.simulation import Simulation, SpawnRequest
@@ -135,7 +138,7 @@ def _rebuild(segment, first_step):
     """The segment's Simulation at step 0 (the reader checked that its dt is the recorded one)."""
     if first_step.ball_count is not None:
         segment.check_ball_count(first_step.ball_count)
-    return Simulation(segment.parameters, sinks=())
+    return Simulation(segment.parameters, sinks=(), occupancy_map=segment.occupancy_map)
 
 
 def _resume(segment):
@@ -154,7 +157,7 @@ def _resume(segment):
                              '(resume_exact; an older ball_world wrote it without them): it '
                              're-simulates bit for bit only from its first step (give the bag '
                              'directory with the file where it starts)')
-    simulation = Simulation(segment.parameters, sinks=())
+    simulation = Simulation(segment.parameters, sinks=(), occupancy_map=segment.occupancy_map)
     try:
         simulation.resume(segment.parameters, segment.resume, segment.index,
                           segment.log_offset_ns)
@@ -319,7 +322,7 @@ def resimulate(recording, progress=None):
     """
     comparison = Comparison()
     simulation = result = None
-    scans = RecordedScans(recording)
+    scans = RecordedAgentMessages(recording)
     for step in recording.steps():
         if progress is not None and not step.closing:
             progress.advance()
@@ -365,40 +368,74 @@ def resimulate(recording, progress=None):
     return comparison
 
 
-class RecordedScans:
-    """The agents' recorded scans (<name>/scan), read alongside the steps in log-time order.
+class RecordedAgentMessages:
+    """The agents' recorded scans, ground truth and bumpers (<name>/scan, <name>/ground_truth,
+    <name>/bumper), read alongside the steps in log-time order.
 
-    Each must equal, byte for byte, the re-simulated agent's scan of the same step (ranges
-    with their seeded noise, stamp, frame); a scan recorded but not re-simulated, or the
-    reverse, is a difference too.
+    Each must equal, byte for byte, the re-simulated agent's message of the same step (a
+    scan's ranges with their seeded noise, the true pose and twist, the collision impulse in
+    base_link; stamp and frame too); one recorded but not re-simulated, or the reverse, is a
+    difference too. A recording made before a kind existed has none of it, and is compared
+    without it.
     """
 
     def __init__(self, recording):
-        topics = {topic for topic in recording.topics if topic.endswith('/scan')}
-        self._messages = recording.messages(topics) if topics else iter(())
+        self._kinds = {}  # topic -> (kind, agent name)
+        for topic in recording.topics:
+            found = agent_topics.agent_message(topic)
+            if found is not None:
+                self._kinds[topic] = found
+        self.recorded_kinds = {kind for kind, _ in self._kinds.values()}
+        self._messages = (recording.messages(set(self._kinds)) if self._kinds else iter(()))
         self._next = next(self._messages, None)
 
     def take(self, log_time_ns):
-        """{agent name: LaserScan bytes} recorded at this log time."""
+        """{(kind, agent name): bytes} recorded at this log time."""
         found = {}
         while self._next is not None and self._next.log_time_ns <= log_time_ns:
             if self._next.log_time_ns == log_time_ns:
-                found[self._next.topic.rsplit('/', 2)[-2]] = self._next.data
+                found[self._kinds[self._next.topic]] = self._next.data
             self._next = next(self._messages, None)
         return found
 
     def compare(self, step, record, comparison, segment_index):
         recorded = self.take(step.log_time_ns)
-        agents = getattr(record, 'agents', None)
-        resimulated = {scan.name: scan.cdr for scan in agents.scans} if agents else {}
+        resimulated = {key: data for key, data in _agent_messages(record).items()
+                       if key[0] in self.recorded_kinds or key[0] == agent_topics.SCAN}
         if recorded == resimulated:
             return True
-        for name in sorted(set(recorded) | set(resimulated)):
-            ours, theirs = recorded.get(name), resimulated.get(name)
+        for key in sorted(set(recorded) | set(resimulated)):
+            ours, theirs = recorded.get(key), resimulated.get(key)
             if ours != theirs:
-                comparison.add(Difference(segment_index, step.step, f'scan {name}', None,
-                                          _scan_text(ours), _scan_text(theirs), math.inf))
+                kind, name = key
+                shown = _SHOWN[kind]
+                comparison.add(Difference(segment_index, step.step, f'{kind} {name}', None,
+                                          shown(ours), shown(theirs), math.inf))
         return False
+
+
+def _agent_messages(record):
+    """{(kind, agent name): bytes} of a re-simulated record's scans, ground truth, bumpers."""
+    agents = getattr(record, 'agents', None)
+    if agents is None:
+        return {}
+    found = {(agent_topics.SCAN, scan.name): scan.cdr for scan in agents.scans}
+    found.update(((agent_topics.GROUND_TRUTH, name), data)
+                 for name, data in zip(agents.names, agents.ground_truth_cdr))
+    found.update(((agent_topics.BUMPER, bumper.name), bumper.cdr)
+                 for bumper in agents.bumpers)
+    return found
+
+
+def _bumper_text(data):
+    """A bumper message as a difference shows it (or 'none')."""
+    if data is None:
+        return 'none'
+    try:
+        stamp_ns, frame_id, x, y, z = decode_vector3_stamped(data)
+    except ValueError as error:
+        return f'undecodable ({error})'
+    return f'{frame_id} at {stamp_ns} ns: ({x!r}, {y!r}, {z!r})'
 
 
 def _scan_text(data):
@@ -411,6 +448,11 @@ def _scan_text(data):
         return f'undecodable ({error})'
     return (f'{scan.frame_id} at {scan.stamp_ns} ns, {len(scan.ranges)} ranges, first '
             f'{scan.ranges[:3].tolist()}')
+
+
+#: How a difference shows each kind of agent message.
+_SHOWN = {agent_topics.SCAN: _scan_text, agent_topics.GROUND_TRUTH: _odom_text,
+          agent_topics.BUMPER: _bumper_text}
 
 
 def describe(comparison):

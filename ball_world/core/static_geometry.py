@@ -1,0 +1,339 @@
+"""Everything that does not move: the arena, the walls and a map's solid cells, as one index.
+
+Why one module: seed mode, exact mode and the lidar ask the same questions of static
+geometry (which walls can a ball touch, which can it hit along its path, where does a beam
+first meet a wall), and a map of a real building has tens of thousands of boundary edges.
+Today's walls were rasterised into the balls' grid on every rebuild of the candidate lists,
+and exact mode listed them in buckets sized by the ball count (too-long walls checked by
+every ball): both cost O(walls) or more per step. Here the static geometry is indexed once
+per World, in a grid sized by the geometry, and every question costs what lies near the
+ball or the beam, whatever the size of the map.
+
+A map's solid cells become walls as the boundary of the solid region, in merged runs
+(`boundary_runs`): every edge between a solid cell (or the outside of the grid, solid too)
+and a free cell, merged with its collinear neighbours whose solid side is the same. So a
+run's end points are always true corners of the solid region: convex ones (the corner of a
+block, where the seed's end-point rule applies: the normal from the corner to the ball's
+centre), concave ones (inside a room's corner, where a ball touches two runs inside their
+length) or the point where two solid cells meet diagonally only (a checkerboard; the two
+runs on each line through it have opposite solid sides, so they are never merged, and the
+point is a convex corner of both cells). Edges between two solid cells are no geometry.
+
+Walls are numbered: the World's `walls` first (the arena's four, then the `walls`
+parameter's), then the map's runs (horizontal runs by row line and start, then vertical runs
+by column line and start). A world without a map keeps its walls' numbers, so the canonical
+contact order of seed mode and the tie order of exact mode are the ones it always had.
+
+The index (`SegmentIndex`) is a uniform grid of square buckets over the geometry's bounding
+box, in compressed rows (CSR): the walls listed in bucket (column c, row r) are
+items[first[c * rows + r]:first[c * rows + r + 1]], in increasing wall order. Buckets of one
+column are consecutive, so a box of buckets is one contiguous run of items per column. A
+segment is listed in every bucket it passes through (widened by a hair, SLACK), so any
+region a query covers finds every segment that enters it. No I/O, no ROS.
+"""
+import math
+
+import numpy as np
+
+from ball_world.core import limits, rules
+
+_EMPTY = np.empty(0, dtype=np.int64)
+#: Relative widening of bucket ranges, far above the rounding of bucket coordinates, so a
+#: segment exactly on a bucket's edge is listed on both sides and a query on the edge finds
+#: it (as broadphase.SLACK).
+SLACK = 1e-9
+#: Buckets are at least this many map cells wide: a bucket narrower than a few cells would
+#: list a long run in more buckets than it saves tests.
+MIN_BUCKET_CELLS = 4.0
+#: A bucket is about this many times as wide as the mean spacing of segments
+#: (sqrt(area / segments)): a few segments per bucket where they are dense.
+BUCKET_SPACING = 2.0
+#: Most buckets per segment (plus BUCKETS_SLACK); buckets grow past it.
+BUCKETS_PER_SEGMENT = 4
+BUCKETS_SLACK = 1024
+#: Cells of a lidar block (`ScanGrid`): a beam crosses an empty block in one step.
+BLOCK_CELLS = 8
+
+
+def expand(owners, low, high):
+    """For each owner k and each i in [low[k], high[k]): the pair (owner, i), as two arrays
+    (broadphase's _expand: `repeat` and `cumsum`, no Python loop)."""
+    counts = np.maximum(high - low, 0)
+    total = int(counts.sum())
+    if total == 0:
+        return _EMPTY, _EMPTY
+    first = np.repeat(owners, counts)
+    offsets = np.cumsum(counts) - counts
+    second = np.repeat(low - offsets, counts) + np.arange(total)
+    return first, second
+
+
+def widened(length, scale):
+    """`length` plus SLACK of itself and of the coordinates' magnitude `scale`."""
+    return length + SLACK * (length + scale)
+
+
+# A map's solid cells as merged boundary runs -------------------------------------------------
+
+def _runs(kinds):
+    """Maximal runs of equal non-zero values along the last axis of `kinds` (2D int8, whose
+    first and last columns are 0): (line, first, end) arrays, end exclusive, in row-major
+    order."""
+    width = kinds.shape[1]
+    flat = kinds.reshape(-1)
+    before = np.empty_like(flat)
+    before[0] = 0
+    before[1:] = flat[:-1]
+    after = np.empty_like(flat)
+    after[-1] = 0
+    after[:-1] = flat[1:]
+    starts = np.flatnonzero((flat != 0) & (flat != before))
+    ends = np.flatnonzero((flat != 0) & (flat != after)) + 1
+    line = starts // width
+    return line, starts - line * width, ends - line * width
+
+
+def boundary_runs(cells):
+    """The boundary of a map's solid cells (core.solid_cells.SolidCells, checked) as merged
+    axis-aligned runs: (K, 4) segments x1, y1, x2, y2, horizontal runs first (by row line,
+    then x), left to right, then vertical runs (by column line, then y), bottom to top.
+
+    Vertex (i, j) of the grid is at (origin_x + i resolution, origin_y + j resolution), the
+    same expression the lidar's grid walk uses for cell edges, so both see the same lines.
+    """
+    solid = cells.solid
+    rows, columns = solid.shape
+    # A ring of solid cells around the grid: everything outside it is solid.
+    padded = np.ones((rows + 2, columns + 2), dtype=bool)
+    padded[1:-1, 1:-1] = solid
+    # Horizontal edges on row line j (0..rows), between padded rows j and j + 1: 1 where the
+    # solid side is below, 2 where it is above. Padded columns 0 and columns + 1 are solid
+    # on both sides, so runs never continue from one line to the next.
+    below = padded[:-1, :]
+    above = padded[1:, :]
+    kinds = (below & ~above).astype(np.int8) + 2 * (above & ~below).astype(np.int8)
+    line, first, end = _runs(kinds)
+    y = cells.origin_y + line.astype(np.float64) * cells.resolution
+    horizontal = np.stack((cells.origin_x + (first - 1).astype(np.float64) * cells.resolution,
+                           y,
+                           cells.origin_x + (end - 1).astype(np.float64) * cells.resolution,
+                           y), axis=1)
+    # Vertical edges on column line i (0..columns), between padded columns i and i + 1,
+    # transposed so that runs go along the last axis.
+    left = padded[:, :-1]
+    right = padded[:, 1:]
+    kinds = np.ascontiguousarray(
+        ((left & ~right).astype(np.int8) + 2 * (right & ~left).astype(np.int8)).T)
+    line, first, end = _runs(kinds)
+    x = cells.origin_x + line.astype(np.float64) * cells.resolution
+    vertical = np.stack((x, cells.origin_y + (first - 1).astype(np.float64) * cells.resolution,
+                         x, cells.origin_y + (end - 1).astype(np.float64) * cells.resolution),
+                        axis=1)
+    return np.concatenate((horizontal, vertical)).reshape(-1, 4)
+
+
+# The bucket index -----------------------------------------------------------------------------
+
+def _cell_ranges(low, high, origin, size, count, slack):
+    """First and last bucket (arrays) of intervals [low, high] widened by `slack`, clipped to
+    [0, count - 1] (first > last where an interval misses the grid)."""
+    first = np.floor(np.clip((low - slack - origin) / size, -1.0, float(count)))
+    last = np.floor(np.clip((high + slack - origin) / size, -1.0, float(count)))
+    return (np.maximum(first.astype(np.int64), 0),
+            np.minimum(last.astype(np.int64), count - 1))
+
+
+def bucket_size(extent_x, extent_y, count, resolution):
+    """The buckets' width for `count` segments spanning the extent (m), from the geometry
+    alone: BUCKET_SPACING mean spacings, at least MIN_BUCKET_CELLS map cells (resolution 0
+    without a map), widened until the grid has at most BUCKETS_PER_SEGMENT buckets per
+    segment (plus BUCKETS_SLACK)."""
+    area = max(extent_x, 0.0) * max(extent_y, 0.0)
+    size = BUCKET_SPACING * math.sqrt(area / max(count, 1))
+    size = max(size, MIN_BUCKET_CELLS * resolution, 1e-3 * max(extent_x, extent_y), 1e-6)
+    budget = BUCKETS_PER_SEGMENT * count + BUCKETS_SLACK
+    while (extent_x / size + 1.0) * (extent_y / size + 1.0) > budget:
+        size *= 2.0
+    return size
+
+
+class SegmentIndex:
+    """Segments (M, 4) in a uniform grid of buckets (see the module docstring).
+
+    `grid` holds (origin_x, origin_y, bucket width, largest |coordinate|) and `shape`
+    (columns, rows), as the compiled kernels take them.
+    """
+
+    def __init__(self, segments, resolution=0.0):
+        segments = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+        count = len(segments)
+        if count:
+            low = np.minimum(segments[:, 0:2], segments[:, 2:4]).min(axis=0)
+            high = np.maximum(segments[:, 0:2], segments[:, 2:4]).max(axis=0)
+            scale = float(np.abs(segments).max())
+        else:
+            low = high = np.zeros(2)
+            scale = 0.0
+        size = bucket_size(float(high[0] - low[0]), float(high[1] - low[1]), count, resolution)
+        self.columns = int((high[0] - low[0]) / size) + 1
+        self.rows = int((high[1] - low[1]) / size) + 1
+        self.grid = np.array([low[0], low[1], size, scale])
+        self.shape = np.array([self.columns, self.rows], dtype=np.int64)
+        self.first, self.items = self._fill(segments)
+
+    @property
+    def size(self):
+        """A bucket's width, m."""
+        return float(self.grid[2])
+
+    def _fill(self, segments):
+        """(first, items): each segment listed in the buckets it passes through, column by
+        column (the part of the segment inside a column's widened x-interval gives rows)."""
+        ox, oy, size, scale = self.grid
+        slack = widened(0.0, max(size, scale))
+        x0 = segments[:, 0]
+        y0 = segments[:, 1]
+        x1 = segments[:, 2]
+        y1 = segments[:, 3]
+        first_col, last_col = _cell_ranges(np.minimum(x0, x1), np.maximum(x0, x1), ox, size,
+                                           self.columns, slack)
+        wall, col = expand(np.arange(len(segments)), first_col, last_col + 1)
+        x0 = np.take(x0, wall)
+        y0 = np.take(y0, wall)
+        dx = np.take(x1, wall) - x0
+        dy = np.take(y1, wall) - y0
+        left = ox + col * size - slack - x0
+        right = ox + (col + 1) * size + slack - x0
+        vertical = dx == 0.0
+        safe_dx = np.where(vertical, 1.0, dx)
+        ta = left / safe_dx
+        tb = right / safe_dx
+        t_low = np.where(vertical, 0.0, np.clip(np.minimum(ta, tb), 0.0, 1.0))
+        t_high = np.where(vertical, 1.0, np.clip(np.maximum(ta, tb), 0.0, 1.0))
+        ya = y0 + t_low * dy
+        yb = y0 + t_high * dy
+        first_row, last_row = _cell_ranges(np.minimum(ya, yb), np.maximum(ya, yb), oy, size,
+                                           self.rows, slack)
+        entry, row = expand(np.arange(len(wall)), first_row, last_row + 1)
+        keys = np.take(col, entry) * self.rows + row
+        items = np.take(wall, entry)
+        # Entries come segment by segment: a stable sort keeps each bucket's in wall order.
+        order = np.argsort(keys, kind='stable')
+        first = np.zeros(self.columns * self.rows + 1, dtype=np.int64)
+        np.cumsum(np.bincount(keys, minlength=self.columns * self.rows), out=first[1:])
+        return first, np.ascontiguousarray(np.take(items, order), dtype=np.int64)
+
+    def near_pairs(self, positions, radii, margin, starts, directions, lengths):
+        """(ball, segment) with the ball's centre closer than r + margin to the segment, in
+        canonical order (by ball, then segment), vectorised: each ball's box of buckets,
+        one contiguous run of items per column, then the exact distance test."""
+        if len(positions) == 0 or len(self.items) == 0:
+            return _EMPTY, _EMPTY
+        ox, oy, size, scale = self.grid
+        reach = widened(radii + margin, max(scale, float(np.abs(positions).max())))
+        x = positions[:, 0]
+        y = positions[:, 1]
+        col0, col1 = _cell_ranges(x - reach, x + reach, ox, size, self.columns, 0.0)
+        row0, row1 = _cell_ranges(y - reach, y + reach, oy, size, self.rows, 0.0)
+        ball, col = expand(np.arange(len(positions)), col0, col1 + 1)
+        base = col * self.rows
+        low = np.take(self.first, base + np.take(row0, ball))
+        high = np.take(self.first, base + np.take(row1, ball) + 1)
+        entry, item = expand(np.arange(len(ball)), low, high)
+        ball = np.take(ball, entry)
+        wall = np.take(self.items, item)
+        points = np.take(positions, ball, axis=0)
+        sx, sy, _ = rules.wall_offset(points[:, 0], points[:, 1],
+                                      np.take(starts[:, 0], wall), np.take(starts[:, 1], wall),
+                                      np.take(directions[:, 0], wall),
+                                      np.take(directions[:, 1], wall), np.take(lengths, wall))
+        near = np.take(radii, ball) + margin
+        keep = np.flatnonzero(sx * sx + sy * sy < near * near)
+        # A segment listed in several buckets of the box is found once per bucket.
+        keys = np.unique(np.take(ball, keep) * max(1, len(starts)) + np.take(wall, keep))
+        return keys // max(1, len(starts)), keys % max(1, len(starts))
+
+
+# The whole static geometry of a World ---------------------------------------------------------
+
+class StaticGeometry:
+    """The World's walls and its map's boundary runs as one list of segments (walls first),
+    their per-segment values (as core.world.Walls has them), the bucket index, and the map's
+    cells for the lidar.
+
+    Built once per World: nothing static changes while it lives (edits move balls only).
+    """
+
+    def __init__(self, walls, cells=None):
+        self.wall_count = len(walls)
+        self.cells = cells
+        if cells is None:
+            runs = np.empty((0, 4))
+        else:
+            runs = boundary_runs(cells)
+            far = np.abs(runs) > limits.COORDINATE_LIMIT
+            if far.any():
+                raise ValueError(f'the map reaches {float(np.abs(runs).max()):g} m from the '
+                                 f'origin, beyond the coordinate limit of '
+                                 f'{limits.COORDINATE_LIMIT:g} m')
+        self.run_count = len(runs)
+        self.segments = np.concatenate((walls.segments, runs)).reshape(-1, 4)
+        edge = runs[:, 2:4] - runs[:, 0:2]
+        run_lengths = np.hypot(edge[:, 0], edge[:, 1])
+        self.starts = np.concatenate((walls.starts, runs[:, 0:2])).reshape(-1, 2)
+        self.ends = np.concatenate((walls.ends, runs[:, 2:4])).reshape(-1, 2)
+        self.lengths = np.concatenate((walls.lengths, run_lengths))
+        self.directions = np.concatenate((walls.directions,
+                                          edge / np.maximum(run_lengths, 1e-300)[:, None]))
+        self.index = SegmentIndex(self.segments,
+                                  cells.resolution if cells is not None else 0.0)
+        self._scan_grid = None
+
+    def __len__(self):
+        return len(self.segments)
+
+    def near_pairs(self, positions, radii, margin):
+        """(ball, wall) index arrays, in canonical order, of every ball whose centre is
+        closer than its radius plus `margin` to a wall or run."""
+        return self.index.near_pairs(positions, radii, margin, self.starts, self.directions,
+                                     self.lengths)
+
+    @property
+    def scan_grid(self):
+        """The map's cells as the lidar walks them (ScanGrid), made on first use."""
+        if self._scan_grid is None:
+            self._scan_grid = ScanGrid(self.cells)
+        return self._scan_grid
+
+
+class ScanGrid:
+    """A map's solid cells as a beam walks them: one byte a cell (1 solid), and a coarser
+    level of blocks of BLOCK_CELLS x BLOCK_CELLS cells (1: the block holds a solid cell or
+    reaches past the grid), so a beam crosses empty space a block at a time.
+
+    Without a map: a grid of no cells, which a scan never walks.
+    """
+
+    def __init__(self, cells=None):
+        if cells is None:
+            self.solid = np.zeros((0, 0), dtype=np.uint8)
+            self.blocks = np.zeros((0, 0), dtype=np.uint8)
+            self.frame = np.array([0.0, 0.0, 1.0])
+            return
+        solid = cells.solid
+        rows, columns = solid.shape
+        self.solid = np.ascontiguousarray(solid, dtype=np.uint8)
+        block_rows = -(-rows // BLOCK_CELLS)
+        block_columns = -(-columns // BLOCK_CELLS)
+        padded = np.ones((block_rows * BLOCK_CELLS, block_columns * BLOCK_CELLS), dtype=bool)
+        padded[:rows, :columns] = solid
+        self.blocks = np.ascontiguousarray(
+            padded.reshape(block_rows, BLOCK_CELLS, block_columns, BLOCK_CELLS)
+            .any(axis=(1, 3)), dtype=np.uint8)
+        #: origin_x, origin_y, resolution
+        self.frame = np.array([cells.origin_x, cells.origin_y, cells.resolution])
+
+    @property
+    def empty(self):
+        """Whether there is no map to walk."""
+        return self.solid.size == 0

@@ -1,0 +1,111 @@
+"""How long a map takes to load: the loader alone, and the node from its start to its first step.
+
+    .venv/bin/python -m benchmarks.map_load [--repeat 5]
+
+The maps: the two real ones shipped in maps/ (TurtleBot3 sandbox, 147,456 cells; depot,
+185,428 cells) and a warehouse at 3 cm made here, 2048 x 1024 = 2,097,152 cells (a PGM of
+walls, shelves and unknown border, like a SLAM map). The loader's time is read_map_files +
+load_map (decode, cells) and the world's CellQueries, the median of --repeat runs; the
+node's is the wall time of `ball_world -p max_steps:=1` (process start to its first step and
+exit) with the map and without, so their difference is what the map costs a start (on a
+loaded machine that difference drowns in the start's noise); the world's build in this process
+(a Simulation: files read, decoded, cells, placement, the World's static geometry, /map
+encoded) is what the node does between its start and its first step.
+"""
+import argparse
+import os
+from pathlib import Path
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from ball_world.core.parameters import DEFAULTS
+from ball_world.core.solid_cells import CellQueries
+from ball_world.map_files import load_map_file
+from ball_world.simulation import Simulation
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def warehouse(folder, columns=2048, rows=1024):
+    """A 3 cm warehouse map of walls, aisles of shelves and an unknown border."""
+    pixels = np.full((rows, columns), 254, dtype=np.uint8)
+    pixels[:8, :] = pixels[-8:, :] = 205
+    pixels[:, :8] = pixels[:, -8:] = 205
+    pixels[8:12, 8:-8] = pixels[-12:-8, 8:-8] = 0
+    pixels[8:-8, 8:12] = pixels[8:-8, -12:-8] = 0
+    for x in range(120, columns - 120, 90):  # shelves: 0.9 m deep, aisles of 1.8 m
+        pixels[100:rows - 100, x:x + 30] = 0
+    rng = np.random.default_rng(0)
+    pixels[rng.random((rows, columns)) < 0.002] = 0  # clutter, as SLAM leaves it
+    (folder / 'warehouse.pgm').write_bytes(f'P5\n{columns} {rows}\n255\n'.encode()
+                                           + pixels.tobytes())
+    (folder / 'warehouse.yaml').write_text('image: warehouse.pgm\nmode: trinary\n'
+                                           'resolution: 0.03\norigin: [-5.0, -5.0, 0]\n'
+                                           'negate: 0\noccupied_thresh: 0.65\n'
+                                           'free_thresh: 0.25\n')
+    return folder / 'warehouse.yaml'
+
+
+def loader_seconds(path, repeat):
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        occupancy = load_map_file(str(path))
+        CellQueries(occupancy.solid_cells())
+        times.append(time.perf_counter() - start)
+    return statistics.median(times), occupancy
+
+
+def build_seconds(repeat, **values):
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        Simulation({**DEFAULTS, 'random.count': 20, **values})
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def node_seconds(repeat, *parameters):
+    node = Path(sys.prefix) / 'bin' / 'ball_world'
+    times = []
+    for _ in range(repeat):
+        command = [str(node), '--ros-args', '-p', 'max_steps:=1', '-p', 'rate_hz:=0.0',
+                   '-p', 'dt:=0.01', '-p', 'markers.rate_hz:=0.0']
+        for parameter in parameters:
+            command += ['-p', parameter]
+        start = time.perf_counter()
+        subprocess.run(command, check=True, capture_output=True)
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog='benchmarks.map_load', description=__doc__)
+    parser.add_argument('--repeat', type=int, default=5)
+    args = parser.parse_args(argv)
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    with tempfile.TemporaryDirectory() as folder:
+        maps = [ROOT / 'maps' / 'tb3_sandbox.yaml', ROOT / 'maps' / 'depot.yaml',
+                warehouse(Path(folder))]
+        baseline = node_seconds(args.repeat, 'random.count:=20')
+        built = build_seconds(args.repeat)
+        print(f'without a map: world built in {built * 1e3:.0f} ms; node start to first step '
+              f'{baseline:.2f} s')
+        for path in maps:
+            seconds, occupancy = loader_seconds(path, args.repeat)
+            built = build_seconds(args.repeat, map=str(path), arena=[])
+            started = node_seconds(args.repeat, f'map:={path}', 'arena:=[]',
+                                   'random.count:=20')
+            print(f'{path.name}: {occupancy.width} x {occupancy.height} = '
+                  f'{occupancy.width * occupancy.height:,} cells; loader {seconds * 1e3:.0f} ms;'
+                  f' world built in {built * 1e3:.0f} ms; node start to first step '
+                  f'{started:.2f} s ({started - baseline:+.2f} s)')
+
+
+if __name__ == '__main__':
+    main()
