@@ -25,7 +25,7 @@ from ball_world.core.edits import (check_placement, check_speeds, EditRefused, E
 from ball_world.core.impulses import ImpulseRejected, lookup_ball, velocity_after
 from ball_world.core.limits import MAX_SIM_TIME_NS
 from ball_world.core.occupancy_map import MapError
-from ball_world.core.parameters import checked
+from ball_world.core.parameters import checked, MAX_AGENTS
 from ball_world.core.scenario import build_scene, ScenarioError, step_duration_ns
 from ball_world.core.world import World
 from ball_world.msgs.agent_cdr import encode_odometry, encode_tf_message
@@ -177,7 +177,8 @@ class Simulation:
         self.agents = Agents(agent_names(parameters, len(world)),
                              Limits.from_parameters(parameters))
         self._drive = None  # the agents' impulses for the next step, once applied
-        self._agent_frames = None  # ((names, frame_id), odom frames, body frames) last used
+        # ((names, frame_id), odom frames, body frames, frame_id per agent) last used
+        self._agent_frames = None
         alphas = parameters['agent.odom.noise']
         self._odometry_noise = (odometry.OdometryNoise(parameters['random.seed'])
                                 if odometry.enabled(alphas) else None)
@@ -463,12 +464,16 @@ class Simulation:
         largest = float(world.radii.max()) if len(world) else 0.0
         near = Neighbours(world.positions, world.radii)
         placed = np.empty((len(requests), 3))
+        agents_added = 0
         for request in requests:
             ball = request.ball
             try:
                 if len(world) + len(accepted) >= limits.MAX_BALLS:
                     raise EditRefused(TOO_MANY, f'the world holds {limits.MAX_BALLS:,} balls, '
                                                 'the most it can')
+                if request.agent and len(self.agents) + agents_added >= MAX_AGENTS:
+                    raise EditRefused(TOO_MANY, f'the world has {MAX_AGENTS:,} agents, the most '
+                                                'it can (parameter agents)')
                 name = self.entities.new_name(request.name, request.allow_renaming, taken)
                 clash = request.agent and frame_clash(
                     self.frame_id, str(self.parameters['frame_prefix']), (name,))
@@ -490,6 +495,7 @@ class Simulation:
                 results.append(refusal)
                 continue
             energy, lightest, smallest, largest = added, min(lightest, ball.mass), low, high
+            agents_added += bool(request.agent)
             taken.add(name)
             placed[len(accepted)] = ball.x, ball.y, ball.radius
             accepted.append((name, ball))
@@ -719,16 +725,16 @@ class Simulation:
             prefix = str(self.parameters['frame_prefix'])
             pairs = [frames(prefix, name) for name in names]
             self._agent_frames = (key, tuple(p[0] for p in pairs),
-                                  tuple(p[1] for p in pairs))
+                                  tuple(p[1] for p in pairs), (self.frame_id,) * len(names))
             count = len(names)
             if self.parameters['agent.odom.tf_static']:
                 static = encode_tf_message(stamp_ns, (self.frame_id,) * count,
                                            self._agent_frames[1], np.zeros((count, 2)),
                                            np.zeros(count))
-        _, odom_frames, base_frames = self._agent_frames
+        _, odom_frames, base_frames, world_frames = self._agent_frames
         located = positions[indices]
-        truth = tuple(encode_odometry(stamp_ns, (self.frame_id,) * len(names), base_frames,
-                                      located, yaws, twists))
+        truth = tuple(encode_odometry(stamp_ns, world_frames, base_frames, located, yaws,
+                                      twists))
         poses = covariances = None
         if self._odometry_noise is None:  # odometry is the ground truth, as it always was
             odom = tuple(encode_odometry(stamp_ns, odom_frames, base_frames, located, yaws,

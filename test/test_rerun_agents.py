@@ -66,3 +66,29 @@ def test_a_recording_converted_to_rrd_draws_its_agents(tmp_path, capsys):
     assert shown_at(vectors, 10)[1] == pytest.approx(
         [HEADING_RADII * radius * math.cos(yaw), HEADING_RADII * radius * math.sin(yaw)],
         rel=1e-6)
+
+
+def test_a_bumper_hit_is_drawn_along_the_impulse_then_cleared(tmp_path):
+    from ball_world.recording.rerun_agents import BUMPER_SHOWN, BUMPERS
+    path = tmp_path / 'run.rrd'
+    # ball_0 (an agent, heading 0.8 rad) hit head on by ball_1 coming along -x.
+    simulation = Simulation({'rate_hz': 100.0, 'random.count': 0, 'arena': [],
+                             'agents': ['ball_0'], 'balls.x': [0.0, 1.5],
+                             'balls.y': [0.0, 0.0], 'balls.vx': [0.0, -3.0],
+                             'balls.vy': [0.0, 0.0], 'balls.radius': [0.5, 0.5],
+                             'balls.mass': [2.0, 1.0], 'agent.scan.samples': 0},
+                            sinks=[RerunSink(path)])
+    simulation.set_state('ball_0', 0.0, 0.0, 0.0, 0.0, yaw=0.8)
+    hit = None
+    for _ in range(120):
+        record, _ = simulation.step()
+        if record.agents.bumpers and hit is None:
+            hit = record.step
+    simulation.close()
+    _, content, _, _ = read(path)
+    vectors = content[(f'/{BUMPERS}', 'Arrows2D:vectors')]
+    labels = content[(f'/{BUMPERS}', 'Arrows2D:labels')]
+    [vector] = shown_at(vectors, hit)
+    assert vector[1] == pytest.approx(0.0, abs=1e-6) and vector[0] < 0.0  # pushed along -x
+    assert shown_at(labels, hit) == ['ball_0 hit 4 N s']  # 2 m1 m2 / (m1 + m2) x 3 m/s
+    assert shown_at(vectors, hit + round(BUMPER_SHOWN * 100) + 1) in ([], None)

@@ -1,11 +1,20 @@
-"""How Rerun draws agents (core.agents): an arrow along each heading.
+"""How Rerun draws agents (core.agents): an arrow along each heading (the name is drawn with
+the balls' names, rerun_labels), and each bumper hit (<name>/bumper) as an arrow from the
+agent's centre along the impulse.
 
 A module of its own so rerun_log.py only calls it: an agent is a ball (drawn with the
-balls) plus this arrow, from its centre, HEADING_RADII of its radius long, so the heading
-reads at any zoom that shows the ball.
+balls) plus its heading arrow, from its centre, HEADING_RADII of its radius long, so the
+heading reads at any zoom that shows the ball. A hit's arrow (BUMPERS) points along the
+impulse the agent took, in the world (the message holds it in base_link; turned back by the
+heading), its length the velocity change times BUMPER_SECONDS but at least BUMPER_MIN_RADII
+radii, labelled with the agent and the impulse in N s; BumperView keeps it on screen for
+BUMPER_SHOWN seconds of simulated time, since one step is too short to see.
 """
 import numpy as np
 import rerun as rr
+
+from ball_world.msgs.bumper_markers import (BUMPER_COLOR, BUMPER_MIN_RADII,
+                                            BUMPER_SECONDS, BUMPER_SHOWN)
 
 #: Entity path of the arrows, under the arena's +y-up transform.
 AGENTS = 'arena/agents'
@@ -14,9 +23,10 @@ HEADING_RADII = 2.0
 #: Arrow length where a record carries no radii, m.
 DEFAULT_LENGTH = 0.5
 #: Burnt orange: no ball has it, and it keeps a contrast of at least 4:1 on the viewer's
-#: light theme and on its dark one (yellow was 1.3:1 on the light one). The agent's name is
-#: drawn with the balls' names (rerun_labels places it where it collides with nothing).
+#: light theme and on its dark one (yellow was 1.3:1 on the light one).
 AGENT_COLOR = (200, 80, 0)
+#: Entity path of the bumper hits, under the arena's +y-up transform.
+BUMPERS = 'arena/bumpers'
 
 
 def heading_arrows(record):
@@ -32,3 +42,53 @@ def heading_arrows(record):
     return rr.Arrows2D(origins=np.asarray(record.positions, dtype=np.float64)[indices],
                        vectors=vectors, colors=AGENT_COLOR, radii=rr.Radius.ui_points(2.5),
                        draw_order=35.0)
+
+
+def bumper_arrows(record):
+    """rr.Arrows2D of the record's bumper hits (world frame, from each agent's centre), or
+    None when no agent was hit in its step."""
+    frame = getattr(record, 'agents', None)
+    if frame is None or not frame.bumpers:
+        return None
+    row_of = {name: row for row, name in enumerate(frame.names)}
+    rows = [row_of[bumper.name] for bumper in frame.bumpers]
+    indices = frame.indices[rows]
+    yaws = frame.yaws[rows]
+    body = np.array([(bumper.x, bumper.y) for bumper in frame.bumpers], dtype=np.float64)
+    cos, sin = np.cos(yaws), np.sin(yaws)
+    world = np.stack((cos * body[:, 0] - sin * body[:, 1], sin * body[:, 0] + cos * body[:, 1]),
+                     axis=1)
+    size = np.hypot(world[:, 0], world[:, 1])
+    radii = getattr(record, 'radii', None)
+    masses = getattr(record, 'masses', None)
+    radius = (np.asarray(radii, dtype=np.float64)[indices] if radii is not None
+              else np.full(len(rows), DEFAULT_LENGTH / HEADING_RADII))
+    change = (size / np.asarray(masses, dtype=np.float64)[indices] if masses is not None
+              else size)
+    length = np.maximum(change * BUMPER_SECONDS, BUMPER_MIN_RADII * radius)
+    vectors = world / np.where(size > 0.0, size, 1.0)[:, None] * length[:, None]
+    return rr.Arrows2D(
+        origins=np.asarray(record.positions, dtype=np.float64)[indices], vectors=vectors,
+        labels=[f'{bumper.name} hit {value:.3g} N s' for bumper, value in zip(frame.bumpers,
+                                                                              size)],
+        show_labels=True, colors=BUMPER_COLOR, radii=rr.Radius.ui_points(3.0),
+        draw_order=36.0)
+
+
+class BumperView:
+    """When to draw and clear the bumper arrows: a hit stays BUMPER_SHOWN simulated seconds."""
+
+    def __init__(self):
+        self.shown_until_ns = None
+
+    def update(self, record):
+        """('log', Arrows2D), ('clear', None) or None: what BUMPERS needs at this record."""
+        arrows = bumper_arrows(record)
+        if arrows is not None:
+            self.shown_until_ns = record.stamp_ns + round(BUMPER_SHOWN * 1e9)
+            return 'log', arrows
+        if self.shown_until_ns is not None and (record.stamp_ns >= self.shown_until_ns
+                                                or record.step == 0):
+            self.shown_until_ns = None
+            return 'clear', None
+        return None

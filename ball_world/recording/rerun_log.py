@@ -33,6 +33,7 @@ Layout of the recording (application id 'ball_world'):
 - `arena/velocities` (Arrows2D, optional): each ball's velocity times VELOCITY_SECONDS.
 - `arena/trails` (LineStrips2D, optional): each ball's path over the last trail seconds.
 - `arena/agents` (Arrows2D): each agent's heading, labelled with its name (rerun_agents).
+- `arena/bumpers` (Arrows2D): each agent's bumper hit, along the impulse (rerun_agents).
 - `plots/energy_change` (Scalars): kinetic energy relative to step 0 of the segment, in
   percent, rounded to ENERGY_RESOLUTION: an exact simulation conserves energy to ~1e-15, and
   an autoscaled plot would blow that rounding noise up to full-height steps. Real changes
@@ -83,7 +84,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from ball_world.core.parameters import BY_NAME
-from ball_world.recording.rerun_agents import AGENTS, heading_arrows
+from ball_world.recording.rerun_agents import AGENTS, BUMPERS, BumperView, heading_arrows
 from ball_world.recording.rerun_labels import LabelPlacer
 from ball_world.recording.rerun_map import map_bounds, map_entities
 from ball_world.recording.rerun_outlet import new_stream, Outlet, OutletFailed, parse_view
@@ -632,6 +633,7 @@ class _Feed:
         self._segment_base = 0  # value of the step timeline at step 0 of this segment
         self._last_global = None  # step timeline of the last record seen (logged or not)
         self._unlogged = None  # the last record seen, when it was not logged
+        self._bumpers = BumperView()
         self._totals = np.zeros(2, dtype=np.int64)  # collisions since step 0 of the segment
         self._energy0 = None
         self._shown_names = None
@@ -738,6 +740,10 @@ class _Feed:
             self._unlogged = (record, rtf)
         if self._scans and not self.live:
             self._log_scans(self._segment_base + record.step, record.log_time_ns)
+        bumpers = self._bumpers.update(record)
+        if bumpers is not None:
+            self._set_time(self._segment_base + record.step, record.log_time_ns)
+            self._emit('log', BUMPERS, bumpers[1] or rr.Arrows2D.cleared())
 
     def flush(self):
         if self._opened and not self._closed:

@@ -1,5 +1,5 @@
 """The agents' ROS topics: <name>/cmd_vel in; <name>/odom, <name>/ground_truth, <name>/bumper,
-<name>/scan, /tf, /tf_static out.
+<name>/scan, /tf, /tf_static out; and bumper_markers (RViz arrows of the hits).
 
 The node creates one AgentTopics and calls it at four points: sync() when the set of balls
 changes, drain() before each step, publish() after it, and report() for the progress line.
@@ -37,14 +37,23 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
 from tf2_msgs.msg import TFMessage
+from visualization_msgs.msg import MarkerArray
 
 from ball_world.core.agents import CommandRejected
+from ball_world.msgs.bumper_markers import bumper_markers
 from ball_world.msgs.twist_cdr import decode_twist, decode_twist_stamped
 
 #: cmd_vel messages a subscription holds between two steps (the node drains them all).
 CMD_VEL_DEPTH = 100
 #: Seconds between two warnings about refused commands.
 WARN_PERIOD = 5.0
+#: Agents whose topics take long enough to make (or leave) that the node says so first.
+MANY_AGENTS = 200
+#: Wall seconds between two looks at the graph for cmd_vel of another type (check_types).
+TYPE_CHECK_PERIOD = 2.0
+#: Wall seconds the node spends leaving the graph entity by entity when it stops; what is
+#: left then goes with the process (see destroy).
+LEAVE_BUDGET = 5.0
 
 CMD_VEL_QOS = QoSProfile(depth=CMD_VEL_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
 ODOM_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -82,6 +91,7 @@ class AgentTopics:
         self._tf = None
         self._tf_static = None
         self._warned_at = -WARN_PERIOD
+        self._hinted = set()  # (topic, type) pairs already named in a hint
         self.sync()
 
     @property
@@ -110,9 +120,14 @@ class AgentTopics:
             for publisher in entities.all():
                 node.destroy_publisher(publisher)
         scanning = self.simulation.parameters['agent.scan.samples'] > 0
-        for name in names:
-            if name in self._topics:
-                continue
+        new = [name for name in names if name not in self._topics]
+        started = time.monotonic()
+        if len(new) >= MANY_AGENTS:
+            self.node.get_logger().info(
+                f'making the topics of {len(new):,} agents (cmd_vel, odom, ground_truth, '
+                f"bumper{', scan' if scanning else ''}): DDS announces each, which takes a "
+                'while')
+        for name in new:
             subscription = node.create_subscription(
                 self._message_type, f'{name}/cmd_vel',
                 lambda data, name=name: self.take(name, data), CMD_VEL_QOS, raw=True,
@@ -122,21 +137,78 @@ class AgentTopics:
                 self._publisher(Odometry, f'{name}/ground_truth'),
                 self._publisher(Vector3Stamped, f'{name}/bumper'),
                 self._publisher(LaserScan, f'{name}/scan') if scanning else None)
+        if len(new) >= MANY_AGENTS:
+            self.node.get_logger().info(f'made the topics of {len(new):,} agents in '
+                                        f'{time.monotonic() - started:.1f} s')
         if names and self._tf is None:
+            self._bumper_markers = self.node.create_publisher(MarkerArray, 'bumper_markers',
+                                                              ODOM_QOS)
             self._tf = self.node.create_publisher(TFMessage, '/tf', TF_QOS)
             self._tf_static = self.node.create_publisher(TFMessage, '/tf_static',
                                                          TF_STATIC_QOS)
+
+    def check_types(self):
+        """Say once, for each agent's cmd_vel and each other type seen on it, that commands
+        of that type never arrive, and which setting takes them.
+
+        Why: DDS matches a publisher only with subscriptions of its own type, so a
+        TwistStamped sent to a world that takes Twist (Jazzy's diff_drive_controller takes
+        only TwistStamped, Nav2 sends it with enable_stamped_cmd_vel, teleop_twist_keyboard
+        sends Twist) is dropped without a word on either side. One graph query a period
+        (all topics and their types) covers every agent.
+        """
+        if self._io is None:
+            return
+        expected = self._message_type.__module__.split('.')[0] + '/msg/' + \
+            self._message_type.__name__
+        wanted = {self._io.resolve_topic_name(f'{name}/cmd_vel'): name for name in self._topics}
+        for topic, types in self._io.get_topic_names_and_types():
+            if topic not in wanted:
+                continue
+            for other in types:
+                if other == expected or (topic, other) in self._hinted:
+                    continue
+                self._hinted.add((topic, other))
+                setting = 'true' if other.endswith('TwistStamped') else 'false'
+                self.node.get_logger().warning(
+                    f'{topic} has a {other} endpoint, but this world takes {expected} there: '
+                    f'those commands never reach agent {wanted[topic]} (start the world with '
+                    f'-p agent.cmd_vel_stamped:={setting} to take {other})')
 
     def _publisher(self, message_type, topic):
         return self._io.create_publisher(
             message_type, topic, ODOM_QOS,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
-    def destroy(self):
-        """Leave the graph (the world node is closing)."""
-        if self._io is not None:
-            self._io.destroy_node()
-            self._io = None
+    def destroy(self, budget=LEAVE_BUDGET):
+        """Leave the graph (the world node is closing), within `budget` wall seconds.
+
+        Entity by entity, the subscriptions first (they are what publishers of cmd_vel look
+        for), then the publishers. Why a budget: with FastDDS each destruction costs in
+        proportion to the entities left in the participant (measured 2026-12-02: 1,000
+        agents' 4,000 entities took 23-44 s publishers first, 8 s subscriptions first; see
+        docs/agents.md), so stopping at 10,000 agents took minutes. What is left when the
+        budget is spent goes with the process: the node is exiting, and its participant's
+        end tells the other participants (at the latest when its lease runs out).
+        """
+        if self._io is None:
+            return
+        deadline = time.monotonic() + budget
+        node = self._io
+        entities = self._topics.values()
+        work = ([(node.destroy_subscription, e.cmd_vel) for e in entities]
+                + [(node.destroy_publisher, p) for e in entities for p in e.all()])
+        for done, (destroy, entity) in enumerate(work):
+            if time.monotonic() > deadline:
+                self.node.get_logger().info(
+                    f'stopping: {len(work) - done:,} agent topics left to the process exit '
+                    f'(over {budget:g} s leaving the graph one by one)')
+                self._io = None
+                return
+            destroy(entity)
+        self._topics = {}
+        node.destroy_node()
+        self._io = None
 
     def names(self):
         """The resolved topic names of the agents' topics."""
@@ -196,6 +268,9 @@ class AgentTopics:
             topics[name].ground_truth.publish(data)
         for bumper in frame.bumpers:
             topics[bumper.name].bumper.publish(bumper.cdr)
+        markers = bumper_markers(record, self.simulation.frame_id)
+        if markers is not None:
+            self._bumper_markers.publish(markers)
         for scan in frame.scans:
             entities = topics[scan.name]
             if entities.scan is None:  # scanners turned on by a reset

@@ -40,7 +40,7 @@ from ball_world.msgs.cdr import decode_vector3_stamped, encode_clock
 from ball_world.msgs.map_cdr import encode_occupancy_grid
 from ball_world.msgs.markers import MarkerBuilder
 from ball_world.recording.writer_thread import BackgroundSink
-from ball_world.ros.agents import AgentTopics
+from ball_world.ros.agents import AgentTopics, TYPE_CHECK_PERIOD
 from ball_world.ros.calls import SERVICE_QOS
 from ball_world.ros.parameters import converted, current_values, declare_all, ParameterError
 from ball_world.ros.rcl_init import init_quietly
@@ -259,6 +259,7 @@ class BallWorld(Node):
         self._set_markers_rate(values['markers.rate_hz'])
         self.create_timer(FLUSH_PERIOD, self.simulation.flush, clock=self._steady)
         self.create_timer(REPORT_PERIOD, self._report, clock=self._steady)
+        self.create_timer(TYPE_CHECK_PERIOD, self.agent_topics.check_types, clock=self._steady)
         self._window = (time.monotonic(), 0)
         self._start_wall = time.monotonic()
         self._held = []  # ('clock' or 'tf', record) not published yet: see _release_held

@@ -11,7 +11,8 @@ it does not push the ball with impulses (see goal.py for that) but, like a Nav2 
          forward   v = min(kv * d, max_speed) * max(cos e, 0)
                                                    (drive when facing it, slow down near it)
      and once within `tolerance`, v = w = 0, which holds the robot there;
-  3. publishes the command on `<ball>/cmd_vel` (geometry_msgs/Twist).
+  3. publishes the command on `<ball>/cmd_vel` (geometry_msgs/Twist, or TwistStamped when
+     the world takes that: agent.cmd_vel_stamped, seen on the graph once odom arrives).
 
 The world turns commands into accelerations limited by agent.max_accel, so the robot's
 velocity follows the command smoothly; a command must come at least every agent.cmd_timeout
@@ -21,10 +22,12 @@ or the robot brakes, which this loop does at rate_hz.
 """
 import math
 
-from geometry_msgs.msg import Twist
+from geometry_msgs.msg import Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from ball_world.tools.teleop_drive import command_type, stamped
 
 PARAMETERS = """\
 ROS parameters with --agent (after --ros-args):
@@ -35,7 +38,7 @@ ROS parameters with --agent (after --ros-args):
   max_speed    fastest forward command, m/s (default 1.0)
   tolerance    distance at which it stops, m (default 0.05)
   rate_hz      commands per second (default 20.0)
-  use_sim_time true: run on the world's /clock (start the world with publish_clock:=true)"""
+  use_sim_time true: run on the world's /clock (publish_clock, on by default)"""
 
 
 def heading(orientation):
@@ -70,9 +73,7 @@ class AgentGoal(Node):
         rate_hz = parameter(self, 'rate_hz', 20.0, float, low=0.0, strict=True)
         self.odom = None
         self.create_subscription(Odometry, f'{self.ball}/odom', self.on_odom, 1)
-        self.publisher = self.create_publisher(
-            Twist, f'{self.ball}/cmd_vel',
-            QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        self.publisher = None  # made once the world is heard: its cmd_vel type is then known
         self.create_timer(1.0 / rate_hz, self.on_timer)
         self.get_logger().info(
             f'driving agent {self.ball} to ({self.goal[0]:g}, {self.goal[1]:g}) on '
@@ -88,9 +89,14 @@ class AgentGoal(Node):
                 f'no odometry on {self.resolve_topic_name(self.ball + "/odom")} yet: is '
                 f'{self.ball} an agent (agents:=[{self.ball}])?', throttle_duration_sec=5.0)
             return
+        if self.publisher is None:
+            self.publisher = self.create_publisher(
+                command_type(self, f'{self.ball}/cmd_vel'), f'{self.ball}/cmd_vel',
+                QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         pose = self.odom.pose.pose
         forward, rate = command(pose.position.x, pose.position.y, heading(pose.orientation),
                                 self.goal, self.kv, self.kw, self.max_speed, self.tolerance)
         msg = Twist()
         msg.linear.x, msg.angular.z = forward, rate
-        self.publisher.publish(msg)
+        self.publisher.publish(stamped(self, msg) if self.publisher.msg_type is TwistStamped
+                               else msg)
