@@ -28,6 +28,11 @@ WANDERER, DRIVEN = 'ball_0', 'ball_1'
 #: Without a map: the default 10 m box with a wall up from the floor and one down from the
 #: ceiling, so the wanderer has corners to get out of.
 DEMO_WALLS = [3.5, 0.0, 3.5, 4.0, 6.5, 10.0, 6.5, 6.0, 0.0, 7.0, 2.0, 7.0]
+#: The sandbox's robots are TurtleBot3 Burgers (0.105 m, 0.22 m/s) among balls of 0.05-0.1 m:
+#: the wanderer's corridor and the tracker's ball sizes follow (the defaults are for the
+#: room's 0.25 m robots and 0.1-0.3 m balls).
+SANDBOX_WANDER = ['-p', 'half_width:=0.25', '-p', 'avoid_distance:=0.5', '-p', 'speed:=0.22']
+SANDBOX_TRACKER = ['-p', 'radius:=[0.05,0.1]', '-p', 'gate:=0.3']
 #: The robots as the first two balls (so they are ball_0 and ball_1), then slow random balls
 #: the tracker can follow.
 DEMO_BALLS = {'balls.x': [1.5, 8.5], 'balls.y': [1.5, 2.0], 'balls.vx': [0.0, 0.0],
@@ -107,10 +112,13 @@ def main(argv=None):
         children.start('world', world_command(
             args.grpc_port, world, args.steps, demo_parameters(world) + ros_args[1:],
             recording))
+        sandbox = world == SANDBOX
         children.start('wander', [tool('ball_world_wander'), '--ros-args',
-                                  '-p', f'agent:={WANDERER}'])
+                                  '-p', f'agent:={WANDERER}',
+                                  *(SANDBOX_WANDER if sandbox else [])])
         children.start('tracker', [tool('ball_world_tracker'), '--ros-args',
-                                   '-p', f'agent:={DRIVEN}'])
+                                   '-p', f'agent:={DRIVEN}',
+                                   *(SANDBOX_TRACKER if sandbox else [])])
         children.start('view_tracks', [tool('ball_world_view_tracks'), '--ros-args',
                                        '-p', f'agent:={DRIVEN}',
                                        '-p', f'view:={proxy_url(args.grpc_port)}',
