@@ -4,8 +4,9 @@ The Simulation asks `AgentScans.take` once per recorded step. A scan is due at s
 at every step whose end crosses a multiple of the scan period (1 / agent.scan.rate_hz of
 simulated time, in integer nanoseconds), so the rate never depends on the wall clock. Each
 agent scans from its centre along its heading at the end of the step (core.lidar, its own
-ball excluded), stamped with that step's time in its `<p><name>/base_link` frame, as REP 117
-says: +inf for nothing within range_max, -inf for closer than range_min. The noise is
+ball excluded, the map's cells seen: world.static.scan_grid), stamped with that step's time
+in its `<p><name>/base_link` frame, as REP 117 says: +inf for nothing within range_max,
+-inf for closer than range_min. The noise is
 seeded by (random.seed, the agent's name, the step), so a re-simulation draws it again.
 
 agent.scan.range_min 0 means 0.05 m beyond each agent's own radius (a scanner on a ball
@@ -101,7 +102,8 @@ class AgentScans:
         for name, index, yaw, frame_id in zip(names, indices, yaws, base_frames):
             scanner = self.scanner(name, float(world.radii[index]))
             ranges = scanner.scan(world.positions, world.radii, world.walls,
-                                  world.positions[index], float(yaw), int(index), step_index)
+                                  world.positions[index], float(yaw), int(index), step_index,
+                                  world.static.scan_grid)
             fan = scanner.fan
             cdr = encode_laser_scan(stamp_ns, frame_id, fan.angle_min, fan.angle_max,
                                     fan.angle_increment, 0.0, period, fan.range_min,

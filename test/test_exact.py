@@ -536,8 +536,7 @@ def single_grid_run(world, dt, steps):
     """Step `world` as exact mode did before radius classes (one grid, cells at least one
     largest diameter wide); return each ball's ball-ball collisions."""
     from ball_world.core import exact_kernel as kernel
-    walls = world.walls
-    geometry = (walls.segments, walls.starts, walls.ends, walls.directions, walls.lengths)
+    geometry = kernel.geometry(world.static)
     state = kernel.build(world.positions, world.velocities, world.radii, *geometry, math.inf)
     assert len(state.grids) == 2  # one class, and the totals
     per_ball = np.zeros(len(world), dtype=np.int64)

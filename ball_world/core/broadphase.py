@@ -34,10 +34,10 @@ every hot path.
 import numpy as np
 
 from ball_world.core import rules
-# SLACK (the relative widening of cells and reaches, far above the rounding of cell
-# coordinates, so that a pair exactly at its reach is never lost to rounding), `widened`
-# and `expand` are the static geometry's, shared.
-from ball_world.core.static_geometry import expand as _expand, SLACK, StaticGeometry, widened
+# `widened` (by static_geometry.SLACK, far above the rounding of cell coordinates, so that
+# a pair exactly at its reach is never lost to rounding) and `expand` are the static
+# geometry's, shared.
+from ball_world.core.static_geometry import expand as _expand, StaticGeometry, widened
 
 _EMPTY = np.empty(0, dtype=np.intp)
 #: Largest radius over smallest radius within one level of the hierarchical grid.

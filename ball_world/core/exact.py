@@ -4,7 +4,9 @@ Art of Molecular Dynamics Simulation"), compiled with numba. No ROS, no I/O.
 
 The responses are the seed's (shared/seed/RULES.md), applied at the exact contact: a pair
 along r_a - r_b at contact, a wall inside its length about its direction, an end point
-about the normal from the end point to the centre. How the events are found and kept in
+about the normal from the end point to the centre. A map's solid cells are walls too: the
+boundary runs of core.static_geometry, numbered after the walls, found by walking the static
+index along each ball's path (exact_kernel._scan_runs). How the events are found and kept in
 order is in exact_kernel.py; the impact times and responses are in exact_impacts.py.
 
 Simultaneous events (same time to the last bit) are processed in a fixed order: ball-ball
@@ -16,10 +18,11 @@ every step would cost more than the events themselves). Same world, same sequenc
 of edits between steps: bit-identical trajectories. The state is kept beside the world, not
 in it, and follows edits by itself: a ball whose position or velocity differs from what the
 last step left (an impulse, a set-state) is predicted again; a change in the number of
-balls, a radius or a wall rebuilds everything. `invalidate(world)` drops the state, so the
-next step starts from the world's arrays alone. `carried(world)` gives the state as plain
-arrays and `restore(world, carried)` takes it back (core.exact_carry), so a World rebuilt
-from a recording's arrays and the carried state steps bit for bit as the original did.
+balls, a radius or a wall rebuilds everything (a World's map never changes).
+`invalidate(world)` drops the state, so the next step starts from the world's arrays alone.
+`carried(world)` gives the state as plain arrays and `restore(world, carried)` takes it back
+(core.exact_carry), so a World rebuilt from a recording's arrays and the carried state steps
+bit for bit as the original did.
 
 Bounded work: a step processes at most `event_budget(n)` events, then raises
 EventBudgetExceeded instead of going on (the balls are left where they were at that moment,
@@ -77,8 +80,8 @@ def carried(world):
     from ball_world.core import exact_kernel as kernel
 
     state = _states.get(world)
-    walls = world.walls
-    if state is None or not kernel.matches(state, world.radii, walls.segments):
+    static = world.static
+    if state is None or not kernel.matches(state, world.radii, static.segments, static.layout):
         return exact_carry.NOTHING_KEPT
     return exact_carry.export(state, world)
 
@@ -111,13 +114,11 @@ def step(world, dt, per_ball=None):
     n = len(world.positions)
     if n == 0:
         return 0, 0, 0
-    walls = world.walls
     totals = np.zeros(3, dtype=np.int64)
     counts = per_ball if per_ball is not None else _NO_COUNTS
     budget = event_budget(n)
-    arguments = (world.positions, world.velocities, world.radii, world.masses, walls.segments,
-                 walls.starts, walls.ends, walls.directions, walls.lengths, float(dt), budget,
-                 totals, counts)
+    arguments = (world.positions, world.velocities, world.radii, world.masses,
+                 *kernel.geometry(world.static), float(dt), budget, totals, counts)
     state = _states.get(world)
     status = kernel.STALE_STATE if state is None else kernel.advance(state, *arguments)
     if status == kernel.STALE_STATE:
@@ -140,6 +141,4 @@ def _build(world, kernel):
     velocities = world.velocities
     if not (np.isfinite(positions).all() and np.isfinite(velocities).all()):
         raise ValueError('exact step: a ball position or velocity is not finite')
-    walls = world.walls
-    return kernel.build(positions, velocities, world.radii, walls.segments, walls.starts,
-                        walls.ends, walls.directions, walls.lengths)
+    return kernel.build(positions, velocities, world.radii, *kernel.geometry(world.static))

@@ -141,7 +141,7 @@ def restore(world, carried):
     _check_tori(carried.tori, members, kernel.BUCKETS_PER_BALL)
     _check_cells(carried, world, classes, [kernel.cell_shift(unit, largest, c)
                                            for c in range(len(largest))])
-    walls = len(world.walls)
+    walls = len(world.static)  # the walls, then the map's runs
     _check_partners(carried, n, walls)
     _check_times(carried)
     balls = np.empty((n, kernel.COLUMNS), dtype=np.int64)
@@ -159,9 +159,8 @@ def restore(world, carried):
     next_kind = carried.next_kind
     event_time = np.where(next_kind == CROSSING, carried.exit_time,
                           np.where(next_kind == NOTHING, math.inf, carried.hit_time))
-    walls = world.walls
-    return kernel.restore(world.positions, world.velocities, world.radii, walls.segments,
-                          walls.starts, walls.directions, walls.lengths, float(unit),
+    return kernel.restore(world.positions, world.velocities, world.radii,
+                          *kernel.geometry(world.static), float(unit),
                           np.ascontiguousarray(carried.tori, dtype=np.int64),
                           np.ascontiguousarray(largest), balls,
                           np.array(carried.hit_time, dtype=np.float64),

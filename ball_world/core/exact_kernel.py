@@ -86,6 +86,12 @@ BUCKETS = 3       # its first bucket in heads and wall_first (last row: all buck
 GLOBALS = 4       # its first wall in global_walls, which all its balls check (last row: all)
 REACH = 5         # REACH + b: how far (in units) grid b is searched around its cells (_span)
 
+# Entries of State.run_layout (core.static_geometry.StaticGeometry.layout).
+LAYOUT_COLUMNS = 0
+LAYOUT_ROWS = 1
+FIRST_RUN = 2     # the map's runs are walls FIRST_RUN .. FIRST_RUN + RUNS - 1
+RUNS = 3
+
 # Outcomes of a step.
 DONE = 0
 OVER_BUDGET = 1
@@ -102,6 +108,9 @@ MAX_CROWDING = 3.0
 BUCKETS_PER_BALL = 4
 #: Wall entries in the buckets, per bucket, before further long walls become global.
 WALL_ENTRIES_PER_BUCKET = 16
+#: Relative widening of the capsule a ball's path walks through the static buckets
+#: (_scan_runs), far above the rounding of its bucket coordinates.
+WALK_SLACK = 1e-9
 #: Largest radius over smallest within one radius class: radii from r_min * 4 ** c up to
 #: (not including) r_min * 4 ** (c + 1) share class c's grid (empty classes are left out),
 #: as seed mode's broadphase groups them (broadphase.LEVEL_RATIO).
@@ -126,8 +135,23 @@ State = collections.namedtuple('State', (
     'seen_positions',   # what the kernel left in the world, to notice edits
     'seen_velocities',
     'seen_radii',
-    'seen_walls',       # (M, 4) segments
+    'seen_walls',       # (W, 4) the walls' segments (the map's runs never change)
+    'run_grid',         # the static index (core.static_geometry.SegmentIndex): origin x, y,
+    'run_layout',       # bucket width, scale; columns, rows, first run (= W), runs (LAYOUT)
+    'run_first',        # its buckets' first items, column by column
+    'run_items',        # its items: walls and runs (the walk takes the runs only)
+    'run_seen',         # (M,) the walk's stamp of the last walk that met each segment
+    'run_stamp',        # (1,) walks so far
 ))
+
+
+def geometry(static):
+    """A World's static geometry (core.static_geometry.StaticGeometry) as build, restore and
+    advance take it: every segment (the walls, then the map's runs: segments, starts, ends,
+    directions, lengths) and the static index (grid, layout, first, items)."""
+    index = static.index
+    return (static.segments, static.starts, static.ends, static.directions, static.lengths,
+            index.grid, static.layout, index.first, index.items)
 
 
 @compile_inline
@@ -353,6 +377,98 @@ def _schedule(i, balls, hit_time, exit_time, event_time):
 
 
 @compile_inline
+def _scan_runs(state, i, now, px, py, vx, vy, radius, starts, ends, directions, lengths):
+    """Merge ball i's impacts with the map's runs that its disc can meet on its path from
+    `now` until its next event (its cell exit or its stored hit, whichever is first): the
+    static buckets that path's capsule (the path widened by the radius) covers, column by
+    column, each run once.
+
+    Why bounded by the next event: at a cell exit the ball walks again from there (_cross),
+    and any hit makes it predict again (_predict, also for a stale one), so the walks cover
+    its whole path piece by piece, and no walk ever crosses the map. A run is found if its
+    contact point lies within the radius of the path walked, and that holds for every impact
+    before the bound: what is found beyond it is exact too, and kept if earliest.
+    """
+    layout = state.run_layout
+    if layout[RUNS] == 0 or (vx == 0.0 and vy == 0.0):
+        return
+    until = min(state.exit_time[i], state.hit_time[i])
+    if not until < INFINITY:
+        return
+    duration = max(0.0, until - now)
+    qx = px + vx * duration
+    qy = py + vy * duration
+    grid = state.run_grid
+    origin_x = grid[0]
+    origin_y = grid[1]
+    size = grid[2]
+    scale = max(grid[3], abs(px), abs(py), abs(qx), abs(qy))
+    reach = radius + WALK_SLACK * (radius + scale)
+    columns = layout[LAYOUT_COLUMNS]
+    rows = layout[LAYOUT_ROWS]
+    first_run = layout[FIRST_RUN]
+    first = state.run_first
+    items = state.run_items
+    seen = state.run_seen
+    state.run_stamp[0] += 1
+    stamp = state.run_stamp[0]
+    balls = state.balls
+    last = balls[i, LAST]
+    best_t = state.hit_time[i]
+    best_kind = balls[i, HIT_KIND]
+    best_partner = balls[i, HIT_PARTNER]
+    found = False
+    dx = qx - px
+    dy = qy - py
+    low_col = max(0, _bucket_of(min(px, qx) - reach, origin_x, size, columns))
+    high_col = min(columns - 1, _bucket_of(max(px, qx) + reach, origin_x, size, columns))
+    for col in range(low_col, high_col + 1):
+        # The part of the path whose x lies within reach of the column, then its rows.
+        if dx == 0.0:
+            t_low = 0.0
+            t_high = 1.0
+        else:
+            ta = (origin_x + col * size - reach - px) / dx
+            tb = (origin_x + (col + 1) * size + reach - px) / dx
+            t_low = min(max(min(ta, tb), 0.0), 1.0)
+            t_high = min(max(max(ta, tb), 0.0), 1.0)
+        ya = py + t_low * dy
+        yb = py + t_high * dy
+        low_row = max(0, _bucket_of(min(ya, yb) - reach, origin_y, size, rows))
+        high_row = min(rows - 1, _bucket_of(max(ya, yb) + reach, origin_y, size, rows))
+        if low_row > high_row:
+            continue
+        base = col * rows
+        for s in range(first[base + low_row], first[base + high_row + 1]):
+            k = items[s]
+            if k < first_run or seen[k] == stamp:
+                continue
+            seen[k] = stamp
+            if last == wall_code(k):
+                continue
+            t = wall_impact_time(px, py, vx, vy, radius, starts[k, 0], starts[k, 1], ends[k, 0],
+                                 ends[k, 1], directions[k, 0], directions[k, 1], lengths[k])
+            if t < INFINITY:
+                t += now
+                if _precedes(t, WALL, k, best_t, best_kind, best_partner):
+                    best_t = t
+                    best_kind = WALL
+                    best_partner = k
+                    found = True
+    if found:
+        state.hit_time[i] = best_t
+        balls[i, HIT_KIND] = WALL
+        balls[i, HIT_PARTNER] = best_partner
+
+
+@compile_inline
+def _bucket_of(coordinate, origin, size, count):
+    """The static bucket of a coordinate along one axis, clipped to [-1, count] (so a
+    coordinate far outside, or not finite, never overflows an integer)."""
+    return np.int64(math.floor(min(max((coordinate - origin) / size, -1.0), float(count))))
+
+
+@compile_inline
 def _predict(state, i, now, x, v, radii, starts, ends, directions, lengths):
     """Ball i's earliest events from time `now` on, over every grid's cells within reach of its
     cell (in its own grid: the 3 x 3 block), and its own cell's walls (not the tree).
@@ -384,6 +500,7 @@ def _predict(state, i, now, x, v, radii, starts, ends, directions, lengths):
         _scan_balls(i, now, px, py, vx, vy, low_x, high_x, low_y, high_y, balls,
                     state.hit_time, state.heads, state.clock, grids[b, BUCKETS],
                     grids[b, COLUMN_MASK], grids[b, ROW_BITS], x, v, radii)
+    _scan_runs(state, i, now, px, py, vx, vy, radii[i], starts, ends, directions, lengths)
     _schedule(i, balls, state.hit_time, state.exit_time, state.event_time)
 
 
@@ -441,6 +558,7 @@ def _cross(state, i, now, x, v, radii, starts, ends, directions, lengths):
             _scan_balls(i, now, px, py, vx, vy, across_low, across_high, low, high, balls,
                         state.hit_time, state.heads, state.clock, grids[b, BUCKETS],
                         grids[b, COLUMN_MASK], grids[b, ROW_BITS], x, v, radii)
+    _scan_runs(state, i, now, px, py, vx, vy, radii[i], starts, ends, directions, lengths)
     _schedule(i, balls, state.hit_time, state.exit_time, state.event_time)
 
 
@@ -766,8 +884,13 @@ def _class_walls(unit, grids, starts, directions, lengths):
 
 
 @compile_kernel
-def build(x, v, radii, segments, starts, ends, directions, lengths, class_ratio=CLASS_RATIO):
+def build(x, v, radii, segments, starts, ends, directions, lengths, run_grid, run_layout,
+          run_first, run_items, class_ratio=CLASS_RATIO):
     """A fresh state for the world at the start of a step: cells, walls, predictions, tree.
+
+    The static geometry (core.exact.geometry): every segment (the walls, then the map's
+    runs) and the static index, whose layout says where the runs begin; the walls go in
+    the classes' buckets as they always did, the runs are walked (_scan_runs).
 
     class_ratio: the radius classes' width (CLASS_RATIO); math.inf makes the single grid of
     cells one largest diameter wide (or wider) that exact mode had before radius classes,
@@ -779,15 +902,17 @@ def build(x, v, radii, segments, starts, ends, directions, lengths, class_ratio=
     leaves = 1
     while leaves < n:
         leaves *= 2
-    wall_first, wall_items, global_walls = _class_walls(unit, grids, starts, directions,
-                                                        lengths)
+    walls = run_layout[FIRST_RUN]
+    wall_first, wall_items, global_walls = _class_walls(unit, grids, starts[:walls],
+                                                        directions[:walls], lengths[:walls])
     state = State(unit, grids, leaves, np.zeros(n),
                   np.empty(n), np.empty(n), np.empty(n),
                   np.empty((n, COLUMNS), dtype=np.int64),
                   np.full(grids[count, BUCKETS], NO_BALL, np.int64),
                   wall_first, wall_items, global_walls,
                   np.full(2 * leaves, NO_BALL, np.int64), x.copy(), v.copy(), radii.copy(),
-                  segments.copy())
+                  segments[:walls].copy(), run_grid, run_layout.copy(), run_first, run_items,
+                  np.full(segments.shape[0], -1, np.int64), np.zeros(1, dtype=np.int64))
     balls = state.balls
     for i in range(n):
         balls[i, COUNTER] = 0
@@ -839,8 +964,9 @@ def export(state, x, v, cells, last, hit_kind, hit_partner, hit_current, exit_si
 
 
 @compile_kernel
-def restore(x, v, radii, segments, starts, directions, lengths, unit, tori, largest, balls,
-            hit_time, exit_time, event_time, edited):
+def restore(x, v, radii, segments, starts, ends, directions, lengths, run_grid, run_layout,
+            run_first, run_items, unit, tori, largest, balls, hit_time, exit_time, event_time,
+            edited):
     """The state another World kept at the end of a step, carried over (core.exact_carry,
     which checked every value against this world): build's, with the cells, predictions and
     partners given instead of found. `balls` has every column but NEXT and PREVIOUS filled
@@ -856,8 +982,9 @@ def restore(x, v, radii, segments, starts, directions, lengths, unit, tori, larg
     leaves = 1
     while leaves < n:
         leaves *= 2
-    wall_first, wall_items, global_walls = _class_walls(unit, grids, starts, directions,
-                                                        lengths)
+    walls = run_layout[FIRST_RUN]
+    wall_first, wall_items, global_walls = _class_walls(unit, grids, starts[:walls],
+                                                        directions[:walls], lengths[:walls])
     seen_x = x.copy()
     for e in range(edited.shape[0]):
         seen_x[edited[e], 0] = math.nan
@@ -865,7 +992,8 @@ def restore(x, v, radii, segments, starts, directions, lengths, unit, tori, larg
                   np.full(grids[grids.shape[0] - 1, BUCKETS], NO_BALL, np.int64),
                   wall_first, wall_items, global_walls,
                   np.full(2 * leaves, NO_BALL, np.int64), seen_x, v.copy(), radii.copy(),
-                  segments.copy())
+                  segments[:walls].copy(), run_grid, run_layout.copy(), run_first, run_items,
+                  np.full(segments.shape[0], -1, np.int64), np.zeros(1, dtype=np.int64))
     for i in range(n):
         _link(balls, state.heads, i, _home(state, balls[i, CLASS], balls[i, CELL_X],
                                            balls[i, CELL_Y]))
@@ -874,16 +1002,25 @@ def restore(x, v, radii, segments, starts, directions, lengths, unit, tori, larg
 
 
 @compile_kernel
-def matches(state, radii, segments):
-    """Whether the state was built for these radii and walls (else it must be rebuilt)."""
+def matches(state, radii, segments, run_layout):
+    """Whether the state was built for these radii and walls (else it must be rebuilt).
+
+    The walls are compared segment by segment; of the map's runs (the rest of `segments`),
+    their number and the index's layout: a World's map never changes, and comparing tens of
+    thousands of runs would cost a step of a small world.
+    """
     seen_radii = state.seen_radii
     seen_walls = state.seen_walls
-    if radii.shape[0] != seen_radii.shape[0] or segments.shape[0] != seen_walls.shape[0]:
+    walls = run_layout[FIRST_RUN]
+    if radii.shape[0] != seen_radii.shape[0] or walls != seen_walls.shape[0]:
         return False
+    for entry in range(run_layout.shape[0]):
+        if run_layout[entry] != state.run_layout[entry]:
+            return False
     for i in range(radii.shape[0]):
         if radii[i] != seen_radii[i]:
             return False
-    for k in range(segments.shape[0]):
+    for k in range(walls):
         for c in range(4):
             if segments[k, c] != seen_walls[k, c]:
                 return False
@@ -929,8 +1066,8 @@ def _absorb_edits(state, x, v, radii, starts, ends, directions, lengths):
 
 
 @compile_kernel
-def advance(state, x, v, radii, masses, segments, starts, ends, directions, lengths, dt, budget,
-            totals, per_ball):
+def advance(state, x, v, radii, masses, segments, starts, ends, directions, lengths, run_grid,
+            run_layout, run_first, run_items, dt, budget, totals, per_ball):
     """Process every event before dt in order, then bring all balls to dt.
 
     totals gets [ball-ball collisions, ball-wall collisions, events processed] added;
@@ -939,7 +1076,7 @@ def advance(state, x, v, radii, masses, segments, starts, ends, directions, leng
     one; nothing moved); NOT_FINITE (an edited ball is not finite; nothing moved); or
     OVER_BUDGET (more than `budget` events: the balls are left at the time reached).
     """
-    if not matches(state, radii, segments):
+    if not matches(state, radii, segments, run_layout):
         return STALE_STATE
     status = _absorb_edits(state, x, v, radii, starts, ends, directions, lengths)
     if status != DONE:

@@ -1,10 +1,12 @@
 """An exact 2D laser scanner: the ranges a beam fan from a point sees among balls and walls.
 
-What it computes: for each beam, the true distance from the scanner to the first ball or
-wall the beam meets (ray-circle and ray-segment intersection in closed form,
-`core.lidar_kernel`), the scanner's own ball excluded. Then REP 117's conventions for a
-sensor_msgs/LaserScan: +inf when nothing lies within range_max, -inf when the first thing is
-closer than range_min. Then, if asked, Gaussian noise on the ranges that are neither.
+What it computes: for each beam, the true distance from the scanner to the first ball, wall
+or solid map cell the beam meets (ray-circle and ray-segment intersection in closed form,
+`core.lidar_kernel`; a map's cells by a walk of its grid, where the distance is the closed
+form of the first solid cell's edge), the scanner's own ball excluded. Then REP 117's
+conventions for a sensor_msgs/LaserScan: +inf when nothing lies within range_max, -inf when
+the first thing is closer than range_min. Then, if asked, Gaussian noise on the ranges that
+are neither.
 
 Two backends, one answer: `numpy` is the reference, every beam against every ball that can
 be within range_max (vectorised, in chunks); `numba` tests each ball only against the beams
@@ -24,11 +26,15 @@ from typing import NamedTuple
 import numpy as np
 
 from ball_world.core import lidar_kernel, noise_seed
-from ball_world.core.lidar_kernel import circle_terms, rotate, segment_terms
+from ball_world.core.lidar_kernel import (circle_terms, crossing, rotate, segment_terms,
+                                          start_cell)
+from ball_world.core.static_geometry import ScanGrid
 from ball_world.core.stepping import resolve_backend
 
 #: Most (beam, ball) pairs the numpy reference evaluates at once (memory, not speed).
 CHUNK_PAIRS = 1 << 20
+#: A scan without a map: no cells to walk.
+NO_MAP = ScanGrid()
 
 
 class Fan(NamedTuple):
@@ -85,9 +91,12 @@ def beam_directions(yaw, fan):
     return rotate(math.cos(yaw), math.sin(yaw), bx, by)
 
 
-def _nearest(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude, range_max):
-    """Each beam against every ball that can be within range_max and every wall: the
-    distance to the nearest hit (+inf for none) and the ball it is (-1: a wall, or none)."""
+def _nearest(positions, radii, walls, grid, origin, cos_yaw, sin_yaw, body, exclude,
+             range_max):
+    """Each beam against every ball that can be within range_max and every wall, then along
+    the map's cells (`grid`, a core.static_geometry.ScanGrid) up to that hit: the distance
+    to the nearest hit (+inf for none) and the ball it is (-1: a wall, a map cell, or
+    none)."""
     px, py = float(origin[0]), float(origin[1])
     dx, dy = rotate(cos_yaw, sin_yaw, body[0], body[1])
     near = (np.abs(positions[:, 0] - px) <= range_max + radii) & (
@@ -118,28 +127,103 @@ def _nearest(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude, r
             wall = np.where(hit, t, np.inf).min(axis=1)
             ball[part] = np.where(wall < best[part], -1, ball[part])
             best[part] = np.minimum(best[part], wall)
+    if not grid.empty:
+        cells = first_solid(px, py, dx, dy, np.minimum(best, range_max), grid)
+        ball = np.where(cells < best, -1, ball)
+        best = np.minimum(best, cells)
     return best, ball
 
 
-def distances_numpy(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude,
+def first_solid(px, py, dx, dy, bound, grid):
+    """The reference walk of the map's cells: for each beam from (px, py) along the unit
+    (dx[k], dy[k]), the distance to where it first enters a solid cell (or leaves the grid),
+    if at most bound[k]; +inf otherwise; 0 from inside a solid cell.
+
+    Amanatides and Woo's walk, every beam one cell per round, vectorised over the beams:
+    each crossing is the closed form of its grid line (`lidar_kernel.crossing`), and a
+    beam through a vertex (crossings of both axes equal) is stopped if any of the three
+    cells it touches there is solid. `lidar_kernel.first_solid` computes the same distances,
+    skipping empty squares.
+    """
+    solid = grid.solid
+    origin_x, origin_y, resolution = (float(value) for value in grid.frame)
+    ci = int(start_cell(px, origin_x, resolution))
+    cj = int(start_cell(py, origin_y, resolution))
+    out = np.full(len(dx), np.inf)
+    if _solid_at(solid, np.array([ci]), np.array([cj]))[0]:
+        out[:] = 0.0
+        return out
+    sx = np.sign(dx).astype(np.int64)
+    sy = np.sign(dy).astype(np.int64)
+    nx = np.where(sx > 0, ci + 1, ci)
+    ny = np.where(sy > 0, cj + 1, cj)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        ix = np.where(sx != 0, 1.0 / dx, 0.0)
+        iy = np.where(sy != 0, 1.0 / dy, 0.0)
+    tx = np.where(sx != 0, crossing(origin_x, nx, resolution, px, ix), np.inf)
+    ty = np.where(sy != 0, crossing(origin_y, ny, resolution, py, iy), np.inf)
+    beam = np.arange(len(dx))
+    ci = np.full(len(dx), ci)
+    cj = np.full(len(dx), cj)
+    bound = np.asarray(bound, dtype=np.float64)
+    while len(beam):
+        t = np.minimum(tx, ty)
+        going = t <= bound
+        step_x = going & (tx <= ty)
+        step_y = going & (ty <= tx)
+        tie = step_x & step_y
+        # Through a vertex: the cells beside the diagonal one count too.
+        touched = tie & (_solid_at(solid, ci + sx, cj) | _solid_at(solid, ci, cj + sy))
+        ci = ci + np.where(step_x, sx, 0)
+        cj = cj + np.where(step_y, sy, 0)
+        hit = going & (touched | _solid_at(solid, ci, cj))
+        out[beam[hit]] = t[hit]
+        nx = nx + np.where(step_x, sx, 0)
+        ny = ny + np.where(step_y, sy, 0)
+        tx = np.where(step_x, crossing(origin_x, nx, resolution, px, ix), tx)
+        ty = np.where(step_y, crossing(origin_y, ny, resolution, py, iy), ty)
+        keep = np.flatnonzero(going & ~hit)
+        beam, ci, cj, nx, ny, tx, ty, sx, sy, ix, iy, bound = (
+            np.take(a, keep) for a in (beam, ci, cj, nx, ny, tx, ty, sx, sy, ix, iy, bound))
+    return out
+
+
+def _solid_at(solid, i, j):
+    """Whether cells (column i, row j) are solid (arrays); everything outside the grid is."""
+    inside = (i >= 0) & (j >= 0) & (j < solid.shape[0]) & (i < solid.shape[1])
+    value = np.ones(len(i), dtype=bool)
+    value[inside] = solid[j[inside], i[inside]] != 0
+    return value
+
+
+def distances_numpy(positions, radii, walls, grid, origin, cos_yaw, sin_yaw, body, exclude,
                     range_min, range_max):
     """The reference: each beam against every ball that can be within range_max (and every
-    wall), the nearest hit kept; REP 117's infinities."""
-    best, _ = _nearest(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude,
+    wall, and the map's cells), the nearest hit kept; REP 117's infinities."""
+    best, _ = _nearest(positions, radii, walls, grid, origin, cos_yaw, sin_yaw, body, exclude,
                        range_max)
     best[best < range_min] = -np.inf
     best[best > range_max] = np.inf
     return best
 
 
-def distances_numba(positions, radii, walls, origin, cos_yaw, sin_yaw, body, exclude,
+def distances_numba(positions, radii, walls, grid, origin, cos_yaw, sin_yaw, body, exclude,
                     range_min, range_max):
     """The compiled scan by sectors: the same ranges as distances_numpy."""
     out = np.empty(len(body[0]))
-    lidar_kernel.scan_sectors(positions, radii, walls, float(origin[0]), float(origin[1]),
-                              cos_yaw, sin_yaw, body[0], body[1], body[2], body[3],
-                              int(exclude), range_min, range_max, out)
+    lidar_kernel.scan_sectors(positions, radii, walls, grid.solid, _skips(grid), grid.frame,
+                              float(origin[0]), float(origin[1]), cos_yaw, sin_yaw, body[0],
+                              body[1], body[2], body[3], int(exclude), range_min, range_max,
+                              out)
     return out
+
+
+def _skips(grid):
+    """The grid's free squares (lidar_kernel.free_squares), made the first time the
+    compiled scan walks it and kept with it."""
+    if grid.skips is None:
+        grid.skips = lidar_kernel.free_squares(grid.solid)
+    return grid.skips
 
 
 _DISTANCES = {'numpy': distances_numpy, 'numba': distances_numba}
@@ -164,17 +248,18 @@ class Scanner:
         self.noise = (noise_seed.NoiseSeeds(self.seed, self.key) if fan.noise_stddev > 0.0
                       else None)
 
-    def distances(self, positions, radii, walls, origin, yaw, exclude=-1):
+    def distances(self, positions, radii, walls, origin, yaw, exclude=-1, grid=NO_MAP):
         """REP 117 ranges without noise: the closed forms. positions (N, 2) and radii (N,)
-        float64, walls a Walls or (M, 4) segments."""
+        float64, walls a Walls or (M, 4) segments, grid the map's cells (a
+        core.static_geometry.ScanGrid: a World's `static.scan_grid`; NO_MAP for none)."""
         fan = self.fan
         return self._distances(_float_array(positions), _float_array(radii), _segments(walls),
-                               origin, math.cos(yaw), math.sin(yaw), self.body, exclude,
+                               grid, origin, math.cos(yaw), math.sin(yaw), self.body, exclude,
                                fan.range_min, fan.range_max)
 
-    def scan(self, positions, radii, walls, origin, yaw, exclude=-1, step=0):
+    def scan(self, positions, radii, walls, origin, yaw, exclude=-1, step=0, grid=NO_MAP):
         """One scan as LaserScan's `ranges`: the closed forms plus the noise of this step."""
-        ranges = self.distances(positions, radii, walls, origin, yaw, exclude)
+        ranges = self.distances(positions, radii, walls, origin, yaw, exclude, grid)
         if self.fan.noise_stddev > 0.0:
             # default_rng([seed, key, step])'s numbers, made in a third of its time
             add_noise(ranges, self.fan.noise_stddev, self.noise.generator(step))
@@ -215,24 +300,26 @@ def add_noise(ranges, stddev, rng):
 
 
 def scan(positions, radii, walls, origin, yaw, fan, exclude=-1, backend='auto', seed=0,
-         name='', step=0):
+         name='', step=0, grid=NO_MAP):
     """One scan as LaserScan's `ranges`: exact distances, REP 117's infinities, seeded noise
     (see Scanner, which keeps what a scanner scanning often can)."""
     return Scanner(fan, backend, seed, name).scan(positions, radii, walls, origin, yaw,
-                                                  exclude, step)
+                                                  exclude, step, grid)
 
 
-def distances(positions, radii, walls, origin, yaw, fan, exclude=-1, backend='auto'):
+def distances(positions, radii, walls, origin, yaw, fan, exclude=-1, backend='auto',
+              grid=NO_MAP):
     """scan() without noise: each range equals its closed form."""
-    return Scanner(fan, backend).distances(positions, radii, walls, origin, yaw, exclude)
+    return Scanner(fan, backend).distances(positions, radii, walls, origin, yaw, exclude, grid)
 
 
-def seen_balls(positions, radii, walls, origin, yaw, fan, exclude=-1):
+def seen_balls(positions, radii, walls, origin, yaw, fan, exclude=-1, grid=NO_MAP):
     """Indices of the balls that at least one beam meets first, within [range_min,
-    range_max], without noise: the balls this scanner can see (ground truth for scoring)."""
+    range_max], without noise: the balls this scanner can see (ground truth for scoring);
+    the map's cells (`grid`) hide what lies behind them."""
     walls = _segments(walls)
     best, ball = _nearest(_float_array(positions).reshape(-1, 2), _float_array(radii), walls,
-                          origin, math.cos(yaw), math.sin(yaw), body_directions(fan),
+                          grid, origin, math.cos(yaw), math.sin(yaw), body_directions(fan),
                           exclude, fan.range_max)
     return np.unique(ball[(ball >= 0) & (best >= fan.range_min) & (best <= fan.range_max)])
 

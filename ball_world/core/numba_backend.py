@@ -29,10 +29,11 @@ import numpy as np
 
 from ball_world.core import broadphase, limits, rules, static_geometry, stepping
 from ball_world.core.broadphase import (CELLS_PER_BALL, CELLS_SLACK, grid_shape, LEVEL_RATIO,
-                                        PAD, SLACK, widened)
+                                        PAD)
 from ball_world.core.rules import (advance, pair_approaching, pair_response, pair_touching,
                                    reach_squared, reflect_off_end, reflect_off_wall,
                                    speed_squared, wall_approaching, wall_offset, wall_touching)
+from ball_world.core.static_geometry import SLACK, widened
 from ball_world.core.stepping import (BALL_BALL, BALL_WALL, MAX_ROUNDS, over_budget,
                                       plan_substeps, reachable_speed, refusal_possible, replan,
                                       ROUNDS, speed_limit, STEP_DONE, STEP_REFUSED, SUBSTEPS,
@@ -49,9 +50,8 @@ SKIN_RADII = 2.0
 #: Lists are rebuilt a millionth before the skin could close: rounding never decides.
 LISTS_MARGIN = 1.0 - 1e-6
 #: Entries of seed_step's `lists`: rows of candidate pairs and of ball-wall pairs in the
-#: buffers (or rows needed, when they outgrew them), whether the buffers hold them, and how
-#: many times they were built (the stamp of the static index's search).
-PAIRS, NEAR_WALLS, FRESH, EPOCH = range(4)
+#: buffers (or rows needed, when they outgrew them), and whether the buffers hold them.
+PAIRS, NEAR_WALLS, FRESH = range(3)
 #: Columns of the packed wall array the kernels take.
 WALL_COLUMNS = ('start_x', 'start_y', 'end_x', 'end_y', 'w_x', 'w_y', 'length')
 
@@ -289,52 +289,60 @@ def _cell_range(low, high, reach, origin, cell, cells):
 
 
 @_compile
-def _candidate_walls(x, radii, margin, walls, index_grid, index_shape, index_first,
-                     index_items, seen, epoch, scale):
-    """(ball, wall) with the ball closer than r + margin to the segment, in canonical order:
-    each ball, in index order, asks the static buckets its reach covers (one contiguous run
-    of items per column, core.static_geometry.SegmentIndex), meets each wall once (`seen`
-    holds the stamp epoch * N + ball of the last ball that met it), and sorts its few walls.
+def _walls_into(found, x, radii, margin, walls, index_grid, index_shape, index_first,
+                index_items, cell_balls):
+    """_candidate_walls' search, written into `found` (at least one row) while it has room;
+    returns how many pairs there are (more than its rows: call again with that many). A
+    fixed buffer, not one grown inside the loop (reassigning the array there doubled the
+    search's time), and no branch on the distance test (each pair is written, and kept by
+    counting it: a fifth of a map's search was mispredicted branches; measured).
     """
-    found = np.empty((64, 2), dtype=np.int64)
     count = 0
-    if index_items.shape[0] == 0:
-        return found[:0]
-    n = x.shape[0]
     origin_x = index_grid[0]
     origin_y = index_grid[1]
     size = index_grid[2]
-    widen = max(scale, index_grid[3])
     columns = index_shape[0]
     rows = index_shape[1]
-    for i in range(n):
-        stamp = epoch * n + i
-        reach = widened(radii[i] + margin, widen)
-        first_col, last_col = _cell_range(x[i, 0], x[i, 0], reach, origin_x, size, columns)
-        first_row, last_row = _cell_range(x[i, 1], x[i, 1], reach, origin_y, size, rows)
+    last = found.shape[0] - 1
+    for p in range(x.shape[0]):
+        i = cell_balls[p]
+        col, _ = _cell_range(x[i, 0], x[i, 0], 0.0, origin_x, size, columns)
+        row, _ = _cell_range(x[i, 1], x[i, 1], 0.0, origin_y, size, rows)
+        bucket = min(col, columns - 1) * rows + min(row, rows - 1)
         reach_i = radii[i] + margin
-        begin = count
-        for col in range(first_col, last_col + 1):
-            base = col * rows
-            for s in range(index_first[base + first_row], index_first[base + last_row + 1]):
-                w = index_items[s]
-                if seen[w] == stamp:
-                    continue
-                seen[w] = stamp
-                sx, sy, _ = wall_offset(x[i, 0], x[i, 1], walls[w, 0], walls[w, 1],
-                                        walls[w, 4], walls[w, 5], walls[w, 6])
-                if sx * sx + sy * sy < reach_i * reach_i:
-                    if count == found.shape[0]:
-                        found = _doubled(found)
-                    # Insertion into the ball's sorted run (a handful of walls).
-                    j = count
-                    while j > begin and found[j - 1, 1] > w:
-                        found[j, 0] = i
-                        found[j, 1] = found[j - 1, 1]
-                        j -= 1
-                    found[j, 0] = i
-                    found[j, 1] = w
-                    count += 1
+        reach2 = reach_i * reach_i
+        for s in range(index_first[bucket], index_first[bucket + 1]):
+            w = index_items[s]
+            sx, sy, _ = wall_offset(x[i, 0], x[i, 1], walls[w, 0], walls[w, 1], walls[w, 4],
+                                    walls[w, 5], walls[w, 6])
+            slot = min(count, last)
+            found[slot, 0] = i
+            found[slot, 1] = w
+            count += np.int64(sx * sx + sy * sy < reach2)
+    return count
+
+
+@_compile
+def _candidate_walls(x, radii, margin, walls, index_grid, index_shape, index_first,
+                     index_items, cell_balls):
+    """(ball, wall) with the ball closer than r + margin to the segment, unsorted: each ball
+    reads its own bucket of the static index dilated by at least the largest r + margin
+    (core.static_geometry.StaticGeometry.dilated), which lists each wall within that reach
+    of the bucket once. A ball outside the index's box reads the nearest bucket, which lists
+    every wall within reach of it too (moving a point into the box brings it no further
+    from any point inside). Balls are taken in the order of their grid cells (`cell_balls`),
+    so neighbours read neighbouring buckets: in index order each read was a cache miss,
+    which tripled the time of a map's 25,000 runs (measured).
+    """
+    found = np.empty((2 * x.shape[0] + 64, 2), dtype=np.int64)
+    if index_items.shape[0] == 0:
+        return found[:0]
+    count = _walls_into(found, x, radii, margin, walls, index_grid, index_shape, index_first,
+                        index_items, cell_balls)
+    if count >= found.shape[0]:  # its last row may hold a pair that was not kept
+        found = np.empty((count + 1, 2), dtype=np.int64)
+        _walls_into(found, x, radii, margin, walls, index_grid, index_shape, index_first,
+                    index_items, cell_balls)
     return found[:count]
 
 
@@ -371,16 +379,24 @@ def _canonical(found, rows):
 
 
 @_compile
-def build_candidates(x, radii, walls, index_grid, index_shape, index_first, index_items, seen,
-                     epoch, margin, members, level_starts, level_largest):
-    """Candidate pairs and ball-wall pairs within `margin` of touching, in canonical order."""
+def build_pairs(x, radii, margin, members, level_starts, level_largest, order):
+    """Candidate pairs within `margin` of touching, in canonical order; `order` gets the
+    balls in the order of their grid cells (for build_walls)."""
     low, cell, shape, starts, cell_balls, cell_keys, scale = build_grids(
         x, members, level_starts, level_largest, margin)
+    order[:] = cell_balls
     pairs = _candidate_pairs(x, radii, margin, level_starts, low, cell, shape, starts,
                              cell_balls, cell_keys)
-    near_walls = _candidate_walls(x, radii, margin, walls, index_grid, index_shape,
-                                  index_first, index_items, seen, epoch, scale)
-    return _canonical(pairs, x.shape[0]), near_walls
+    return _canonical(pairs, x.shape[0])
+
+
+@_compile
+def build_walls(x, radii, walls, index_grid, index_shape, index_first, index_items, margin,
+                order):
+    """Ball-wall pairs within `margin` of touching, in canonical order (balls asked in
+    `order`, build_pairs')."""
+    return _canonical(_candidate_walls(x, radii, margin, walls, index_grid, index_shape,
+                                       index_first, index_items, order), x.shape[0])
 
 
 @_compile
@@ -537,15 +553,19 @@ def speed_and_energy(v, masses):
 
 
 @_compile
-def lists_stale(x, anchor, skin):
-    """Whether two balls may have closed the skin since the lists were built at `anchor`.
+def lists_stale(x, anchor, wall_anchor, skin):
+    """Whether the pair lists (built with the balls at `anchor`) and the ball-wall lists
+    (built at `wall_anchor`) may have had their skin closed: (pairs, walls).
 
     A pair left out was r_a + r_b + skin apart; it can touch only once the two largest
-    displacements since then add up to the skin (a ball-wall pair needs the largest one to).
-    Tighter than the numpy backend's bound (speed times time), so rebuilds are rarer.
+    displacements since then add up to the skin. A ball-wall pair left out needs its ball
+    alone to move the whole skin (a wall does not move), so the ball-wall lists, which cost
+    a map's runs, last about twice as long and are kept apart. Tighter than the numpy
+    backend's bound (speed times time), so rebuilds are rarer.
     """
     first = 0.0
     second = 0.0
+    wall = 0.0
     for i in range(x.shape[0]):
         dx = x[i, 0] - anchor[i, 0]
         dy = x[i, 1] - anchor[i, 1]
@@ -556,17 +576,22 @@ def lists_stale(x, anchor, skin):
                 first = moved2
             else:
                 second = moved2
-    return not np.sqrt(first) + np.sqrt(second) < LISTS_MARGIN * skin
+        dx = x[i, 0] - wall_anchor[i, 0]
+        dy = x[i, 1] - wall_anchor[i, 1]
+        wall = max(wall, dx * dx + dy * dy)
+    limit = LISTS_MARGIN * skin
+    return not np.sqrt(first) + np.sqrt(second) < limit, not np.sqrt(wall) < limit
 
 
 @_compile
 def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, index_grid, index_shape,
-              index_first, index_items, seen, members, level_starts, level_largest, skin,
-              pair_rows, wall_rows, lists, anchor, best, totals):
+              index_first, index_items, members, level_starts, level_largest, skin,
+              pair_rows, wall_rows, lists, anchor, wall_anchor, order, best, totals):
     """One seed-mode step, planned and split exactly as numpy_backend.NumpyStepper.step.
 
-    The candidates are Verlet lists with `skin`, built with the balls at `anchor`, kept
-    between steps in the caller's buffers: pairs in pair_rows[:lists[PAIRS]], ball-wall
+    The candidates are Verlet lists with `skin`, built with the balls at `anchor` (pairs)
+    and `wall_anchor` (ball-wall pairs, see lists_stale), kept between steps in the
+    caller's buffers: pairs in pair_rows[:lists[PAIRS]], ball-wall
     pairs in wall_rows[:lists[NEAR_WALLS]], valid while lists[FRESH] is 1. They are rebuilt
     whenever the balls may have closed the skin. Buffers, not returned arrays: returning
     arrays to Python costs about 0.5 us a call, a tenth of a whole step at 100 balls. Lists
@@ -576,8 +601,8 @@ def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, index_grid, inde
     put positions and velocities back as they were.
 
     `walls` packs every static segment (walls, then map runs: pack_walls), and index_* is
-    their bucket index (core.static_geometry.SegmentIndex); `seen` (one entry per segment)
-    is the candidate search's scratch, stamped with lists[EPOCH], which counts the builds.
+    their bucket index dilated by at least the largest radius plus the skin
+    (core.static_geometry.StaticGeometry.dilated).
     """
     totals[:] = 0
     speed, energy = speed_and_energy(v, masses)
@@ -595,15 +620,20 @@ def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, index_grid, inde
     done = 0
     while done < count:
         move(x, v, h)
-        if not fresh or lists_stale(x, anchor, skin):
-            lists[EPOCH] += 1
-            candidates, near_walls = build_candidates(x, radii, walls, index_grid, index_shape,
-                                                      index_first, index_items, seen,
-                                                      lists[EPOCH], skin, members,
-                                                      level_starts, level_largest)
+        pairs_stale = walls_stale = not fresh
+        if fresh:
+            pairs_stale, walls_stale = lists_stale(x, anchor, wall_anchor, skin)
+        if pairs_stale:
+            candidates = build_pairs(x, radii, skin, members, level_starts, level_largest,
+                                     order)
             anchor[:] = x
-            fresh = True
             rebuilt = True
+        if walls_stale:
+            near_walls = build_walls(x, radii, walls, index_grid, index_shape, index_first,
+                                     index_items, skin, order)
+            wall_anchor[:] = x
+            rebuilt = True
+        fresh = True
         pairs, rel, contacts, offsets, interior = find_contacts(x, radii, walls, candidates,
                                                                 near_walls)
         fastest = resolve(v, masses, walls, pairs, rel, contacts, offsets, interior, best,
@@ -667,6 +697,7 @@ class NumbaStepper:
 
     def __init__(self):
         ensure_fresh_cache()
+        self._walls = None  # the packed static segments: they never change
         self.invalidate()
 
     def invalidate(self):
@@ -677,21 +708,26 @@ class NumbaStepper:
         """One seed-mode step; counts into `totals` (zeroed first); STEP_DONE or STEP_REFUSED."""
         if self._prepared is None:
             static = world.static
-            index = static.index
             n = len(world)
-            self._prepared = (float(world.masses.min()), pack_walls(static), index.grid,
-                              index.shape, index.first, index.items,
-                              np.full(len(static), -1, np.int64),
-                              *radius_classes(world.radii), SKIN_RADII * world.min_radius,
+            skin = SKIN_RADII * world.min_radius
+            # The largest reach a ball-wall candidate needs, widened as the search widens it.
+            index = static.dilated(widened(float(world.radii.max()) + skin, float(
+                max(static.index.grid[3], np.abs(world.positions).max()))))
+            if self._walls is None:
+                self._walls = pack_walls(static)
+            self._prepared = (float(world.masses.min()), self._walls, index.grid, index.shape,
+                              index.first, index.items, *radius_classes(world.radii), skin,
                               np.empty((4 * n, 2), dtype=np.int64),
-                              np.empty((n, 2), dtype=np.int64), np.zeros(4, dtype=np.int64),
-                              np.empty((n, 2)), np.full(n, -1, np.int64))
-        (min_mass, walls, index_grid, index_shape, index_first, index_items, seen, members,
-         level_starts, largest, skin, pair_rows, wall_rows, lists, anchor, best) = self._prepared
+                              np.empty((n, 2), dtype=np.int64), np.zeros(3, dtype=np.int64),
+                              np.empty((n, 2)), np.empty((n, 2)), np.arange(n, dtype=np.int64),
+                              np.full(n, -1, np.int64))
+        (min_mass, walls, index_grid, index_shape, index_first, index_items, members,
+         level_starts, largest, skin, pair_rows, wall_rows, lists, anchor, wall_anchor, order,
+         best) = self._prepared
         status = seed_step(world.positions, world.velocities, world.radii, world.masses,
                            min_mass, dt, travel, walls, index_grid, index_shape, index_first,
-                           index_items, seen, members, level_starts, largest, skin, pair_rows,
-                           wall_rows, lists, anchor, best, totals)
+                           index_items, members, level_starts, largest, skin, pair_rows,
+                           wall_rows, lists, anchor, wall_anchor, order, best, totals)
         if not lists[FRESH] and status == STEP_DONE:
             self._grow(pair_rows, wall_rows, lists)
         return status
@@ -699,12 +735,13 @@ class NumbaStepper:
     @property
     def buffers(self):
         """(pair_rows, wall_rows, lists) of seed_step, once a step has made them."""
-        return self._prepared[-5:-2]
+        return self._prepared[-7:-4]
 
     def _grow(self, pair_rows, wall_rows, lists):
         """Buffers for lists that outgrew them, with room to spare; the next step rebuilds."""
         rows = [max(2 * int(lists[PAIRS]), len(pair_rows)),
                 max(2 * int(lists[NEAR_WALLS]), len(wall_rows))]
-        (*head, _, _, lists, anchor, best) = self._prepared
+        (*head, _, _, lists, anchor, wall_anchor, order, best) = self._prepared
         self._prepared = (*head, np.empty((rows[0], 2), dtype=np.int64),
-                          np.empty((rows[1], 2), dtype=np.int64), lists, anchor, best)
+                          np.empty((rows[1], 2), dtype=np.int64), lists, anchor, wall_anchor,
+                          order, best)

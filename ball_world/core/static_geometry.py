@@ -45,14 +45,12 @@ SLACK = 1e-9
 #: Buckets are at least this many map cells wide: a bucket narrower than a few cells would
 #: list a long run in more buckets than it saves tests.
 MIN_BUCKET_CELLS = 4.0
-#: A bucket is about this many times as wide as the mean spacing of segments
-#: (sqrt(area / segments)): a few segments per bucket where they are dense.
-BUCKET_SPACING = 2.0
+#: Dilations of StaticGeometry.dilated are REACH_STEP (m) times a power of REACH_GROWTH.
+REACH_STEP = 2.0 ** -20
+REACH_GROWTH = 1.05
 #: Most buckets per segment (plus BUCKETS_SLACK); buckets grow past it.
 BUCKETS_PER_SEGMENT = 4
 BUCKETS_SLACK = 1024
-#: Cells of a lidar block (`ScanGrid`): a beam crosses an empty block in one step.
-BLOCK_CELLS = 8
 
 
 def expand(owners, low, high):
@@ -143,28 +141,32 @@ def _cell_ranges(low, high, origin, size, count, slack):
             np.minimum(last.astype(np.int64), count - 1))
 
 
-def bucket_size(extent_x, extent_y, count, resolution):
-    """The buckets' width for `count` segments spanning the extent (m), from the geometry
-    alone: BUCKET_SPACING mean spacings, at least MIN_BUCKET_CELLS map cells (resolution 0
-    without a map), widened until the grid has at most BUCKETS_PER_SEGMENT buckets per
-    segment (plus BUCKETS_SLACK)."""
-    area = max(extent_x, 0.0) * max(extent_y, 0.0)
-    size = BUCKET_SPACING * math.sqrt(area / max(count, 1))
-    size = max(size, MIN_BUCKET_CELLS * resolution, 1e-3 * max(extent_x, extent_y), 1e-6)
+def bucket_size(extent_x, extent_y, count, resolution, reach=0.0):
+    """The buckets' width for `count` segments spanning the extent (m): as many buckets as
+    BUCKETS_PER_SEGMENT per segment (plus BUCKETS_SLACK) allow over the extent, at least
+    MIN_BUCKET_CELLS map cells (resolution 0 without a map) and at least half of `reach`
+    (an index dilated by it, see SegmentIndex: a bucket then lists what lies within a square
+    of twice its width around it), widened by a tenth at a time until the budget holds."""
     budget = BUCKETS_PER_SEGMENT * count + BUCKETS_SLACK
+    area = max(extent_x, 0.0) * max(extent_y, 0.0)
+    size = max(math.sqrt(area / budget), MIN_BUCKET_CELLS * resolution, 0.5 * reach,
+               1e-6 * max(extent_x, extent_y, 1.0))
     while (extent_x / size + 1.0) * (extent_y / size + 1.0) > budget:
-        size *= 2.0
+        size *= 1.1
     return size
 
 
 class SegmentIndex:
     """Segments (M, 4) in a uniform grid of buckets (see the module docstring).
 
-    `grid` holds (origin_x, origin_y, bucket width, largest |coordinate|) and `shape`
-    (columns, rows), as the compiled kernels take them.
+    With `reach` > 0 each segment is listed in every bucket within `reach` of it (a dilated
+    index): a point's own bucket then lists every segment within `reach` of the point, so a
+    ball asks one bucket, not a box of them (seed mode's compiled search, see
+    StaticGeometry.dilated). `grid` holds (origin_x, origin_y, bucket width, largest
+    |coordinate|) and `shape` (columns, rows), as the compiled kernels take them.
     """
 
-    def __init__(self, segments, resolution=0.0):
+    def __init__(self, segments, resolution=0.0, reach=0.0):
         segments = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
         count = len(segments)
         if count:
@@ -174,7 +176,9 @@ class SegmentIndex:
         else:
             low = high = np.zeros(2)
             scale = 0.0
-        size = bucket_size(float(high[0] - low[0]), float(high[1] - low[1]), count, resolution)
+        size = bucket_size(float(high[0] - low[0]), float(high[1] - low[1]), count, resolution,
+                           reach)
+        self.reach = float(reach)
         self.columns = int((high[0] - low[0]) / size) + 1
         self.rows = int((high[1] - low[1]) / size) + 1
         self.grid = np.array([low[0], low[1], size, scale])
@@ -187,10 +191,12 @@ class SegmentIndex:
         return float(self.grid[2])
 
     def _fill(self, segments):
-        """(first, items): each segment listed in the buckets it passes through, column by
-        column (the part of the segment inside a column's widened x-interval gives rows)."""
+        """(first, items): each segment listed in the buckets it passes within `reach` of,
+        column by column (the part of the segment whose x lies within reach of a column's
+        gives rows, widened by reach). Conservative: it may list a bucket slightly out of
+        reach, never miss one within it."""
         ox, oy, size, scale = self.grid
-        slack = widened(0.0, max(size, scale))
+        slack = widened(self.reach, max(size, scale))
         x0 = segments[:, 0]
         y0 = segments[:, 1]
         x1 = segments[:, 2]
@@ -285,8 +291,13 @@ class StaticGeometry:
         self.lengths = np.concatenate((walls.lengths, run_lengths))
         self.directions = np.concatenate((walls.directions,
                                           edge / np.maximum(run_lengths, 1e-300)[:, None]))
-        self.index = SegmentIndex(self.segments,
-                                  cells.resolution if cells is not None else 0.0)
+        self.resolution = cells.resolution if cells is not None else 0.0
+        self.index = SegmentIndex(self.segments, self.resolution)
+        self._dilated = None
+        #: columns and rows of the index, the first run's wall number, the number of runs
+        #: (as exact mode's kernel takes them: exact_kernel's LAYOUT_COLUMNS ... RUNS)
+        self.layout = np.array([self.index.columns, self.index.rows, self.wall_count,
+                                self.run_count], dtype=np.int64)
         self._scan_grid = None
 
     def __len__(self):
@@ -298,6 +309,19 @@ class StaticGeometry:
         return self.index.near_pairs(positions, radii, margin, self.starts, self.directions,
                                      self.lengths)
 
+    def dilated(self, reach):
+        """The segments in an index dilated by at least `reach` (SegmentIndex), kept for the
+        next caller: the dilation is rounded up to REACH_STEP times a power of REACH_GROWTH,
+        so that
+        spawning or removing balls (which moves the reach a ball needs: its radius plus the
+        candidate lists' skin) rarely makes a new one."""
+        dilation = REACH_STEP
+        while dilation < reach:
+            dilation *= REACH_GROWTH
+        if self._dilated is None or self._dilated.reach != dilation:
+            self._dilated = SegmentIndex(self.segments, self.resolution, dilation)
+        return self._dilated
+
     @property
     def scan_grid(self):
         """The map's cells as the lidar walks them (ScanGrid), made on first use."""
@@ -307,30 +331,22 @@ class StaticGeometry:
 
 
 class ScanGrid:
-    """A map's solid cells as a beam walks them: one byte a cell (1 solid), and a coarser
-    level of blocks of BLOCK_CELLS x BLOCK_CELLS cells (1: the block holds a solid cell or
-    reaches past the grid), so a beam crosses empty space a block at a time.
+    """A map's solid cells as a beam walks them (core.lidar): one byte a cell (1 solid), in
+    OccupancyGrid's layout, and `frame` (origin x, origin y, resolution). `skips` (the
+    largest free squares at each cell, one per quadrant of directions) is made by the
+    compiled scan the first time it walks the grid (core.lidar_kernel.free_squares), so a
+    World that never scans, or scans with the numpy reference, never pays for it.
 
     Without a map: a grid of no cells, which a scan never walks.
     """
 
     def __init__(self, cells=None):
+        self.skips = None
         if cells is None:
             self.solid = np.zeros((0, 0), dtype=np.uint8)
-            self.blocks = np.zeros((0, 0), dtype=np.uint8)
             self.frame = np.array([0.0, 0.0, 1.0])
             return
-        solid = cells.solid
-        rows, columns = solid.shape
-        self.solid = np.ascontiguousarray(solid, dtype=np.uint8)
-        block_rows = -(-rows // BLOCK_CELLS)
-        block_columns = -(-columns // BLOCK_CELLS)
-        padded = np.ones((block_rows * BLOCK_CELLS, block_columns * BLOCK_CELLS), dtype=bool)
-        padded[:rows, :columns] = solid
-        self.blocks = np.ascontiguousarray(
-            padded.reshape(block_rows, BLOCK_CELLS, block_columns, BLOCK_CELLS)
-            .any(axis=(1, 3)), dtype=np.uint8)
-        #: origin_x, origin_y, resolution
+        self.solid = np.ascontiguousarray(cells.solid, dtype=np.uint8)
         self.frame = np.array([cells.origin_x, cells.origin_y, cells.resolution])
 
     @property
