@@ -260,7 +260,7 @@ def scene_bounds(world):
         reach = np.asarray(world.radii)[:, None]
         boxes.append(np.column_stack((world.positions - reach, world.positions + reach)))
     if getattr(world, 'occupancy_map', None) is not None:
-        boxes.append(np.array([map_bounds(world.occupancy_map)]))
+        boxes.append(np.array([known_bounds(world.occupancy_map)]))
     boxes = np.concatenate(boxes)
     if len(boxes) == 0:
         return (-1.0, -1.0, 1.0, 1.0)
@@ -268,6 +268,20 @@ def scene_bounds(world):
     xmax, ymax = boxes[:, 2:4].max(axis=0)
     margin = 0.03 * max(xmax - xmin, ymax - ymin, 1e-9)
     return (xmin - margin, ymin - margin, xmax + margin, ymax + margin)
+
+
+def known_bounds(occupancy_map):
+    """(xmin, ymin, xmax, ymax) of a map's known cells (free or occupied), m: the view fits
+    what was mapped, not the unknown the image holds around it (the TurtleBot3 sandbox is
+    4 m across in a 19 m image). The whole grid when nothing is known."""
+    known = np.asarray(occupancy_map.data) >= 0
+    rows, columns = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
+    if not len(rows):
+        return map_bounds(occupancy_map)
+    x, y = occupancy_map.origin
+    resolution = occupancy_map.resolution
+    return (x + columns[0] * resolution, y + rows[0] * resolution,
+            x + (columns[-1] + 1) * resolution, y + (rows[-1] + 1) * resolution)
 
 
 def clock_text(record, rtf):
