@@ -123,9 +123,9 @@ LABEL_LIMIT = 30
 #: an impulse's label below the tail of its arrow goes a line further down, under the label
 #: of the ball it pushed.
 LABEL_LINE_FRACTION = 0.03
-#: Mid grey, for the clock line: 3.8:1 on the label boxes of both themes, the most one colour
-#: can have on both (docs/view.md).
-CLOCK_COLOR = (120, 120, 120)
+#: Slate grey, for the clock line: 3.8:1 on the label boxes of both themes, the most one colour
+#: can have on both (docs/view.md); bluer than the walls' grey, so screenshots tell them apart.
+CLOCK_COLOR = (108, 120, 138)
 #: Room above the scene for the clock line, as a fraction of the view's larger side.
 CLOCK_FRACTION = 0.05
 #: A file's clock line is logged every this many simulated seconds (a view's every frame).
