@@ -10,17 +10,21 @@ Layout of the recording (application id 'ball_world'):
   step of a segment and again whenever the balls (their names, in pose order) change, so a
   step costs one float32 array. No labels: Rerun draws a point's label just below the point
   itself, over the lower half of a ball, and has no label offset.
-- `arena/labels` (Points2D, up to LABEL_LIMIT balls): each ball's name, at the bottom of the
-  ball (below it in the view, +y up), so the label is drawn under the ball. Names and
-  colours are logged when the balls change, like the radii; the points move with the balls
-  (a second small float32 array per step). Beyond LABEL_LIMIT balls nothing is logged here.
-  A live view without velocities gets them in `arena/balls` instead, in the frame's row, as
-  Arrows2D of length 0 at the same points (see _Feed._log_balls).
+- `arena/labels` (Points2D, up to LABEL_LIMIT balls; beyond, the agents only): the names
+  shown at each logged step, each below, above, right or left of its ball where it collides
+  with no other name and no other ball, or dropped (rerun_labels): points, names and colours
+  per step. A live view without velocities gets them in `arena/balls` instead, in the
+  frame's row, as Arrows2D of length 0 at the same points (see _Feed._log_balls).
+- `arena/clock` (Points2D): one line of text above the scene, the simulated time and the
+  real-time factor (every frame of a view, every FILE_CLOCK_SECONDS of a file).
+- `arena/scans/<agent>` (LineStrips2D, Points2D): each scan as a fan of rays from its robot
+  and its hit points (rerun_scans): a file every scan, a view the latest at each frame.
 - `arena/walls` (LineStrips2D), once per segment at its first step: not static in a file,
   because a reset may change the walls and static data would rewrite the earlier segments.
 - `arena/map` (a map's cells as a SegmentationImage under its origin and scale, rerun_map),
   static, once: the map cannot change during a run.
-- `arena/impulses` (Arrows2D): each applied impulse for IMPULSE_SECONDS of simulated time,
+- `arena/impulses` (Arrows2D): each push (an applied impulse that is not an agent's own drive,
+  AppliedImpulse.drive) for IMPULSE_SECONDS of simulated time,
   in IMPULSE_COLOR (no ball has it; readable on the viewer's light and dark themes), at the
   point where it was applied, pointing along the velocity change. Its length is the
   velocity change times ARROW_SECONDS, kept between a floor (a tiny push is still seen) and
@@ -32,7 +36,7 @@ Layout of the recording (application id 'ball_world'):
   when that is the tail, where the ball was, under the ball's label too.
 - `arena/velocities` (Arrows2D, optional): each ball's velocity times VELOCITY_SECONDS.
 - `arena/trails` (LineStrips2D, optional): each ball's path over the last trail seconds.
-- `arena/agents` (Arrows2D): each agent's heading, labelled with its name (rerun_agents).
+- `arena/agents` (Arrows2D): each agent's heading (rerun_agents); its name is a label.
 - `arena/bumpers` (Arrows2D): each agent's bumper hit, along the impulse (rerun_agents).
 - `plots/energy_change` (Scalars): kinetic energy relative to step 0 of the segment, in
   percent, rounded to ENERGY_RESOLUTION: an exact simulation conserves energy to ~1e-15, and
@@ -48,6 +52,8 @@ Layout of the recording (application id 'ball_world'):
 - `plots/momentum` (Scalars x, y): total momentum. In a walled box every wall bounce changes
   it, so its plot is mostly noise to a reader: the blueprint keeps it in a tab behind the
   collisions.
+- `plots/energy_change/headroom`, `plots/collisions/headroom` (Scalars, invisible): values
+  just beyond the plots' data (Headroom), so the axis Rerun fits to the data holds it whole.
 
 Timelines: `sim_time`, the record's log time (simulation time plus the segment offset, so it
 never goes back across resets), and `step`, a step counter over the whole recording: the

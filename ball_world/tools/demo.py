@@ -25,8 +25,8 @@ PROG = 'ball_world_demo'
 SANDBOX = Path('worlds/sandbox.yaml')
 #: The robots: ball_0 wanders, ball_1 is driven by you and tracks the balls.
 WANDERER, DRIVEN = 'ball_0', 'ball_1'
-#: Without a map: the default 10 m box with a wall up from the floor and one down from the
-#: ceiling, so the wanderer has corners to get out of.
+#: Without a map: the default 10 m box with a wall up from the floor, one down from the
+#: ceiling and a shelf from the left, so the wanderer has corners to get out of.
 DEMO_WALLS = [3.5, 0.0, 3.5, 4.0, 6.5, 10.0, 6.5, 6.0, 0.0, 7.0, 2.0, 7.0]
 #: The sandbox's robots are TurtleBot3 Burgers (0.105 m, 0.22 m/s) among balls of 0.05-0.1 m:
 #: the wanderer's corridor and the tracker's ball sizes follow (the defaults are for the

@@ -6,7 +6,7 @@ the address to open, and runs until Ctrl-C (or until the world stops: --steps). 
 stops both, the world first so it closes its recordings; the server never outlives this
 program (tools/processes.py), so its ports are free again as soon as it has returned.
 
-The server keeps only the last VIEW_SERVER_MEMORY of what it relayed, for pages opened
+The server keeps only the last SERVER_MEMORY of what it relayed, for pages opened
 later: a web viewer rendering in software takes in a backlog slowly and shows nothing new
 meanwhile, so a page opened an hour in gets the last seconds, not the hour (the world logs
 the walls, the balls' looks and the layout static, which the server always keeps).
