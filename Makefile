@@ -31,7 +31,7 @@ view: setup
 
 # Robots among balls live in a browser: one wandering, one tracking, yours to drive.
 demo: setup
-	@$(VENV)/bin/ball_world_demo $(if $(WORLD),--world '$(WORLD)') --ros-args $(ARGS)
+	@set -f; $(VENV)/bin/ball_world_demo $(if $(WORLD),--world '$(WORLD)') --ros-args $(ARGS)
 
 test: setup
 	$(VENV)/bin/python -m pytest -q -n 2 test
