@@ -137,7 +137,7 @@ def test_a_world_without_agents_records_no_agent_channel(tmp_path):
         simulation.step()
     simulation.close()
     topics = set(Recording(path).topics)
-    assert topics == {'/balls', '/state', '/stats', '/impulse', '/markers'}
+    assert topics == {'/balls', '/state', '/stats', '/impulse', '/markers', '/clock'}
 
 
 def test_info_counts_agents_and_commands(tmp_path, capsys):

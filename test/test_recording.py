@@ -37,8 +37,10 @@ from ball_world.step_record import STATS_FIELDS
 from ball_world.tools import info, repair, resim
 
 ROOT = Path(__file__).resolve().parents[1]
-PARAMS = {'rate_hz': 20.0, 'random.count': 12, 'random.seed': 3}
-SECOND = {'rate_hz': 20.0, 'random.count': 8, 'random.seed': 9, 'arena': [0.0, 0.0, 6.0, 5.0]}
+# Without /clock (on by default): its channel is checked in test_foxglove.py.
+PARAMS = {'rate_hz': 20.0, 'random.count': 12, 'random.seed': 3, 'publish_clock': False}
+SECOND = {'rate_hz': 20.0, 'random.count': 8, 'random.seed': 9, 'arena': [0.0, 0.0, 6.0, 5.0],
+          'publish_clock': False}
 # Impulses queued before stepping into the step (key) whose stamp they will carry.
 IMPULSES = {5: [(2, 0.3, -0.1)], 12: [(0, -0.2, 0.4), (1, 0.1, 0.0)]}
 RESET_IMPULSES = {3: [(4, 0.05, 0.05)]}

@@ -404,7 +404,9 @@ class BallWorld(Node):
         self.state_pub.publish(record.state_cdr)
         self.stats_pub.publish(record.stats_cdr)
         self.agent_topics.publish(record, tf=not hold)
-        self._held = [('clock', record), ('tf', record)] if hold else []
+        # The /clock twice: a client that loses one (it takes /clock best effort, depth 1)
+        # still sees the jump before the /tf.
+        self._held = [('clock', record), ('clock', record), ('tf', record)] if hold else []
         self._held_due = time.monotonic() + TF_HOLD
 
     def _release_held(self, now=None):
@@ -418,7 +420,8 @@ class BallWorld(Node):
         either way a use_sim_time tf2 buffer, which clears itself at the jump, ends up
         holding transforms of the other timeline (dropped as TF_OLD_DATA, or kept and
         looked up as the latest). Held TF_HOLD apart, and to timer ticks (no step is taken
-        meanwhile), each goes out after the one before it has had time to arrive.
+        meanwhile), each goes out after the one before it has had time to arrive; the
+        /clock twice, since clients take it best effort (rclpy's and rclcpp's TimeSource).
         """
         now = time.monotonic() if now is None else now
         while self._held and now >= self._held_due:
