@@ -159,7 +159,7 @@ def recorded(tmp_path_factory):
     maps = copy_maps(folder / 'maps')
     values = {'map': str(maps / 'tb3_sandbox.yaml'), 'arena': '[]', 'max_steps': '240',
               'rate_hz': '0.0', 'dt': '0.01', 'random.count': '10', 'random.seed': '4',
-              'record.mcap': str(folder / 'bag'), 'record.max_seconds': '0.8',
+              'record.mcap': str(folder / 'bag'), 'record.max_seconds': '1.0',
               'record.rerun': str(folder / 'run.rrd'), 'markers.rate_hz': '0.0',
               'balls.x': '[-2.0, 2.0]', 'balls.y': '[-0.5, -0.5]', 'balls.vx': '[0.4, 0.0]',
               'balls.vy': '[0.0, 0.3]', 'balls.radius': '[0.105, 0.105]',
@@ -173,7 +173,7 @@ def recorded(tmp_path_factory):
 
 def test_a_recording_resimulates_bit_for_bit_without_the_map_files(recorded):
     files = sorted((recorded / 'bag').glob('*.mcap'))
-    assert len(files) == 4  # split every 0.8 s of the 2.4: each file carries the map
+    assert len(files) == 3  # split every 1 s of the 2.4: each file carries the map
     code, out, err = run_tool('ball_world_resim', str(recorded / 'bag'))
     assert code == 0, out + err
     assert 'all 241 recorded steps re-simulate bit-identically' in out

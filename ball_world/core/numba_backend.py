@@ -304,7 +304,7 @@ def _walls_into(found, x, radii, margin, walls, index_grid, index_shape, index_f
     columns = index_shape[0]
     rows = index_shape[1]
     last = found.shape[0] - 1
-    for p in range(x.shape[0]):
+    for p in range(cell_balls.shape[0]):
         i = cell_balls[p]
         col, _ = _cell_range(x[i, 0], x[i, 0], 0.0, origin_x, size, columns)
         row, _ = _cell_range(x[i, 1], x[i, 1], 0.0, origin_y, size, rows)
@@ -325,10 +325,10 @@ def _walls_into(found, x, radii, margin, walls, index_grid, index_shape, index_f
 @_compile
 def _candidate_walls(x, radii, margin, walls, index_grid, index_shape, index_first,
                      index_items, cell_balls):
-    """(ball, wall) with the ball closer than r + margin to the segment, unsorted: each ball
-    reads its own bucket of the static index dilated by at least the largest r + margin
-    (core.static_geometry.StaticGeometry.dilated), which lists each wall within that reach
-    of the bucket once. A ball outside the index's box reads the nearest bucket, which lists
+    """(ball, wall) with the ball closer than r + margin to the segment, unsorted, for the
+    balls `cell_balls` lists: each reads its own bucket of the static index dilated by at
+    least the largest r + margin (core.static_geometry.StaticGeometry.dilated), which lists
+    each wall within that reach of the bucket once. A ball outside the index's box reads the nearest bucket, which lists
     every wall within reach of it too (moving a point into the box brings it no further
     from any point inside). Balls are taken in the order of their grid cells (`cell_balls`),
     so neighbours read neighbouring buckets: in index order each read was a cache miss,
@@ -381,7 +381,7 @@ def _canonical(found, rows):
 @_compile
 def build_pairs(x, radii, margin, members, level_starts, level_largest, order):
     """Candidate pairs within `margin` of touching, in canonical order; `order` gets the
-    balls in the order of their grid cells (for build_walls)."""
+    balls in the order of their grid cells (for refresh_walls)."""
     low, cell, shape, starts, cell_balls, cell_keys, scale = build_grids(
         x, members, level_starts, level_largest, margin)
     order[:] = cell_balls
@@ -391,12 +391,58 @@ def build_pairs(x, radii, margin, members, level_starts, level_largest, order):
 
 
 @_compile
-def build_walls(x, radii, walls, index_grid, index_shape, index_first, index_items, margin,
-                order):
-    """Ball-wall pairs within `margin` of touching, in canonical order (balls asked in
-    `order`, build_pairs')."""
-    return _canonical(_candidate_walls(x, radii, margin, walls, index_grid, index_shape,
-                                       index_first, index_items, order), x.shape[0])
+def refresh_walls(x, radii, walls, index_grid, index_shape, index_first, index_items, margin,
+                  order, wall_anchor, near_walls, wall_first, everyone):
+    """The ball-wall pairs within `margin` of touching, in canonical order, with the lists of
+    the balls that moved half the margin or more since theirs were made searched again (all
+    balls when `everyone`), the others kept: a ball's list stays valid until that ball
+    alone has moved the whole margin (a wall does not move), so slow balls keep theirs while
+    the fastest set the pace. Returns the new pairs; updates `wall_anchor` (where each ball's
+    list was made) and `wall_first` (ball i's pairs are rows wall_first[i] to
+    wall_first[i + 1]) in place. Balls are searched in `order` (build_pairs')."""
+    n = x.shape[0]
+    half = 0.5 * margin
+    again = np.zeros(n, dtype=np.bool_)
+    count = 0
+    for i in range(n):
+        dx = x[i, 0] - wall_anchor[i, 0]
+        dy = x[i, 1] - wall_anchor[i, 1]
+        if everyone or not dx * dx + dy * dy < half * half:
+            again[i] = True
+            count += 1
+    searched = np.empty(count, dtype=np.int64)
+    count = 0
+    for p in range(n):
+        if again[order[p]]:
+            searched[count] = order[p]
+            count += 1
+    found = _canonical(_candidate_walls(x, radii, margin, walls, index_grid, index_shape,
+                                        index_first, index_items, searched), n)
+    kept = 0
+    for i in range(n):
+        if not again[i]:
+            kept += wall_first[i + 1] - wall_first[i]
+    merged = np.empty((kept + found.shape[0], 2), dtype=np.int64)
+    row = 0
+    new = 0
+    for i in range(n):
+        start = row
+        if again[i]:
+            while new < found.shape[0] and found[new, 0] == i:
+                merged[row, 0] = i
+                merged[row, 1] = found[new, 1]
+                row += 1
+                new += 1
+            wall_anchor[i, 0] = x[i, 0]
+            wall_anchor[i, 1] = x[i, 1]
+        else:
+            for old in range(wall_first[i], wall_first[i + 1]):
+                merged[row, 0] = i
+                merged[row, 1] = near_walls[old, 1]
+                row += 1
+        wall_first[i] = start
+    wall_first[n] = row
+    return merged
 
 
 @_compile
@@ -586,12 +632,13 @@ def lists_stale(x, anchor, wall_anchor, skin):
 @_compile
 def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, index_grid, index_shape,
               index_first, index_items, members, level_starts, level_largest, skin,
-              pair_rows, wall_rows, lists, anchor, wall_anchor, order, best, totals):
+              pair_rows, wall_rows, lists, anchor, wall_anchor, wall_first, order, best,
+              totals):
     """One seed-mode step, planned and split exactly as numpy_backend.NumpyStepper.step.
 
     The candidates are Verlet lists with `skin`, built with the balls at `anchor` (pairs)
-    and `wall_anchor` (ball-wall pairs, see lists_stale), kept between steps in the
-    caller's buffers: pairs in pair_rows[:lists[PAIRS]], ball-wall
+    and, ball by ball, at `wall_anchor` (ball-wall pairs, see lists_stale and
+    refresh_walls, which keeps `wall_first`), kept between steps in the caller's buffers: pairs in pair_rows[:lists[PAIRS]], ball-wall
     pairs in wall_rows[:lists[NEAR_WALLS]], valid while lists[FRESH] is 1. They are rebuilt
     whenever the balls may have closed the skin. Buffers, not returned arrays: returning
     arrays to Python costs about 0.5 us a call, a tenth of a whole step at 100 balls. Lists
@@ -629,9 +676,9 @@ def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, index_grid, inde
             anchor[:] = x
             rebuilt = True
         if walls_stale:
-            near_walls = build_walls(x, radii, walls, index_grid, index_shape, index_first,
-                                     index_items, skin, order)
-            wall_anchor[:] = x
+            near_walls = refresh_walls(x, radii, walls, index_grid, index_shape, index_first,
+                                       index_items, skin, order, wall_anchor, near_walls,
+                                       wall_first, not fresh)
             rebuilt = True
         fresh = True
         pairs, rel, contacts, offsets, interior = find_contacts(x, radii, walls, candidates,
@@ -719,15 +766,17 @@ class NumbaStepper:
                               index.first, index.items, *radius_classes(world.radii), skin,
                               np.empty((4 * n, 2), dtype=np.int64),
                               np.empty((n, 2), dtype=np.int64), np.zeros(3, dtype=np.int64),
-                              np.empty((n, 2)), np.empty((n, 2)), np.arange(n, dtype=np.int64),
+                              np.empty((n, 2)), np.empty((n, 2)),
+                              np.zeros(n + 1, dtype=np.int64), np.arange(n, dtype=np.int64),
                               np.full(n, -1, np.int64))
         (min_mass, walls, index_grid, index_shape, index_first, index_items, members,
-         level_starts, largest, skin, pair_rows, wall_rows, lists, anchor, wall_anchor, order,
-         best) = self._prepared
+         level_starts, largest, skin, pair_rows, wall_rows, lists, anchor, wall_anchor,
+         wall_first, order, best) = self._prepared
         status = seed_step(world.positions, world.velocities, world.radii, world.masses,
                            min_mass, dt, travel, walls, index_grid, index_shape, index_first,
                            index_items, members, level_starts, largest, skin, pair_rows,
-                           wall_rows, lists, anchor, wall_anchor, order, best, totals)
+                           wall_rows, lists, anchor, wall_anchor, wall_first, order, best,
+                           totals)
         if not lists[FRESH] and status == STEP_DONE:
             self._grow(pair_rows, wall_rows, lists)
         return status
@@ -735,13 +784,13 @@ class NumbaStepper:
     @property
     def buffers(self):
         """(pair_rows, wall_rows, lists) of seed_step, once a step has made them."""
-        return self._prepared[-7:-4]
+        return self._prepared[-8:-5]
 
     def _grow(self, pair_rows, wall_rows, lists):
         """Buffers for lists that outgrew them, with room to spare; the next step rebuilds."""
         rows = [max(2 * int(lists[PAIRS]), len(pair_rows)),
                 max(2 * int(lists[NEAR_WALLS]), len(wall_rows))]
-        (*head, _, _, lists, anchor, wall_anchor, order, best) = self._prepared
+        (*head, _, _, lists, anchor, wall_anchor, wall_first, order, best) = self._prepared
         self._prepared = (*head, np.empty((rows[0], 2), dtype=np.int64),
                           np.empty((rows[1], 2), dtype=np.int64), lists, anchor, wall_anchor,
-                          order, best)
+                          wall_first, order, best)

@@ -12,7 +12,7 @@ a late page of a live view gets it.
 import numpy as np
 import rerun as rr
 
-from ball_world.core.occupancy_map import OCCUPIED
+from ball_world.core.occupancy_map import OCCUPIED, UNKNOWN
 
 #: Entity paths, under the arena's +y-up transform.
 MAP = 'arena/map'
@@ -55,7 +55,16 @@ def map_entities(occupancy_map, wall_color):
 
 
 def map_bounds(occupancy_map):
-    """(xmin, ymin, xmax, ymax) of the map's grid, m."""
+    """(xmin, ymin, xmax, ymax) of the map's known cells (free or occupied), m: what a view
+    fits. A SLAM map is mostly unknown around the building (the sandbox is 19.2 m square
+    for a room of 5 m); the whole grid when no cell is known."""
+    known = occupancy_map.data != UNKNOWN
+    rows = np.flatnonzero(known.any(axis=1))
+    columns = np.flatnonzero(known.any(axis=0))
+    if not len(rows):
+        rows = np.array([0, occupancy_map.height - 1])
+        columns = np.array([0, occupancy_map.width - 1])
     x, y = occupancy_map.origin
     resolution = occupancy_map.resolution
-    return (x, y, x + occupancy_map.width * resolution, y + occupancy_map.height * resolution)
+    return (float(x + columns[0] * resolution), float(y + rows[0] * resolution),
+            float(x + (columns[-1] + 1) * resolution), float(y + (rows[-1] + 1) * resolution))
