@@ -328,11 +328,11 @@ def _candidate_walls(x, radii, margin, walls, index_grid, index_shape, index_fir
     """(ball, wall) with the ball closer than r + margin to the segment, unsorted, for the
     balls `cell_balls` lists: each reads its own bucket of the static index dilated by at
     least the largest r + margin (core.static_geometry.StaticGeometry.dilated), which lists
-    each wall within that reach of the bucket once. A ball outside the index's box reads the nearest bucket, which lists
-    every wall within reach of it too (moving a point into the box brings it no further
-    from any point inside). Balls are taken in the order of their grid cells (`cell_balls`),
-    so neighbours read neighbouring buckets: in index order each read was a cache miss,
-    which tripled the time of a map's 25,000 runs (measured).
+    each wall within that reach of the bucket once. A ball outside the index's box reads the
+    nearest bucket, which lists every wall within reach of it too (moving a point into the
+    box brings it no further from any point inside). Balls are taken in the order of their
+    grid cells (`cell_balls`), so neighbours read neighbouring buckets: in index order most
+    reads were cache misses, which nearly doubled the search of a map's runs (measured).
     """
     found = np.empty((2 * x.shape[0] + 64, 2), dtype=np.int64)
     if index_items.shape[0] == 0:
@@ -638,9 +638,10 @@ def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, index_grid, inde
 
     The candidates are Verlet lists with `skin`, built with the balls at `anchor` (pairs)
     and, ball by ball, at `wall_anchor` (ball-wall pairs, see lists_stale and
-    refresh_walls, which keeps `wall_first`), kept between steps in the caller's buffers: pairs in pair_rows[:lists[PAIRS]], ball-wall
-    pairs in wall_rows[:lists[NEAR_WALLS]], valid while lists[FRESH] is 1. They are rebuilt
-    whenever the balls may have closed the skin. Buffers, not returned arrays: returning
+    refresh_walls, which keeps `wall_first`), kept between steps in the caller's buffers:
+    pairs in pair_rows[:lists[PAIRS]], ball-wall pairs in wall_rows[:lists[NEAR_WALLS]],
+    valid while lists[FRESH] is 1. They are rebuilt whenever the balls may have closed the
+    skin. Buffers, not returned arrays: returning
     arrays to Python costs about 0.5 us a call, a tenth of a whole step at 100 balls. Lists
     that outgrow a buffer are used for the rest of the step, then dropped (FRESH 0) with the
     rows they need in lists[PAIRS] and lists[NEAR_WALLS], for the caller to grow the
