@@ -1144,11 +1144,12 @@ class _Feed:
             .reshape(-1, 3), radii=rr.Radius.ui_points(1.0), draw_order=10.0))
 
     def _send(self):
-        """Send the buffered steps as one columnar chunk per entity."""
-        self._send_clock()
-        self._send_headroom()
+        """Send the buffered steps as one columnar chunk per entity (the balls first: a
+        writer keeps that order, so a file cut short holds the balls of its last batch)."""
         pending = self._pending
         if not len(pending):
+            self._send_clock()
+            self._send_headroom()
             return
         steps, times, positions, velocities, labels, energy, collisions, momentum, rtf = \
             pending.columns()
@@ -1190,6 +1191,8 @@ class _Feed:
         if rtf_values:
             self._emit('send_columns', REAL_TIME_FACTOR, self._index(rtf_steps, rtf_times),
                        rr.Scalars.columns(scalars=np.array(rtf_values, dtype=np.float64)))
+        self._send_clock()
+        self._send_headroom()
         pending.clear()
 
     @staticmethod
