@@ -1,13 +1,16 @@
 # The commands of the README. Each sets everything up first (scripts/setup.sh is fast when
 # nothing changed), so they work on a fresh clone.
-.PHONY: run view test setup bench soak
+.PHONY: run view demo test setup bench soak
 VENV := .venv
 # Steps of the main job (60 Hz): 1800 is 30 s; 0 runs until Ctrl-C.
 STEPS ?= 1800
 # Steps of make view: 0 runs until Ctrl-C.
 VIEW_STEPS ?= 0
-# Arguments of the benchmark and of the soak runs, e.g. make soak ARGS='kill --times 10'.
+# Arguments of the benchmark and of the soak runs, e.g. make soak ARGS='kill --times 10', and
+# the world's ROS arguments in make view / make demo, e.g. make view ARGS='-p agents:=[ball_0]'.
 ARGS ?=
+# A world's parameters file for make view / make demo, e.g. make view WORLD=worlds/sandbox.yaml.
+WORLD ?=
 
 setup:
 	@scripts/setup.sh
@@ -21,9 +24,14 @@ run: setup
 	@echo '  or open runs/ball_world.mcap in Foxglove with foxglove/ball_world.json (layout),'
 	@echo '  or play it: $(VENV)/bin/ball_world_replay runs/ball_world.mcap  (ros2 bag play with ROS 2 Jazzy)'
 
-# The default world live in a browser: prints the address; Ctrl-C stops the node and the server.
+# A world live in a browser (WORLD=, ARGS=): prints the address; Ctrl-C stops the node and the
+# server.
 view: setup
-	@STEPS=$(VIEW_STEPS) scripts/view.sh
+	@STEPS=$(VIEW_STEPS) WORLD='$(WORLD)' ARGS='$(ARGS)' scripts/view.sh
+
+# Robots among balls live in a browser: one wandering, one tracking, yours to drive.
+demo: setup
+	@set -f; $(VENV)/bin/ball_world_demo $(if $(WORLD),--world '$(WORLD)') --ros-args $(ARGS)
 
 test: setup
 	$(VENV)/bin/python -m pytest -q -n 2 test

@@ -45,6 +45,10 @@ setup(
             'ball_world_tracker = ball_world.tools.tracker:main',
             'ball_world_score = ball_world.tools.score:main',
             'ball_world_score_scenes = ball_world.tools.score_scenes:main',
+            'ball_world_view = ball_world.tools.view:main',
+            'ball_world_demo = ball_world.tools.demo:main',
+            'ball_world_wander = ball_world.tools.wander:main',
+            'ball_world_view_tracks = ball_world.tools.view_tracks:main',
         ],
     },
 )

@@ -142,7 +142,8 @@ class Simulation:
         self.log_offset_ns = 0
         self.last_log_ns = None
         self.rejected = {}
-        self.applied = 0
+        self.applied = 0  # impulses from outside (the impulse topic, services)
+        self.drive_applied = 0  # impulses of the agents' drives
         self.discarded = 0
         self._queue = deque()
         self.reset(parameters, built)
@@ -322,8 +323,11 @@ class Simulation:
         """
         return self._apply(self._queue)
 
-    def _apply(self, queue):
-        """Apply the impulses of `queue` (a deque, emptied) in order; returns rejections."""
+    def _apply(self, queue, drive=False):
+        """Apply the impulses of `queue` (a deque, emptied) in order; returns rejections.
+
+        drive: they are the agents' drive's (counted in drive_applied, marked so).
+        """
         world = self.world
         rejected = []
         if not queue:
@@ -343,10 +347,13 @@ class Simulation:
                 rejected.append(rejection)
                 continue
             world.apply_impulse(ball, jx, jy)
-            self.applied += 1
+            if drive:
+                self.drive_applied += 1
+            else:
+                self.applied += 1
             self._applied.append(AppliedImpulse(
                 ball=ball, jx=jx, jy=jy, frame_id=frame_id,
-                cdr=encode_vector3_stamped(stamp_ns, frame_id, jx, jy, 0.0)))
+                cdr=encode_vector3_stamped(stamp_ns, frame_id, jx, jy, 0.0), drive=drive))
         return rejected
 
     # Agents -----------------------------------------------------------------------------
@@ -385,7 +392,8 @@ class Simulation:
                                                  self.index_of, self.dt_ns, end_ns)
                             if len(self.agents) else ())
         before = len(self._applied)
-        rejected = [] if self._apply_at_once(self._drive) else self._apply(self._drive)
+        rejected = [] if self._apply_at_once(self._drive) else self._apply(self._drive,
+                                                                           drive=True)
         return len(self._applied) - before, rejected
 
     def _apply_at_once(self, drive):
@@ -421,10 +429,10 @@ class Simulation:
         stamp_ns = (self.step_index + 1) * self.dt_ns
         xs, ys = jx.tolist(), jy.tolist()
         self._applied.extend(
-            AppliedImpulse(ball=ball, jx=x, jy=y, frame_id=name, cdr=cdr)
+            AppliedImpulse(ball=ball, jx=x, jy=y, frame_id=name, cdr=cdr, drive=True)
             for ball, x, y, name, cdr in zip(balls.tolist(), xs, ys, names,
                                              encode_impulses(stamp_ns, names, xs, ys)))
-        self.applied += len(names)
+        self.drive_applied += len(names)
         drive.clear()
         return True
 

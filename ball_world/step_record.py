@@ -27,6 +27,9 @@ class AppliedImpulse:
     jy: float  # N*s along world y
     frame_id: str  # 'ball_<i>', as it arrived
     cdr: bytes  # the Vector3Stamped as recorded: CDR, header.stamp = sim time of the step
+    # An agent's own drive (core.agents: its cmd_vel turned into an impulse), not a push from
+    # outside; views draw and count the two apart.
+    drive: bool = False
 
 
 @dataclass(frozen=True)

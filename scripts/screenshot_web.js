@@ -14,7 +14,8 @@
 // viewer's wasm takes about 20 s to load that way). For each it prints one line with the
 // wall-clock times (seconds since the epoch) when the shot was asked for and when it was
 // taken (a busy page takes a while to draw it), to compare the simulated time the page shows
-// with the node's then (`make soak ARGS=liveview` does).
+// with the node's then (`make soak ARGS=liveview` does). THEME=dark or THEME=light sets the
+// colour scheme the page sees (the viewer follows it).
 'use strict';
 const puppeteer = require('puppeteer-core');
 
@@ -34,6 +35,10 @@ async function main() {
   try {
     const page = await browser.newPage();
     await page.setViewport({width: 1600, height: 900});
+    // THEME=dark or light: the viewer follows the system's colour scheme.
+    if (process.env.THEME) {
+      await page.emulateMediaFeatures([{name: 'prefers-color-scheme', value: process.env.THEME}]);
+    }
     page.on('pageerror', (error) => console.error(`page error: ${error.message}`));
     await page.goto(url, {waitUntil: 'load', timeout: 60000});
     const loaded = Date.now();

@@ -41,7 +41,10 @@ def test_teleop_drives_an_agent_and_pushes_a_ball(terminal, processes):
         terminal.start('--ros-args', '-r', f'__ns:={NAMESPACE}', '-p', 'ball:=ball_1')
         # Selected, the agent gets its cmd_vel publisher before any key is pressed; the
         # line says so once the world has matched it.
-        terminal.wait_for('ball     ball_1 (2 of 2) at (5.00, 5.00), an agent: arrows drive it')
+        terminal.wait_for('ball     ball_1 (2 of 2) at (5.00, 5.00), a robot: arrows drive it')
+        # Driving, never "push": the keys line says what the arrows do to a robot.
+        terminal.wait_for(f'keys     drive ball_1: up/down forward/back, left/right turn '
+                          f'({DEFAULT_SPEED:g} m/s, {DEFAULT_TURN:g} rad/s per key)')
         terminal.keys('Up')
         terminal.wait_for(f'status   drive: ball_1 forward +{DEFAULT_SPEED:g} m/s, turn +0')
         probe.spin_until(lambda: odom[-1].twist.twist.linear.x == DEFAULT_SPEED,

@@ -24,15 +24,15 @@ import rerun as rr
 
 from ball_world.recording import rerun_log, rerun_outlet
 from ball_world.recording.mcap_writer import McapSink
+from ball_world.recording.rerun_labels import box_of, LabelScale
 from ball_world.recording.rerun_log import (ARENA, ARROW_MAX_FRACTION, ARROW_MIN_FRACTION,
                                             ARROW_SECONDS, ball_color, BALLS, clip_arrow,
-                                            COLLISIONS, ENERGY, IMPULSE_COLOR,
-                                            IMPULSES, LABEL_GAP,
-                                            LABEL_LIMIT, LABELS, MOMENTUM, REAL_TIME_FACTOR,
-                                            RealTimeFactor, RerunSink, scene_bounds, SIM_TIME,
-                                            STEP, TRAILS,
-                                            VELOCITIES, VELOCITY_SECONDS, VIEW_FPS,
-                                            VIEW_TRAIL_SPACING, WALL_COLOR, WALLS)
+                                            COLLISIONS, ENERGY, IMPULSE_COLOR, IMPULSES,
+                                            LABEL_LIMIT, LABEL_LINE_FRACTION, LABELS,
+                                            MOMENTUM, REAL_TIME_FACTOR, RealTimeFactor,
+                                            RerunSink, scene_bounds, SIM_TIME, STEP, TRAILS,
+                                            VELOCITIES, VELOCITY_SECONDS, view_bounds,
+                                            VIEW_FPS, VIEW_TRAIL_SPACING, WALL_COLOR, WALLS)
 from ball_world.recording.rerun_outlet import Outlet, OutletFailed, parse_view
 from ball_world.simulation import Simulation
 from ball_world.tools import to_rrd
@@ -136,44 +136,68 @@ def test_recording_verifies_and_reads_back_exactly(tmp_path):
     assert walls == {0: world.walls.reshape(-1, 2, 2).tolist()}
     assert content[(f'/{BALLS}', 'Points2D:radii')] == {0: as_float32(world.radii)}
     labels = content[(f'/{LABELS}', 'Points2D:labels')][0]
-    assert labels == [f'ball_{i}' for i in range(len(world.radii))]
+    assert set(labels) <= {f'ball_{i}' for i in range(len(world.radii))}
+    assert len(labels) >= len(world.radii) // 2  # a 10 m box has room for most names
     assert (f'/{ARENA}', 'Transform3D:rotation_axis_angle') in content
     momentum = scalars(content, MOMENTUM)
     assert momentum == {r.step: r.momentum.tolist() for r in records}
     assert not any(entity in (f'/{VELOCITIES}', f'/{TRAILS}') for entity, _ in content)
 
 
-def below_each_ball(positions, radii):
-    """The closed form of the label points: under each ball (+y up), LABEL_GAP radii below
-    its bottom edge, in float32 as Rerun stores them."""
-    centres = np.asarray(positions, dtype=np.float64)
+def assert_labels_clear(points, texts, positions, radii, names, bounds):
+    """The rule the view keeps: each label's box, as Rerun draws it (centred below its point,
+    rerun_labels' measured text size for a view fitted into its pixels), overlaps no other
+    label's box and no ball but its own, lies inside the view, and names a ball beside it."""
+    scale = LabelScale(bounds)
+    positions = np.asarray(positions, dtype=np.float64)
     radii = np.asarray(radii, dtype=np.float64)
-    return np.column_stack((centres[:, 0], centres[:, 1] - radii * (1.0 + LABEL_GAP)))
+    boxes = [box_of(point, *scale.size(text), scale) for point, text in zip(points, texts)]
+    for k, (box, text) in enumerate(zip(boxes, texts)):
+        assert bounds[0] <= box[0] and box[2] <= bounds[2], (text, box, bounds)
+        assert bounds[1] <= box[1] and box[3] <= bounds[3], (text, box, bounds)
+        for other in boxes[k + 1:]:
+            assert not (box[0] < other[2] and other[0] < box[2] and box[1] < other[3]
+                        and other[1] < box[3]), (text, box, other)
+        own = names.index(text)
+        for i, (centre, radius) in enumerate(zip(positions, radii)):
+            nearest = np.clip(centre, box[0:2], box[2:4])
+            touching = np.hypot(*(centre - nearest)) < radius
+            assert touching is np.False_ or i == own, (text, names[i])
+        # Beside its own ball: within a box's size of the ball's edge.
+        centre, radius = positions[own], radii[own]
+        nearest = np.clip(centre, box[0:2], box[2:4])
+        assert np.hypot(*(centre - nearest)) <= radius + 2 * (box[3] - box[1]), text
 
 
-def test_labels_are_their_own_points_under_each_ball_and_the_balls_have_none(tmp_path):
-    """Rerun draws a label just below its point: on the ball's centre it covered the ball's
-    lower half. A point under each ball puts the name under the ball."""
+def test_labels_name_the_balls_without_colliding_and_the_balls_have_none(tmp_path):
+    """Rerun draws a label just below its point, whatever else is there: names overlapped
+    (ball_14 over ball_4) or lay on other balls. Each step's names are placed below, above,
+    right or left of their ball, or dropped, so that none collides."""
     path = tmp_path / 'run.rrd'
-    collected = run([RerunSink(path)], steps=10)
+    parameters = {'random.count': 28, 'random.seed': 3}
+    collected = run([RerunSink(path)], steps=40, parameters=parameters)
     _, content, _, _ = read(path)
     world = collected.segments[0][0]
+    names = [f'ball_{i}' for i in range(len(world.radii))]
     assert not [component for entity, component in content
                 if entity == f'/{BALLS}' and component.endswith(':labels')]
-    assert content[(f'/{LABELS}', 'Points2D:labels')] == {
-        0: [f'ball_{i}' for i in range(len(world.radii))]}
     assert content[(f'/{LABELS}', 'Points2D:show_labels')] == {0: [True]}
-    assert content[(f'/{LABELS}', 'Points2D:colors')] == content[(f'/{BALLS}', 'Points2D:colors')]
     points = content[(f'/{LABELS}', 'Points2D:positions')]
-    assert sorted(points) == list(range(11))
+    texts = content[(f'/{LABELS}', 'Points2D:labels')]
+    colors = content[(f'/{LABELS}', 'Points2D:colors')]
+    ball_colors = content[(f'/{BALLS}', 'Points2D:colors')][0]
+    assert sorted(points) == sorted(texts) == list(range(41))
+    bounds = view_bounds(world)
+    dropped = 0
     for record in collected.records:
-        shown = np.asarray(points[record.step], dtype=np.float64)
-        expected = below_each_ball(as_float32(record.positions), world.radii)
-        assert shown.shape == expected.shape
-        assert np.array_equal(shown[:, 0], expected[:, 0])  # straight below
-        assert np.allclose(shown[:, 1], expected[:, 1], rtol=0.0, atol=1e-5)
-        # Below the ball's edge, not on it (the arena's view has +y up).
-        assert np.all(shown[:, 1] < np.asarray(record.positions)[:, 1] - world.radii)
+        shown, text = points[record.step], texts[record.step]
+        assert len(shown) == len(text) == len(colors[record.step])
+        assert len(set(text)) == len(text)
+        assert colors[record.step] == [ball_colors[names.index(t)] for t in text]
+        assert_labels_clear(shown, text, as_float32(record.positions), world.radii, names,
+                            bounds)
+        dropped += len(names) - len(text)
+    assert dropped < 0.5 * len(names) * 41  # most names are shown
 
 
 def test_beyond_the_label_limit_no_label_points_are_logged(tmp_path):
@@ -183,6 +207,13 @@ def test_beyond_the_label_limit_no_label_points_are_logged(tmp_path):
     run([RerunSink(path)], steps=3, parameters={'random.count': LABEL_LIMIT + 1}, impulses={})
     _, content, _, _ = read(path)
     assert not [key for key in content if key[0] == f'/{LABELS}']
+    # With agents, the robots are still named (and nothing else).
+    path = tmp_path / 'robots.rrd'
+    run([RerunSink(path)], steps=3, parameters={'random.count': LABEL_LIMIT + 1,
+                                                'agents': ['ball_3', 'ball_7']}, impulses={})
+    _, content, _, _ = read(path)
+    assert all(set(texts) <= {'ball_3', 'ball_7'} and texts
+               for texts in content[(f'/{LABELS}', 'Points2D:labels')].values())
     assert sorted(content[(f'/{BALLS}', 'Points2D:positions')]) == [0, 1, 2, 3]
 
     path = tmp_path / 'grows.rrd'
@@ -250,13 +281,17 @@ def test_a_live_view_hides_its_labels_when_the_world_grows_past_the_limit():
         return ([a for static, a in logged if static], [a for static, a in logged if not static])
 
     (looks,), (frame,) = arrows_logged(first)
-    assert looks.labels.as_arrow_array().to_pylist() == ['ball_0', 'ball_1', 'ball_2']
-    assert np.allclose(frame.origins.as_arrow_array().to_pylist(),
-                       below_each_ball(as_float32(first.positions), world.radii), atol=1e-5)
-    (looks,), frames = arrows_logged(grown)
-    assert looks.labels.as_arrow_array().to_pylist() == []  # cleared: no names left
-    assert looks.vectors.as_arrow_array().to_pylist() == []
-    assert frames == []  # and no label points in the frame
+    assert looks.show_labels.as_arrow_array().to_pylist() == [True]
+    assert sorted(frame.labels.as_arrow_array().to_pylist()) == ['ball_0', 'ball_1', 'ball_2']
+    assert_labels_clear(frame.origins.as_arrow_array().to_pylist(),
+                        frame.labels.as_arrow_array().to_pylist(),
+                        as_float32(first.positions), world.radii,
+                        ['ball_0', 'ball_1', 'ball_2'], view_bounds(world))
+    assert np.all(np.asarray(frame.vectors.as_arrow_array().to_pylist()) == 0.0)
+    looks, (frame,) = arrows_logged(grown)
+    assert looks == []  # no label looks for a world past the limit
+    assert frame.labels.as_arrow_array().to_pylist() == []  # an empty set: no names left
+    assert frame.origins.as_arrow_array().to_pylist() == []
     feed.close()
 
 
@@ -341,7 +376,7 @@ def test_impulse_stays_half_a_second_in_its_colour_with_the_ball_name(tmp_path):
                 assert x == pytest.approx(x0 + vector[0], abs=1e-5)
             else:  # under the tail: under the pushed ball's own label as well
                 assert x == pytest.approx(x0, abs=1e-5)
-                assert y < y0 - world.radii[ball] * (1.0 + LABEL_GAP)
+                assert y < y0 - world.radii[ball] - LABEL_LINE_FRACTION * span
     packed = int.from_bytes(bytes((*IMPULSE_COLOR, 255)), 'big')
     assert {tuple(color) for color in colors.values()} == {(packed,), ()}  # () = cleared
     # 0.1 N s on a ball of ~0.1 kg is a small push: its arrow is lifted to the floor.
@@ -475,16 +510,17 @@ def test_balls_named_by_the_record_may_come_and_go(tmp_path):
     labels = content[(f'/{LABELS}', 'Points2D:labels')]
     radii = content[(f'/{BALLS}', 'Points2D:radii')]
     colors = content[(f'/{BALLS}', 'Points2D:colors')]
-    assert labels == {0: ['ball_0', 'ball_1', 'ball_2'], 1: ['ball_0', 'ball_2'],
-                      2: ['ball_0', 'ball_2', 'red']}
+    assert {k: sorted(v) for k, v in labels.items()} == {
+        0: ['ball_0', 'ball_1', 'ball_2'], 1: ['ball_0', 'ball_2'],
+        2: ['ball_0', 'ball_2', 'red']}
     assert radii[1] == as_float32(world.radii[[0, 2]])
     assert radii[2] == as_float32([*world.radii[[0, 2]], 0.5])
     assert colors[1] == [colors[0][0], colors[0][2]]  # a ball keeps its colour
     assert len(content[(f'/{BALLS}', 'Points2D:positions')][2]) == 3
-    # The label points follow the names too: 'red' is labelled under its own radius.
+    # The label points follow the names too: 'red' is labelled beside its own radius.
     points = content[(f'/{LABELS}', 'Points2D:positions')]
-    assert np.allclose(points[2], below_each_ball(as_float32(arrived.positions),
-                                                  arrived.radii), rtol=0.0, atol=1e-5)
+    assert_labels_clear(points[2], labels[2], as_float32(arrived.positions), arrived.radii,
+                        list(arrived.names), view_bounds(world))
 
 
 def test_identical_runs_give_identical_content(tmp_path):
@@ -797,13 +833,15 @@ def test_live_view_gets_frames_at_its_rate_with_balls_trails_and_pushes_in_step(
     # The labels move with the balls, in the balls' rows (arrows of length 0, drawn as
     # their labels alone), under each ball: no frame's names under another frame's balls.
     labels = content_view[(f'/{BALLS}', 'Arrows2D:origins')]
-    assert set(labels) == frames
-    radii = collector.segments[0][0].radii
-    assert all(np.allclose(labels[k], below_each_ball(positions[k], radii), rtol=0.0,
-                           atol=1e-5) for k in frames)
-    assert content_view[(f'/{BALLS}', 'Arrows2D:labels')] == {
-        None: [f'ball_{i}' for i in range(len(radii))]}
-    assert content_view[(f'/{BALLS}', 'Arrows2D:vectors')] == {None: [[0.0, 0.0]] * len(radii)}
+    texts = content_view[(f'/{BALLS}', 'Arrows2D:labels')]
+    assert set(labels) == set(texts) == frames
+    world = collector.segments[0][0]
+    names = [f'ball_{i}' for i in range(len(world.radii))]
+    for k in frames:
+        assert_labels_clear(labels[k], texts[k], positions[k], world.radii, names,
+                            view_bounds(world))
+    assert all(set(map(tuple, v)) == {(0.0, 0.0)}
+               for v in content_view[(f'/{BALLS}', 'Arrows2D:vectors')].values() if v)
     assert not [key for key in content_view if key[0] == f'/{LABELS}']
     assert set(scalars(content_view, COLLISIONS)) == frames
     assert scalars(content_view, COLLISIONS)[90] == scalars(content_file, COLLISIONS)[90]
@@ -815,7 +853,7 @@ def test_live_view_gets_frames_at_its_rate_with_balls_trails_and_pushes_in_step(
     assert not shown_at(origins, 90)
     # What a page opened late needs is static: it outlives the frames a server drops.
     for key in ((f'/{WALLS}', 'LineStrips2D:strips'), (f'/{BALLS}', 'Points2D:radii'),
-                (f'/{BALLS}', 'Points2D:colors'), (f'/{BALLS}', 'Arrows2D:colors'),
+                (f'/{BALLS}', 'Points2D:colors'), (f'/{BALLS}', 'Arrows2D:show_labels'),
                 (f'/{ARENA}', 'Transform3D:rotation_axis_angle')):
         assert list(content_view[key]) == [None], key
 
@@ -912,7 +950,7 @@ def test_node_streams_to_a_viewer_and_records_one_recording(tmp_path, listener):
     assert (f'/{VELOCITIES}', 'Arrows2D:vectors') in content_file
     # The row's arrows are the velocities: the labels are points of their own, per frame.
     assert set(content_view[(f'/{LABELS}', 'Points2D:positions')]) == set(shown)
-    assert list(content_view[(f'/{LABELS}', 'Points2D:labels')]) == [None]
+    assert set(content_view[(f'/{LABELS}', 'Points2D:labels')]) == set(shown)
     assert not [key for key in content_view if key == (f'/{BALLS}', 'Arrows2D:labels')]
     assert (f'/{TRAILS}', 'LineStrips2D:strips') in content_file
     rtf = scalars(content_file, REAL_TIME_FACTOR)

@@ -1,4 +1,4 @@
-"""Rerun draws each agent's heading as an arrow from its centre, labelled with its name."""
+"""Rerun draws each agent's heading as an arrow from its centre, its name among the labels."""
 import math
 
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 from test_rerun import read, shown_at
 
 from ball_world.recording.rerun_agents import AGENTS, HEADING_RADII
-from ball_world.recording.rerun_log import RerunSink
+from ball_world.recording.rerun_log import LABELS, RerunSink
 from ball_world.simulation import Simulation
 
 
@@ -23,7 +23,9 @@ def test_an_agent_is_drawn_with_its_heading_and_name(tmp_path):
     _, content, _, _ = read(path)
     vectors = content[(f'/{AGENTS}', 'Arrows2D:vectors')]
     origins = content[(f'/{AGENTS}', 'Arrows2D:origins')]
-    labels = content[(f'/{AGENTS}', 'Arrows2D:labels')]
+    labels = content[(f'/{LABELS}', 'Points2D:labels')]
+    assert not any(component.endswith(':labels') for entity, component in content
+                   if entity == f'/{AGENTS}')  # the name is with the balls' names
     for step in (0, 7, 20):
         record = records[step]
         yaw = float(record.agents.yaws[0])
@@ -33,7 +35,7 @@ def test_an_agent_is_drawn_with_its_heading_and_name(tmp_path):
                                         HEADING_RADII * radius * math.sin(yaw)], rel=1e-6)
         assert shown_at(origins, step) == np.asarray(record.positions[2:3],
                                                      dtype=np.float32).tolist()
-        assert shown_at(labels, step) == ['ball_2']
+        assert shown_at(labels, step)[0] == 'ball_2'  # agents are named first
 
 
 def test_a_world_without_agents_draws_no_arrows(tmp_path):
@@ -57,8 +59,8 @@ def test_a_recording_converted_to_rrd_draws_its_agents(tmp_path, capsys):
     assert to_rrd.main([str(mcap), '-o', str(tmp_path / 'run.rrd')]) == 0
     _, content, _, _ = read(tmp_path / 'run.rrd')
     vectors = content[(f'/{AGENTS}', 'Arrows2D:vectors')]
-    labels = content[(f'/{AGENTS}', 'Arrows2D:labels')]
-    assert shown_at(labels, 10) == ['ball_2', 'ball_4']
+    labels = content[(f'/{LABELS}', 'Points2D:labels')]
+    assert shown_at(labels, 10)[:2] == ['ball_2', 'ball_4']
     yaw = float(records[10].agents.yaws[1])
     radius = float(records[10].radii[4])
     assert shown_at(vectors, 10)[1] == pytest.approx(

@@ -310,11 +310,11 @@ def test_keys_drive_the_world_in_a_terminal(terminal, world, start_world):
                          f'the node to apply {expected[-1]}')
 
     screen = terminal.wait_for('ball     ball_1 (2 of 3) at (5.00, 5.00)')
-    assert 'impulse  0.1 N s per key' in screen
+    assert 'keys     push ball_1: arrows along +y, -y, -x, +x (0.1 N s per key)' in screen
     push(['Right'], 1, 0.1, 0.0)
     terminal.wait_for('status   push 1: ball_1 by (+0.1, +0) N s')
     push(['+', 'Up'], 1, 0.0, 0.2)
-    terminal.wait_for('impulse  0.2 N s per key')
+    terminal.wait_for('keys     push ball_1: arrows along +y, -y, -x, +x (0.2 N s per key)')
     push(['0', 'Down'], 0, 0.0, -0.2)
     terminal.keys('Tab', 'Tab')
     terminal.wait_for('ball     ball_2 (3 of 3)')
@@ -324,7 +324,7 @@ def test_keys_drive_the_world_in_a_terminal(terminal, world, start_world):
     terminal.keys('-', '-', '9')
     terminal.wait_for('status   no ball number 10: the world has 3')
     push(['Right'], 2, 0.05, 0.0)
-    terminal.wait_for('impulse  0.05 N s per key')
+    terminal.wait_for('keys     push ball_2: arrows along +y, -y, -x, +x (0.05 N s per key)')
 
     # Another client pauses the world: space then means resume, although the teleop last
     # saw it running (its pause changes nothing, so it resumes at once).

@@ -395,6 +395,9 @@ PARAMETERS = (
     Parameter('view.rerun', STRING, '', "Live Rerun view: '' off, 'spawn' starts the native "
               'viewer, or a rerun+http://HOST:PORT/proxy URL of a running viewer or rerun '
               '--serve-web.', AT_START, max_length=MAX_PATH_LENGTH),
+    Parameter('view.recording_id', STRING, '', 'Rerun recording id of the live view, so that '
+              'other programs (ball_world_view_tracks) draw into the same recording; empty: '
+              "derived from the parameters, as the .rrd's.", AT_START, max_length=256),
     Parameter('rerun.velocities', BOOL, False, 'Rerun: draw velocity arrows (costly for large '
               'worlds).', AT_START),
     Parameter('rerun.trail_seconds', DOUBLE, 0.0, 'Rerun: draw each path over this many '

@@ -10,17 +10,21 @@ Layout of the recording (application id 'ball_world'):
   step of a segment and again whenever the balls (their names, in pose order) change, so a
   step costs one float32 array. No labels: Rerun draws a point's label just below the point
   itself, over the lower half of a ball, and has no label offset.
-- `arena/labels` (Points2D, up to LABEL_LIMIT balls): each ball's name, at the bottom of the
-  ball (below it in the view, +y up), so the label is drawn under the ball. Names and
-  colours are logged when the balls change, like the radii; the points move with the balls
-  (a second small float32 array per step). Beyond LABEL_LIMIT balls nothing is logged here.
-  A live view without velocities gets them in `arena/balls` instead, in the frame's row, as
-  Arrows2D of length 0 at the same points (see _Feed._log_balls).
+- `arena/labels` (Points2D, up to LABEL_LIMIT balls; beyond, the agents only): the names
+  shown at each logged step, each below, above, right or left of its ball where it collides
+  with no other name and no other ball, or dropped (rerun_labels): points, names and colours
+  per step. A live view without velocities gets them in `arena/balls` instead, in the
+  frame's row, as Arrows2D of length 0 at the same points (see _Feed._log_balls).
+- `arena/clock` (Points2D): one line of text above the scene, the simulated time and the
+  real-time factor (every frame of a view, every FILE_CLOCK_SECONDS of a file).
+- `arena/scans/<agent>` (LineStrips2D, Points2D): each scan as a fan of rays from its robot
+  and its hit points (rerun_scans): a file every scan, a view the latest at each frame.
 - `arena/walls` (LineStrips2D), once per segment at its first step: not static in a file,
   because a reset may change the walls and static data would rewrite the earlier segments.
 - `arena/map` (a map's cells as a SegmentationImage under its origin and scale, rerun_map),
   static, once: the map cannot change during a run.
-- `arena/impulses` (Arrows2D): each applied impulse for IMPULSE_SECONDS of simulated time,
+- `arena/impulses` (Arrows2D): each push (an applied impulse that is not an agent's own drive,
+  AppliedImpulse.drive) for IMPULSE_SECONDS of simulated time,
   in IMPULSE_COLOR (no ball has it; readable on the viewer's light and dark themes), at the
   point where it was applied, pointing along the velocity change. Its length is the
   velocity change times ARROW_SECONDS, kept between a floor (a tiny push is still seen) and
@@ -32,7 +36,7 @@ Layout of the recording (application id 'ball_world'):
   when that is the tail, where the ball was, under the ball's label too.
 - `arena/velocities` (Arrows2D, optional): each ball's velocity times VELOCITY_SECONDS.
 - `arena/trails` (LineStrips2D, optional): each ball's path over the last trail seconds.
-- `arena/agents` (Arrows2D): each agent's heading, labelled with its name (rerun_agents).
+- `arena/agents` (Arrows2D): each agent's heading (rerun_agents); its name is a label.
 - `arena/bumpers` (Arrows2D): each agent's bumper hit, along the impulse (rerun_agents).
 - `plots/energy_change` (Scalars): kinetic energy relative to step 0 of the segment, in
   percent, rounded to ENERGY_RESOLUTION: an exact simulation conserves energy to ~1e-15, and
@@ -48,6 +52,8 @@ Layout of the recording (application id 'ball_world'):
 - `plots/momentum` (Scalars x, y): total momentum. In a walled box every wall bounce changes
   it, so its plot is mostly noise to a reader: the blueprint keeps it in a tab behind the
   collisions.
+- `plots/energy_change/headroom`, `plots/collisions/headroom` (Scalars, invisible): values
+  just beyond the plots' data (Headroom), so the axis Rerun fits to the data holds it whole.
 
 Timelines: `sim_time`, the record's log time (simulation time plus the segment offset, so it
 never goes back across resets), and `step`, a step counter over the whole recording: the
@@ -85,10 +91,11 @@ import rerun.blueprint as rrb
 
 from ball_world.core.parameters import BY_NAME
 from ball_world.recording.rerun_agents import AGENTS, BUMPERS, BumperView, heading_arrows
+from ball_world.recording.rerun_labels import LabelPlacer
 from ball_world.recording.rerun_map import map_bounds, map_entities
 from ball_world.recording.rerun_outlet import new_stream, Outlet, OutletFailed, parse_view
 from ball_world.recording.rerun_scale import padded, ruler
-from ball_world.scans import hit_points
+from ball_world.recording.rerun_scans import scan_layers, SCANS, VIEW_MAX_POINTS
 from ball_world.step_record import PACKAGE_NAME
 
 APPLICATION_ID = PACKAGE_NAME
@@ -102,12 +109,14 @@ TRAILS = 'arena/trails'
 LABELS = 'arena/labels'
 SCALE = 'arena/scale'
 SCALE_LABELS = 'arena/scale/labels'
-#: Each agent's latest scan, as its hit points in the arena: arena/scans/<name>.
-SCANS = 'arena/scans'
-SCAN_COLOR = (0, 200, 255)
+#: The simulated time and the real-time factor, as a line of text above the scene.
+CLOCK = 'arena/clock'
 ENERGY = 'plots/energy_change'
 COLLISIONS = 'plots/collisions'
 MOMENTUM = 'plots/momentum'
+#: Invisible series that keep room above and below a plot's data (see Headroom).
+ENERGY_HEADROOM = 'plots/energy_change/headroom'
+COLLISIONS_HEADROOM = 'plots/collisions/headroom'
 REAL_TIME_FACTOR = 'plots/real_time_factor'
 
 SIM_TIME = 'sim_time'
@@ -116,13 +125,17 @@ STEP = 'step'
 #: Labels are logged up to this many balls; beyond, they only clutter the view and would
 #: cost a second positions array per step.
 LABEL_LIMIT = 30
-#: A ball's label point lies this fraction of its radius below its bottom edge: the viewer
-#: draws the label's top a few pixels below the point, so the name sits just under the ball.
-LABEL_GAP = 0.1
 #: A line of label text is about this fraction of the scene's larger side in the fitted view:
 #: an impulse's label below the tail of its arrow goes a line further down, under the label
 #: of the ball it pushed.
 LABEL_LINE_FRACTION = 0.03
+#: Slate grey, for the clock line: 3.8:1 on the label boxes of both themes, the most one colour
+#: can have on both (docs/view.md); bluer than the walls' grey, so screenshots tell them apart.
+CLOCK_COLOR = (108, 120, 138)
+#: Room above the scene for the clock line, as a fraction of the view's larger side.
+CLOCK_FRACTION = 0.05
+#: A file's clock line is logged every this many simulated seconds (a view's every frame).
+FILE_CLOCK_SECONDS = 0.1
 
 #: A file's buffered steps are sent once this many are pending, or this many positions.
 MAX_PENDING_STEPS = 64
@@ -168,6 +181,11 @@ IMPULSE_COLOR = (225, 0, 130)
 
 #: A velocity arrow is the velocity times this many seconds.
 VELOCITY_SECONDS = 0.25
+
+#: Room kept above and below a plot's data, as a fraction of its range (Headroom); the energy
+#: change's at least this many percent.
+HEADROOM = 0.08
+ENERGY_HEADROOM_MIN = 0.5
 
 #: The real-time factor is measured over this much wall time (plus the step just before).
 RTF_WINDOW = 1.0
@@ -248,7 +266,7 @@ def scene_bounds(world):
         reach = np.asarray(world.radii)[:, None]
         boxes.append(np.column_stack((world.positions - reach, world.positions + reach)))
     if getattr(world, 'occupancy_map', None) is not None:
-        boxes.append(np.array([map_bounds(world.occupancy_map)]))
+        boxes.append(np.array([known_bounds(world.occupancy_map)]))
     boxes = np.concatenate(boxes)
     if len(boxes) == 0:
         return (-1.0, -1.0, 1.0, 1.0)
@@ -256,6 +274,35 @@ def scene_bounds(world):
     xmax, ymax = boxes[:, 2:4].max(axis=0)
     margin = 0.03 * max(xmax - xmin, ymax - ymin, 1e-9)
     return (xmin - margin, ymin - margin, xmax + margin, ymax + margin)
+
+
+def known_bounds(occupancy_map):
+    """(xmin, ymin, xmax, ymax) of a map's known cells (free or occupied), m: the view fits
+    what was mapped, not the unknown the image holds around it (the TurtleBot3 sandbox is
+    4 m across in a 19 m image). The whole grid when nothing is known."""
+    known = np.asarray(occupancy_map.data) >= 0
+    rows, columns = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
+    if not len(rows):
+        return map_bounds(occupancy_map)
+    x, y = occupancy_map.origin
+    resolution = occupancy_map.resolution
+    return (x + columns[0] * resolution, y + rows[0] * resolution,
+            x + (columns[-1] + 1) * resolution, y + (rows[-1] + 1) * resolution)
+
+
+def clock_text(record, rtf):
+    """The clock line: simulated time, and the real-time factor where it is known."""
+    text = f'simulated time {record.stamp_ns * 1e-9:.1f} s'
+    if rtf is not None and math.isfinite(rtf):
+        text += f', real-time factor {rtf:.2f}'
+    return text
+
+
+def view_bounds(world):
+    """The arena view's bounds: the scene, room for the ruler's labels at the bottom and
+    the left (rerun_scale.padded), and a line for the clock at the top."""
+    xmin, ymin, xmax, ymax = padded(scene_bounds(world))
+    return (xmin, ymin, xmax, ymax + CLOCK_FRACTION * max(xmax - xmin, ymax - ymin))
 
 
 def expected_real_time_factor(parameters):
@@ -284,8 +331,9 @@ def blueprint(world, parameters=None, plot_seconds=None):
     the plots show only that much simulated time up to the time shown (a live view: what a
     viewer draws each frame stays bounded however long the run), else the whole run.
     """
-    # With room at the bottom and the left for the ruler's labels (rerun_scale).
-    xmin, ymin, xmax, ymax = (float(v) for v in padded(scene_bounds(world)))
+    # With room at the bottom and the left for the ruler's labels (rerun_scale), and at the
+    # top for the clock.
+    xmin, ymin, xmax, ymax = (float(v) for v in view_bounds(world))
     arena = rrb.Spatial2DView(
         origin='/', contents=f'/{ARENA}/**', name='arena (+y up)',
         visual_bounds=rrb.VisualBounds2D(x_range=[xmin, xmax], y_range=[-ymax, -ymin]))
@@ -338,6 +386,43 @@ def energy_legend(energy0):
     if energy0 <= 0.0:
         return 'kinetic energy [J] (0 J at step 0)'
     return f'change from {energy0:.6g} J at step 0'
+
+
+class Headroom:
+    """Values just beyond a plot's data, for an invisible series that keeps them in view.
+
+    Rerun's time series view fits its y axis to the data's exact extremes, so a curve at
+    its highest (the collisions' total, always) ran along the plot's top edge, half cut off.
+    Invisible series a little above and below the data (HEADROOM of its range, the energy
+    change at least +-ENERGY_HEADROOM_MIN %) make the fitted axis hold it whole. Over the
+    last `window` s of log time (a view's plots show that much), else the whole segment.
+    """
+
+    def __init__(self, window=None):
+        self.window_ns = None if window is None else round(window * 1e9)
+        self.rows = deque()  # (log ns, energy, collisions)
+        self.extremes = None  # without a window: (energy low, high, collisions high)
+
+    def clear(self):
+        self.rows.clear()
+        self.extremes = None
+
+    def add(self, time_ns, energy, collisions):
+        """(energy above, energy below, collisions above) for a new row."""
+        if self.window_ns is None:
+            low, high, most = self.extremes or (energy, energy, collisions)
+            self.extremes = low, high, most = min(low, energy), max(high, energy), max(
+                most, collisions)
+        else:
+            rows = self.rows
+            rows.append((time_ns, energy, collisions))
+            while rows[0][0] < time_ns - self.window_ns:
+                rows.popleft()
+            energies = [row[1] for row in rows]
+            low, high = min(energies), max(energies)
+            most = max(row[2] for row in rows)
+        room = max(HEADROOM * (high - low), ENERGY_HEADROOM_MIN)
+        return high + room, low - room, most * (1.0 + HEADROOM) + 1.0
 
 
 class RealTimeFactor:
@@ -429,6 +514,9 @@ class _Segment:
         # Arrow heads stay this far inside the scene's bounds (the view's edges).
         inset = ARROW_INSET_FRACTION * self.span
         self.inside = (xmin + inset, ymin + inset, xmax - inset, ymax - inset)
+        self.view = view_bounds(world)
+        # The clock line hangs below this point, centred, in the room above the scene.
+        self.clock_point = (0.5 * (xmin + xmax), self.view[3])
 
 
 class RerunSink:
@@ -444,11 +532,14 @@ class RerunSink:
     when one destination fails while another goes on (when the last one fails, the sink
     raises instead, so its owner drops it and says so). file_process: the file is written
     by a child process (rerun_process), which keeps the SDK's per-chunk index of a long
-    recording out of this process's memory.
+    recording out of this process's memory. view_recording_id: the view's recording id
+    (other programs may draw into the same recording); None: derived from the parameters,
+    the file's.
     """
 
     def __init__(self, path=None, every=1, view=None, velocities=False, trail_seconds=0.0,
-                 clock=None, report=None, view_fps=VIEW_FPS, file_process=False):
+                 clock=None, report=None, view_fps=VIEW_FPS, file_process=False,
+                 view_recording_id=None):
         if isinstance(every, bool) or not isinstance(every, int) or every < 1:
             raise ValueError(f'every must be a whole number >= 1, got {every!r}')
         if not (isinstance(trail_seconds, (int, float)) and 0.0 <= trail_seconds < math.inf):
@@ -475,6 +566,7 @@ class RerunSink:
         if view is not None:
             self._feeds.append(_Feed(lambda stream, plan: Outlet.view(view, stream, plan),
                                      frame_period=1.0 / view_fps,
+                                     recording_id=view_recording_id,
                                      frame_clock=clock or time.monotonic, **layers))
         self._closed = False
 
@@ -540,8 +632,10 @@ class _Feed:
     """
 
     def __init__(self, open_outlet, every=1, velocities=False, trail_seconds=0.0, clock=None,
-                 frame_period=None, frame_clock=None, stream_factory=new_stream):
+                 frame_period=None, frame_clock=None, stream_factory=new_stream,
+                 recording_id=None):
         self._open_outlet = open_outlet
+        self._recording_id = recording_id  # None: derived from the run's parameters
         self._new_stream = stream_factory
         self.every = every
         self.velocities = velocities
@@ -563,10 +657,19 @@ class _Feed:
         self._totals = np.zeros(2, dtype=np.int64)  # collisions since step 0 of the segment
         self._energy0 = None
         self._shown_names = None
-        self._label_drop = None  # (n, 2) float32 from each ball to its label, if shown
+        self._labels = None  # the segment's LabelPlacer
+        self._label_colors = None  # (n, 3) uint8: each ball's colour, for its label
+        self._labelled = False  # every ball is named (else only the agents)
+        self._labels_shown = False  # names are on screen (their last set was not empty)
         # A live view's labels are arrows of length 0 in the balls' row, unless the row's
         # arrows are the velocities (_log_balls).
         self._labels_in_row = self.live and not velocities
+        self._scans = {}  # agent name -> (scan, x, y, yaw): a view's scans for the next frame
+        self._clock_due = None  # a file's next clock line, log ns
+        self._clock_rows = []  # a file's clock lines not sent yet: (step, log ns, text)
+        self._headroom = Headroom(VIEW_PLOT_SECONDS if self.live else None)
+        self._headroom_rows = []  # (step, log ns, energy above, below, collisions above)
+        self._clock_looks = False  # a file's clock looks (colour, no radius) are logged
         self._impulses = []  # (expires log ns, origin, vector, label, label point) on screen
         #                      or due
         self._impulses_changed = False
@@ -583,6 +686,10 @@ class _Feed:
             self._finish_segment()
             self._segment_base = self._last_global + 1
         self._segment = _Segment(world)
+        self._labels = LabelPlacer(self._segment.view)
+        self._scans = {}
+        self._clock_due = None
+        self._headroom.clear()
         self._totals[:] = 0
         self._energy0 = None
         self._shown_names = None
@@ -615,9 +722,11 @@ class _Feed:
         per segment like the walls: a reset may change the scene."""
         ticks, places, texts = ruler(scene_bounds(world))
         self._emit('log', SCALE, rr.LineStrips2D(
-            ticks, radii=rr.Radius.ui_points(1.0), colors=WALL_COLOR, draw_order=20.0))
+            ticks, radii=rr.Radius.ui_points(1.0), colors=WALL_COLOR, draw_order=20.0),
+            static=self.live)  # static for a view: a late page still has it
         self._emit('log', SCALE_LABELS, rr.Points2D(
-            places, radii=0.0, labels=texts, show_labels=True, colors=WALL_COLOR))
+            places, radii=0.0, labels=texts, show_labels=True, colors=WALL_COLOR),
+            static=self.live)
 
     def write_step(self, record):
         """Log the step if it is one to log; a file sends its buffer when it is full."""
@@ -635,19 +744,22 @@ class _Feed:
             # Step 0 is the initial state, written when the world is built, not a step: the
             # pause before the first step (the node starting up) is no slowness.
             rtf = self._rtf.add(record.log_time_ns) if record.step else None
-        if record.impulses:
+        pushed = any(not getattr(impulse, 'drive', False) for impulse in record.impulses)
+        if pushed:
             self._add_impulses(record)
+        agents = getattr(record, 'agents', None)
+        if agents is not None and agents.scans:
+            self._take_scans(record, agents)
         if self.live:
             logged = self._frame_due(record)
         else:
-            logged = record.step % self.every == 0 or record.impulses or record.edits
+            logged = record.step % self.every == 0 or pushed or record.edits
         if logged:
             self._log(record, rtf)
         else:
             self._unlogged = (record, rtf)
-        agents = getattr(record, 'agents', None)
-        if agents is not None and agents.scans:
-            self._log_scans(record, agents, self._segment_base + record.step)
+        if self._scans and not self.live:
+            self._log_scans(self._segment_base + record.step, record.log_time_ns)
         bumpers = self._bumpers.update(record)
         if bumpers is not None:
             self._set_time(self._segment_base + record.step, record.log_time_ns)
@@ -679,7 +791,7 @@ class _Feed:
         self._opened = True
         plan = None if world is None else blueprint(
             world, parameters, VIEW_PLOT_SECONDS if self.live else None)
-        stream = self._new_stream(APPLICATION_ID, recording_id(parameters),
+        stream = self._new_stream(APPLICATION_ID, self._recording_id or recording_id(parameters),
                                   VIEW_FLUSH_SECONDS if self.live else None)
         self.outlet = self._open_outlet(stream, plan)
         self._emit('log', ARENA, rr.Transform3D(
@@ -692,6 +804,10 @@ class _Feed:
             names='real-time factor', colors=(180, 120, 230)), static=True)
         self._emit('log', MOMENTUM, rr.SeriesLines(
             names=['x', 'y'], colors=[(230, 80, 80), (80, 200, 90)]), static=True)
+        for entity, count in ((ENERGY_HEADROOM, 2), (COLLISIONS_HEADROOM, 1)):
+            self._emit('log', entity, rr.SeriesLines(
+                names=[' '] * count, colors=[(0, 0, 0, 0)] * count, widths=[0.0] * count),
+                static=True)
 
     def _emit(self, name, *args, **kwargs):
         """Queue an SDK call on the destination (a failure surfaces at flush)."""
@@ -739,8 +855,14 @@ class _Feed:
         if self.live:
             self._log_frame(record, rtf, step)
             self._show_impulses(step, record.log_time_ns)
+            if self._scans:
+                self._log_scans(step, record.log_time_ns)
             return
         self._buffer(record, rtf, step)
+        if self._clock_due is None or record.log_time_ns >= self._clock_due:
+            # Sent with the buffered columns (a writer gathers them into few chunks).
+            self._clock_due = record.log_time_ns + round(FILE_CLOCK_SECONDS * 1e9)
+            self._clock_rows.append((step, record.log_time_ns, clock_text(record, rtf)))
         self._show_impulses(step, record.log_time_ns)
         if self.trail_seconds:
             self._log_trails(record, names, step)
@@ -755,18 +877,45 @@ class _Feed:
         self._buffer_plots(
             record, rtf, step, positions,
             np.asarray(record.velocities, dtype=np.float32) if self.velocities else None,
-            self._label_points(positions))
+            self._label_layer(record))
 
-    def _label_points(self, positions):
-        """Where the balls' labels go (under each ball), or None when none are shown."""
-        return None if self._label_drop is None else positions - self._label_drop
+    def _label_layer(self, record):
+        """The names shown at this step: (points (k, 2) float32, texts, colours (k, 3)), placed
+        so that none collides with another or lies on a ball (rerun_labels); None when no
+        ball is named (more than LABEL_LIMIT balls and no agents)."""
+        agents = getattr(record, 'agents', None)
+        first = () if agents is None else agents.indices
+        if not self._labelled and not len(first):
+            if not self._labels_shown:
+                return None
+            self._labels_shown = False  # an empty set hides the names shown last
+            return (np.zeros((0, 2), dtype=np.float32), [], np.zeros((0, 3), dtype=np.uint8))
+        self._labels_shown = True
+        names = self._shown_names
+        radii = getattr(record, 'radii', None)
+        if radii is None:
+            segment = self._segment
+            radii = [segment.radius.get(name, segment.smallest) for name in names]
+        if self._labelled:
+            kept, points = self._labels.place(record.positions, radii, names, first)
+        else:  # only the agents
+            rows = np.asarray(first, dtype=np.int64)
+            kept, points = self._labels.place(np.asarray(record.positions)[rows],
+                                              np.asarray(radii)[rows],
+                                              [names[i] for i in rows])
+            kept = rows[kept].tolist()
+        return (points.astype(np.float32), [names[i] for i in kept],
+                self._label_colors[kept].reshape(-1, 3))
 
     def _buffer_plots(self, record, rtf, step, positions=None, velocities=None, labels=None):
         """The step's row (with its balls for a file; a view sends those in frames), added in
-        one operation (_Pending)."""
+        one operation (_Pending), and the plots' headroom."""
+        energy = energy_change(record.kinetic_energy, self._energy0)
+        self._headroom_rows.append((step, record.log_time_ns, *self._headroom.add(
+            record.log_time_ns, energy, float(self._totals.max(initial=0)))))
         self._pending.add((
             step, record.log_time_ns, positions, velocities, labels,
-            energy_change(record.kinetic_energy, self._energy0), self._totals.copy(),
+            energy, self._totals.copy(),
             np.asarray(record.momentum, dtype=np.float64),
             rtf if rtf is not None and math.isfinite(rtf) else None))
 
@@ -788,12 +937,18 @@ class _Feed:
             frame.append(rr.Arrows2D.from_fields(
                 origins=positions, vectors=np.asarray(record.velocities, dtype=np.float32)
                 * np.float32(VELOCITY_SECONDS)))
-        labels = self._label_points(positions)
-        if labels is not None and self._labels_in_row:
-            frame.append(rr.Arrows2D.from_fields(origins=labels))
+        labels = self._label_layer(record)
+        if labels is not None:
+            points, texts, colors = labels
+            if self._labels_in_row:
+                frame.append(rr.Arrows2D.from_fields(
+                    origins=points, vectors=np.zeros_like(points), labels=texts,
+                    colors=colors))
+            else:
+                self._emit('log', LABELS, rr.Points2D.from_fields(
+                    positions=points, labels=texts, colors=colors))
         self._emit('log', BALLS, *frame)
-        if labels is not None and not self._labels_in_row:
-            self._emit('log', LABELS, rr.Points2D.from_fields(positions=labels))
+        self._log_clock(record, rtf)
         self._buffer_plots(record, rtf, step)
         now = self._frame_clock()
         if self._plots_sent is None or now - self._plots_sent >= VIEW_PLOT_PERIOD:
@@ -801,13 +956,14 @@ class _Feed:
             self._send()
 
     def _log_balls(self, record, names, step):
-        """Radii, colours and labels of the balls as they are now, in pose order.
+        """Radii and colours of the balls as they are now, in pose order, and how their
+        labels look.
 
-        The labels go under the balls, LABEL_GAP radii below each, up to LABEL_LIMIT balls,
-        placed by each step's positions (_label_points). In a file they are an entity of
-        their own (LABELS). A live view without velocities gets them in the balls' own row,
-        as arrows of length 0 (drawn as nothing but their labels), so no viewer draws names
-        of one moment under balls of another, and a frame stays one message.
+        The labels themselves (which names, where) are placed at every logged step
+        (_label_layer). In a file they are an entity of their own (LABELS). A live view
+        without velocities gets them in the balls' own row, as arrows of length 0 (drawn as
+        nothing but their labels), so no viewer draws names of one moment under balls of
+        another, and a frame stays one message.
         """
         segment = self._segment
         radii = getattr(record, 'radii', None)
@@ -818,45 +974,73 @@ class _Feed:
         self._set_time(step, record.log_time_ns)
         colors = np.array([ball_color(name) for name in names], dtype=np.uint8).reshape(-1, 3)
         radii = np.asarray(radii, dtype=np.float32).reshape(-1)
-        labelled = len(names) <= LABEL_LIMIT
+        self._label_colors = colors
+        self._labelled = len(names) <= LABEL_LIMIT
         looks = [rr.Points2D.from_fields(radii=radii, colors=colors, draw_order=30.0)]
         if self.live and self.trail_seconds:
             looks.append(rr.LineStrips2D.from_fields(
                 colors=colors, radii=rr.Radius.ui_points(1.0), draw_order=10.0))
         if self.live and self.velocities:
             looks.append(rr.Arrows2D.from_fields(colors=colors, draw_order=35.0))
-        if self._labels_in_row:
-            looks.append(rr.Arrows2D.from_fields(
-                vectors=np.zeros((len(names), 2), dtype=np.float32), radii=0.0, colors=colors,
-                labels=list(names), show_labels=True) if labelled else rr.Arrows2D.cleared())
+        named = self._labelled or getattr(record, 'agents', None) is not None
+        if self._labels_in_row and named:
+            looks.append(rr.Arrows2D.from_fields(radii=0.0, show_labels=True))
         self._emit('log', BALLS, *looks, static=self.live)
-        if not self._labels_in_row:
-            self._log_labels(names, colors, labelled)
-        if labelled:
-            self._label_drop = np.zeros((len(names), 2), dtype=np.float32)
-            self._label_drop[:, 1] = radii * np.float32(1.0 + LABEL_GAP)
-        else:
-            self._label_drop = None
+        if not self._labels_in_row and named:
+            self._emit('log', LABELS, rr.Points2D.from_fields(radii=0.0, show_labels=True),
+                       static=self.live)
 
-    def _log_labels(self, names, colors, labelled):
-        """The labels' names and colours (LABELS); when there are too many balls, no more
-        label points (an empty set hides the last ones)."""
-        if labelled:
-            self._emit('log', LABELS, rr.Points2D.from_fields(
-                radii=0.0, colors=colors, labels=list(names), show_labels=True),
-                static=self.live)
-        elif self._label_drop is not None:
-            self._emit('log', LABELS, rr.Points2D.from_fields(
-                positions=np.zeros((0, 2), dtype=np.float32)))
+    def _log_clock(self, record, rtf):
+        """A view's clock line: the simulated time and the real-time factor, as a line of
+        text above the scene (the real-time factor also has its plot; this says it at a
+        glance)."""
+        self._emit('log', CLOCK, rr.Points2D(
+            [self._segment.clock_point], radii=0.0, labels=[clock_text(record, rtf)],
+            show_labels=True, colors=CLOCK_COLOR))
+
+    def _send_headroom(self):
+        rows, self._headroom_rows = self._headroom_rows, []
+        if not rows:
+            return
+        steps, times, above, below, collisions = zip(*rows)
+        index = self._index(steps, times)
+        self._emit('send_columns', ENERGY_HEADROOM, index, rr.Scalars.columns(
+            scalars=np.column_stack((above, below)).astype(np.float64)))
+        self._emit('send_columns', COLLISIONS_HEADROOM, index, rr.Scalars.columns(
+            scalars=np.asarray(collisions, dtype=np.float64)))
+
+    def _send_clock(self):
+        """A file's clock lines since the last send, as columns; its looks once."""
+        rows, self._clock_rows = self._clock_rows, []
+        if not rows:
+            return
+        steps, times, texts = zip(*rows)
+        if not self._clock_looks:
+            self._clock_looks = True
+            self._set_time(steps[0], times[0])
+            self._emit('log', CLOCK, rr.Points2D.from_fields(
+                radii=0.0, show_labels=True, colors=CLOCK_COLOR))
+        point = np.asarray([self._segment.clock_point], dtype=np.float32)
+        self._emit('send_columns', CLOCK, self._index(steps, times), [
+            rr.ComponentColumn(rr.Points2D.descriptor_positions(),
+                               rr.components.Position2DBatch(np.repeat(point, len(rows), 0))),
+            rr.ComponentColumn(rr.Points2D.descriptor_labels(),
+                               rr.components.TextBatch(list(texts)))])
 
     def _add_impulses(self, record):
-        """Put the step's impulses on screen for IMPULSE_SECONDS from the step on."""
+        """Put the step's pushes on screen for IMPULSE_SECONDS from the step on.
+
+        An agent's drive (its cmd_vel, turned into an impulse every step it accelerates) is
+        not a push: its heading arrow and its trail show what it does.
+        """
         names = names_of(record)
         masses = getattr(record, 'masses', None)
         radii = getattr(record, 'radii', None)
         index_of = None
         now = record.log_time_ns
         for impulse in record.impulses:
+            if getattr(impulse, 'drive', False):
+                continue
             ball = impulse.ball  # its index when it was applied
             if record.edits:  # a later edit of the step may have moved or deleted the ball
                 if index_of is None:
@@ -884,7 +1068,7 @@ class _Feed:
         tip = (origin[0] + vector[0], origin[1] + vector[1])
         if tip[1] < origin[1]:
             return (tip[0], tip[1] - gap)
-        below_ball = radius * (1.0 + LABEL_GAP) + LABEL_LINE_FRACTION * self._segment.span
+        below_ball = radius + 1.5 * LABEL_LINE_FRACTION * self._segment.span
         return (origin[0], origin[1] - max(gap, below_ball))
 
     def _show_impulses(self, step, now):
@@ -907,17 +1091,24 @@ class _Feed:
             colors=IMPULSE_COLOR)
         self._emit('log', IMPULSES, arrows, labels)
 
-    def _log_scans(self, record, agents, step):
-        """Each scan's hit points (finite ranges, noise included) where they fall in the arena."""
-        self._set_time(step, record.log_time_ns)
+    def _take_scans(self, record, agents):
+        """Keep the step's scans, with where each was taken from, until they are logged."""
         rows = dict(zip(agents.names, zip(agents.indices, agents.yaws)))
         for scan in agents.scans:
             index, yaw = rows[scan.name]
             x, y = record.positions[index]
-            points = hit_points(scan, float(x), float(y), float(yaw))
-            self._emit('log', f'{SCANS}/{scan.name}', rr.Points2D(
-                points.astype(np.float32), radii=rr.Radius.ui_points(2.0), colors=SCAN_COLOR,
-                draw_order=35.0))
+            self._scans[scan.name] = (scan, float(x), float(y), float(yaw))
+
+    def _log_scans(self, step, log_time_ns):
+        """Each kept scan as a fan of rays from its robot and its hit points (rerun_scans).
+
+        A file gets every scan at its step; a view the latest of each agent at its frames.
+        """
+        self._set_time(step, log_time_ns)
+        for name, (scan, x, y, yaw) in self._scans.items():
+            self._emit('log', f'{SCANS}/{name}', *scan_layers(
+                scan, x, y, yaw, VIEW_MAX_POINTS if self.live else None))
+        self._scans = {}
 
     def _arrow(self, origin, dvx, dvy):
         """The velocity change times ARROW_SECONDS, its length clamped to the scene's size,
@@ -953,9 +1144,12 @@ class _Feed:
             .reshape(-1, 3), radii=rr.Radius.ui_points(1.0), draw_order=10.0))
 
     def _send(self):
-        """Send the buffered steps as one columnar chunk per entity."""
+        """Send the buffered steps as one columnar chunk per entity (the balls first: a
+        writer keeps that order, so a file cut short holds the balls of its last batch)."""
         pending = self._pending
         if not len(pending):
+            self._send_clock()
+            self._send_headroom()
             return
         steps, times, positions, velocities, labels, energy, collisions, momentum, rtf = \
             pending.columns()
@@ -973,12 +1167,20 @@ class _Feed:
                                    rr.components.Position2DBatch(positions), lengths=sizes),
                 rr.ComponentColumn(rr.Arrows2D.descriptor_vectors(),
                                    rr.components.Vector2DBatch(vectors), lengths=sizes)])
-        label_steps, label_times, label_points = labels
-        if label_points:
+        label_steps, label_times, label_layers = labels
+        if label_layers:
+            points, texts, colors = zip(*label_layers)
+            sizes = [len(p) for p in points]
             self._emit('send_columns', LABELS, self._index(label_steps, label_times), [
                 rr.ComponentColumn(rr.Points2D.descriptor_positions(),
-                                   rr.components.Position2DBatch(np.concatenate(label_points)),
-                                   lengths=[len(p) for p in label_points])])
+                                   rr.components.Position2DBatch(np.concatenate(points)),
+                                   lengths=sizes),
+                rr.ComponentColumn(rr.Points2D.descriptor_labels(),
+                                   rr.components.TextBatch([t for ts in texts for t in ts]),
+                                   lengths=sizes),
+                rr.ComponentColumn(rr.Points2D.descriptor_colors(),
+                                   rr.components.ColorBatch(np.concatenate(colors)),
+                                   lengths=sizes)])
         self._emit('send_columns', ENERGY, index, rr.Scalars.columns(
             scalars=np.array(energy, dtype=np.float64)))
         self._emit('send_columns', COLLISIONS, index, rr.Scalars.columns(
@@ -989,6 +1191,8 @@ class _Feed:
         if rtf_values:
             self._emit('send_columns', REAL_TIME_FACTOR, self._index(rtf_steps, rtf_times),
                        rr.Scalars.columns(scalars=np.array(rtf_values, dtype=np.float64)))
+        self._send_clock()
+        self._send_headroom()
         pending.clear()
 
     @staticmethod

@@ -140,6 +140,7 @@ def open_sinks(values):
                 rerun_file.path if rerun_file else None, every=values['record.rerun_every'],
                 view=values['view.rerun'] or None, velocities=values['rerun.velocities'],
                 trail_seconds=values['rerun.trail_seconds'], clock=time.monotonic,
+                view_recording_id=values['view.recording_id'] or None,
                 report=rclpy.logging.get_logger('ball_world').error,
                 file_process=True)  # the SDK's index of a long file grows: not in the node
             sinks.append(ClaimedSink(sink, rerun_file) if rerun_file else sink)
@@ -694,7 +695,10 @@ class BallWorld(Node):
         detail = ', '.join(f'{k} {v}' for k, v in sorted(simulation.rejected.items()))
         self.get_logger().info(
             f'step {simulation.step_index}: {rate:.1f} steps/s, real-time factor {rtf:.3f}; '
-            f'impulses applied {simulation.applied}, rejected {rejected}'
+            f'impulses applied {simulation.applied}'
+            + (f" (and {simulation.drive_applied} by the agents' drives)"
+               if len(simulation.agents) or simulation.drive_applied else '')
+            + f', rejected {rejected}'
             + (f' ({detail})' if detail else '')
             + f', discarded by reset {simulation.discarded}'
             + (' [paused]' if self.paused else ''))

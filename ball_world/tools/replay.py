@@ -21,6 +21,7 @@ instead: then the recorded /clock is left out, so there is one clock.
 """
 import argparse
 import importlib
+from pathlib import Path
 import sys
 import time
 
@@ -38,6 +39,8 @@ from ball_world.recording.recording_set import open_recording
 from ball_world.ros.stopping import stopped_by_signal
 
 DEFAULT_DEPTH = 10
+#: Recordings larger than this (bytes) take a while to index: the replay says it is reading.
+LARGE_FILE = 64 << 20
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
 #: Seconds to wait at the end for reliable subscribers to acknowledge the last messages.
 ACK_TIMEOUT = 2.0
@@ -225,9 +228,36 @@ def played_topics(args, recording):
     return [topic for topic in recording.topics if not (args.clock and topic == CLOCK_TOPIC)]
 
 
+def _size(path):
+    """Bytes of a recording (a file, or a bag directory's files); 0 when unknown."""
+    try:
+        path = Path(path)
+        files = [path] if path.is_file() else list(path.iterdir()) if path.is_dir() else []
+        return sum(f.stat().st_size for f in files if f.is_file())
+    except OSError:
+        return 0
+
+
+def say(text):
+    """A line on stderr, at once: what the replay is doing (stdout stays free)."""
+    print(f'ball_world_replay: {text}', file=sys.stderr, flush=True)
+
+
+def plan_line(args, recording, topics):
+    """What is about to be played: messages, topics, recorded and wall-clock length."""
+    count = sum(recording.topics[topic].message_count for topic in topics)
+    start = (recording.start_ns or 0) + round(args.start_offset * 1e9)
+    length = max(0.0, ((recording.end_ns or 0) - start) * 1e-9)
+    pace = f', {length / args.rate:.1f} s at --rate {args.rate:g}' if args.rate != 1.0 else ''
+    return (f'playing {count:,} messages on {len(topics)} topics ({", ".join(topics)}): '
+            f'{length:.1f} s of recording{pace}; Ctrl-C stops')
+
+
 def main(argv=None):
     argv = list(sys.argv[1:] if argv is None else argv)
     args = argument_parser().parse_args(remove_ros_args(['ball_world_replay', *argv])[1:])
+    if _size(args.file) > LARGE_FILE:
+        say(f'reading {args.file} ({_size(args.file) / 2**20:,.0f} MiB)')
     try:
         recording = open_recording(args.file)
     except RecordingError as error:
@@ -237,6 +267,8 @@ def main(argv=None):
     if problem:
         print(f'ball_world_replay: {problem}', file=sys.stderr)
         return 2
+    topics = played_topics(args, recording)
+    say(plan_line(args, recording, topics))
     rclpy.init(args=['ball_world_replay', *argv])
     node = executor = None
     finished = False
@@ -245,18 +277,25 @@ def main(argv=None):
             node = rclpy.create_node('ball_world_replay')
             executor = SingleThreadedExecutor()
             executor.add_node(node)
-            player = Player(node, executor, recording, played_topics(args, recording),
+            player = Player(node, executor, recording, topics,
                             rate=args.rate, start_offset=args.start_offset, clock=args.clock,
                             prefix=args.remap_prefix.rstrip('/'))
             if args.wait_for_subscribers:
+                say('waiting for a subscriber on every topic (--wait-for-subscribers)')
                 player.wait_for_subscribers()
+            if args.delay:
+                say(f'starting in {args.delay:g} s (--delay)')
             player.sleep_until(time.monotonic() + args.delay)
+            started = time.monotonic()
+            played = 0
             while True:
                 count = player.play_once()
+                played += count
                 if not args.loop or count == 0:
                     break
             player.wait_for_acks()
             finished = True
+            say(f'played {played:,} messages in {time.monotonic() - started:.1f} s')
     except RecordingError as error:
         print(f'ball_world_replay: {args.file}: {error}', file=sys.stderr)
         return 2

@@ -1,4 +1,4 @@
-"""ball_world_teleop: push the balls of a running ball_world from the keyboard.
+"""ball_world_teleop: push the balls or drive the robots of a running ball_world by keyboard.
 
 Like turtle_teleop_key, it reads single key presses from the terminal it runs in. It learns
 which balls exist from the world's `balls` topic, sends `impulse` messages addressed to a
@@ -41,10 +41,10 @@ REDRAW_PERIOD = 0.1
 CALLBACKS_PER_LOOK = 4
 
 KEYS = """\
-Push a ball of ball_world with the arrow keys.
+Push a ball, or drive a robot (an agent), of ball_world with the arrow keys.
 ---------------------------
-arrow keys    push the selected ball along +y, -y, -x, +x
-              (an agent: up/down drive forward/back, left/right turn, via cmd_vel)
+arrow keys    a ball: push it along +y, -y, -x, +x
+              a robot: up/down drive it forward/back, left/right turn it (cmd_vel)
 0-9           select the 1st to 10th ball;  Tab / Shift-Tab: next / previous ball
 + / -         double / halve the impulse
 space         pause / resume;  s or .: one step while paused
@@ -264,20 +264,27 @@ class Teleop(Node):
             # entity_names (latched) can arrive before the balls they name
             return f'ball     {name}: waiting for {self.balls_topic}'
         x, y = self.positions[position]
-        agent = ', an agent: arrows drive it' if self.drive.ready(name) else ''
+        agent = ', a robot: arrows drive it' if self.drive.ready(name) else ''
         return (f'ball     {name} ({position + 1} of {len(self.selection.names)}) '
                 f'at ({x:.2f}, {y:.2f}){agent}')
 
     def lines(self):
-        self.drive.watch(self.selection.name)
-        return [self.world_line(), self.ball_line(),
-                f'impulse  {self.impulse:.4g} N s per key', f'status   {self.status}']
+        name = self.selection.name
+        self.drive.watch(name)
+        if name and self.drive.is_agent(name):
+            keys = (f'keys     drive {name}: up/down forward/back, left/right turn '
+                    f'({self.drive.speed:.3g} m/s, {self.drive.turn:.3g} rad/s per key)')
+        else:
+            keys = (f'keys     push {name or "the selected ball"}: arrows along +y, -y, -x, +x '
+                    f'({self.impulse:.4g} N s per key)')
+        return [self.world_line(), self.ball_line(), keys, f'status   {self.status}']
 
 
 def _parser():
     parser = argparse.ArgumentParser(
         prog=PROG, formatter_class=argparse.RawDescriptionHelpFormatter,
-        description='Push the balls of a running ball_world from the keyboard (in a terminal).',
+        description='Push the balls of a running ball_world, or drive its robots, from the '
+                    'keyboard (in a terminal).',
         epilog=f"""keys:
 {KEYS.split(chr(10), 2)[2]}
 

@@ -1,0 +1,51 @@
+"""How Rerun draws an agent's lidar scan: a fan of rays from the robot, and the points they hit.
+
+What RViz's LaserScan display shows as points alone is here also the beams themselves, thin
+and translucent, from the scanner (the agent's centre) to each return: at a glance the fan
+says which robot sees what, and where it sees nothing (a beam with no return, +inf, draws
+no ray). The hit points are drawn over the balls, the rays under them.
+"""
+import numpy as np
+import rerun as rr
+
+from ball_world.scans import hit_points
+
+#: Entity path of each agent's scan: arena/scans/<name>.
+SCANS = 'arena/scans'
+#: Cyan: no ball has it; the hit points keep 3:1 on both viewer themes, the rays are faint.
+SCAN_COLOR = (0, 160, 220)
+RAY_ALPHA = 90
+#: At most this many rays per scan (every k-th beam; every hit point is drawn): 360 rays of
+#: two robots filled the arena, and cost a software-rendered web viewer its frame rate.
+MAX_RAYS = 72
+#: A live view's hit points per scan at most: a view is sent what it can show (two robots'
+#: full scans were 80% of what a view got, ten times a second).
+VIEW_MAX_POINTS = 180
+#: Under the balls (30) and the trails (10); the hit points over the balls.
+RAY_ORDER = 5.0
+HIT_ORDER = 35.0
+
+
+def scan_layers(scan, x, y, yaw, max_points=None):
+    """rr archetypes of one scan taken at (x, y) facing yaw: the rays and the hit points
+    (every return, or of every k-th beam so that at most max_points are drawn)."""
+    every = 1 if max_points is None else max(1, -(-len(scan.ranges) // max_points))
+    hits = hit_points(_every(scan, every), x, y, yaw).astype(np.float32)
+    every = max(1, -(-len(scan.ranges) // MAX_RAYS))
+    ends = hit_points(_every(scan, every), x, y, yaw).astype(np.float32)
+    rays = np.empty((len(ends), 2, 2), dtype=np.float32)
+    rays[:, 0] = (x, y)
+    rays[:, 1] = ends
+    return [rr.LineStrips2D(rays, radii=rr.Radius.ui_points(0.75),
+                            colors=(*SCAN_COLOR, RAY_ALPHA), draw_order=RAY_ORDER),
+            rr.Points2D(hits, radii=rr.Radius.ui_points(2.0), colors=SCAN_COLOR,
+                        draw_order=HIT_ORDER)]
+
+
+def _every(scan, every):
+    """The scan with only every `every`-th beam (from the first): same fan, coarser."""
+    if every == 1:
+        return scan
+    fan = scan.fan._replace(angle_increment=scan.fan.angle_increment * every,
+                            samples=len(scan.ranges[::every]))
+    return scan._replace(ranges=scan.ranges[::every], fan=fan)
