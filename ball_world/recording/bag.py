@@ -12,12 +12,21 @@ repaired): it is rewritten, through a temporary file and a rename, each time a f
 finished and when the recording closes, so a crash leaves the last good one.
 
 The directory is claimed like a file (recording.files): an existing one is refused unless
-overwrite (then its bag files are removed, nothing else), and it stays locked (flock on the
-directory) while it is recorded, so a second recorder is refused at once.
+overwrite (then its bag files are removed, nothing else), a symlink is refused whatever it
+points to, and it stays locked (flock on the directory) while it is recorded, so a second
+recorder is refused at once. Every file in it is made, replaced and removed relative to the
+directory's descriptor (recording.files.Folder): never through a symlink, never elsewhere.
+
+The recorder's files are named canonically, `<name>_<n>.mcap` with n written without
+leading zeros: a copy such as `run_000.mcap` is never taken for one of them (it is a stray
+file, which the tools name and leave alone).
+
+When the disk fills, the recorder still says so: it keeps RESERVE_FILE, a few blocks set
+aside, and writes the last metadata.yaml into them, with what stopped it in custom_data
+(STOPPED_KEY), so ball_world_info can tell a full disk from a killed recorder.
 """
 from dataclasses import dataclass
 import errno
-import fcntl
 import os
 import re
 import stat
@@ -25,13 +34,21 @@ from typing import Optional
 
 import yaml
 
-from ball_world.recording.files import FileRefused
+from ball_world.recording.files import FileRefused, Folder, split_path
 
 METADATA_FILE = 'metadata.yaml'
 #: rosbag2 Jazzy's metadata version.
 METADATA_VERSION = 9
 #: Largest metadata.yaml read back (a day of one-minute files lists about 1,500).
 MAX_METADATA_BYTES = 16 << 20
+#: Blocks set aside in the bag directory for the metadata.yaml written when the disk is full.
+RESERVE_FILE = '.metadata.yaml.reserve'
+#: The least space set aside, and how much more than the current metadata.yaml.
+RESERVE_BYTES = 64 << 10
+#: custom_data key saying what stopped the recorder (a write error), when it was stopped.
+STOPPED_KEY = 'ball_world.stopped'
+#: YAML written by libyaml when it is there (a hundred times faster for a long listing).
+_DUMPER = getattr(yaml, 'CSafeDumper', yaml.SafeDumper)
 
 
 def file_stem(directory):
@@ -44,35 +61,58 @@ def file_name(directory, number):
     return f'{file_stem(directory)}_{number}.mcap'
 
 
-def numbered_files(directory):
-    """The split files present in a directory, as (number, name), in order."""
-    pattern = re.compile(re.escape(file_stem(directory)) + r'_([0-9]{1,9})\.mcap')
+def _numbered(directory, names, canonical):
+    digits = r'(0|[1-9][0-9]{0,8})' if canonical else r'([0-9]+)'
+    pattern = re.compile(re.escape(file_stem(directory)) + '_' + digits + r'\.mcap')
     found = []
-    for name in os.listdir(directory):
+    for name in names:
         match = pattern.fullmatch(name)
         if match:
             found.append((int(match.group(1)), name))
     return sorted(found)
 
 
-class DirectoryClaim:
-    """A bag directory created (or emptied of its bag files) for recording, locked."""
+def numbered_files(directory, names=None):
+    """The recorder's split files present in a directory, as (number, name), in order.
 
-    def __init__(self, path, fd, created):
+    Only canonical names count (`run_3.mcap`, never `run_003.mcap`). names: the directory's
+    entries when already listed (a Folder's names()).
+    """
+    return _numbered(directory, os.listdir(directory) if names is None else names, True)
+
+
+def lookalike_files(directory, names=None):
+    """Names that look like split files but are none the recorder writes (`run_000.mcap`)."""
+    names = os.listdir(directory) if names is None else names
+    canonical = {name for _, name in _numbered(directory, names, True)}
+    return [name for _, name in _numbered(directory, names, False) if name not in canonical]
+
+
+class DirectoryClaim:
+    """A bag directory created (or emptied of its bag files) for recording, locked.
+
+    folder: the recording.files.Folder of the directory, in which every file is made.
+    """
+
+    def __init__(self, path, folder, created):
         self.path = path
+        self.folder = folder
         self.created = created
-        self._fd = fd
-        status = os.fstat(fd)
+        status = os.fstat(folder.fd)
         self.identity = (status.st_dev, status.st_ino)
 
     def release(self):
-        if self._fd is not None:
-            os.close(self._fd)
-            self._fd = None
+        if self.folder is not None:
+            self.folder.remove(RESERVE_FILE)
+            self.folder.close()
+            self.folder = None
 
     def discard(self):
         """Release, and remove the directory if it was created here and is empty."""
-        self.release()
+        if self.folder is not None:
+            self.folder.remove(RESERVE_FILE)
+            self.folder.close()
+            self.folder = None
         if self.created:
             try:
                 os.rmdir(self.path)
@@ -80,54 +120,74 @@ class DirectoryClaim:
                 pass  # it holds something: not ours to remove
 
 
-def lock_directory(path):
-    """Open the directory `path` and lock it (flock) for this process; return the descriptor.
+def open_bag(path):
+    """The bag directory `path` opened (not through a symlink) and locked for this process.
 
     One lock for the recorder and for repair in place, so each refuses the other. Raises
-    FileRefused naming the path when another process holds the lock.
+    FileRefused naming the path (a symlink, not a directory, locked by another process).
     """
-    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+    folder = Folder(_directory_path(path), follow=False)
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
-        raise FileRefused(errno.EBUSY, 'is being recorded by another process (it is locked)',
-                          path) from None
-    return fd
+        folder.lock()
+    except BaseException:
+        folder.close()
+        raise
+    return folder
+
+
+def _directory_path(path):
+    """A directory path without trailing slashes ('run/' is the directory 'run')."""
+    path = os.fspath(path)
+    stripped = path.rstrip('/')
+    return stripped or path
 
 
 def claim_directory(path, overwrite=False, hint=''):
     """Create the bag directory `path` (or, with overwrite, reuse one), locked.
 
-    Raises FileRefused naming the path: it exists (without overwrite), is not a directory,
-    or another process records into it.
+    Raises FileRefused naming the path: it exists (without overwrite), is a symlink, is not
+    a directory, or another process records into it. Reused, it loses the recorder's files
+    (canonical split files, metadata.yaml): nothing else in it is touched.
     """
-    path = os.fspath(path)
+    path = _directory_path(path)
+    parent_path, name = split_path(path)
     created = True
+    with Folder(parent_path) as parent:
+        try:
+            os.mkdir(name, dir_fd=parent.fd)
+        except FileExistsError:
+            created = _reuse(parent, name, path, overwrite, hint)
+        except OSError as error:
+            raise FileRefused(error.errno, error.strerror, path) from None
+        folder = parent.subfolder(name)
     try:
-        os.mkdir(path)
-    except FileExistsError:
-        if not overwrite:
-            advice = f'; {hint} to replace it' if hint else ''
-            raise FileRefused(errno.EEXIST, f'already exists{advice}', path) from None
-        created = False
-        mode = os.lstat(path).st_mode
-        if stat.S_ISREG(mode):  # a single-file recording of the same name is replaced
-            os.unlink(path)
-            os.mkdir(path)
-            created = True
-        elif not stat.S_ISDIR(mode):
-            raise FileRefused(errno.EINVAL, 'is not a directory or a regular file', path)
-    except OSError as error:
-        raise FileRefused(error.errno, error.strerror, path) from None
-    fd = lock_directory(path)
+        folder.lock()
+    except BaseException:
+        folder.close()
+        raise
     if not created:
-        for _, name in numbered_files(path):
-            os.unlink(os.path.join(path, name))
-        metadata = os.path.join(path, METADATA_FILE)
-        if os.path.lexists(metadata):
-            os.unlink(metadata)
-    return DirectoryClaim(path, fd, created)
+        names = folder.names()
+        for _, old in numbered_files(path, names):
+            folder.remove(old)
+        for old in (METADATA_FILE, RESERVE_FILE):
+            folder.remove(old)
+    return DirectoryClaim(path, folder, created)
+
+
+def _reuse(parent, name, path, overwrite, hint):
+    """An existing entry where the bag directory goes: whether a new one was made."""
+    parent.refuse_symlink(name)
+    if not overwrite:
+        advice = f'; {hint} to replace it' if hint else ''
+        raise FileRefused(errno.EEXIST, f'already exists{advice}', path)
+    mode = parent.lstat(name).st_mode
+    if stat.S_ISREG(mode):  # a single-file recording of the same name is replaced
+        parent.remove(name)
+        os.mkdir(name, dir_fd=parent.fd)
+        return True
+    if not stat.S_ISDIR(mode):
+        raise FileRefused(errno.EINVAL, 'is not a directory or a regular file', path)
+    return False
 
 
 def _qos_list(text):
@@ -150,6 +210,17 @@ class FileSummary:
     topics: dict  # topic -> mcap_reader.TopicInfo
 
 
+@dataclass(frozen=True)
+class TopicCount:
+    """A topic of a file as metadata.yaml lists it (mcap_reader.TopicInfo's fields)."""
+
+    topic: str
+    type: str
+    message_count: int
+    offered_qos_profiles: str
+    type_hash: str
+
+
 def summarize(recording):
     """The FileSummary of an mcap_reader.Recording: small enough to keep for days."""
     return FileSummary(path=recording.path, start_ns=recording.start_ns,
@@ -157,8 +228,11 @@ def summarize(recording):
                        topics=dict(recording.topics))
 
 
-def bag_metadata(recordings):
-    """The metadata.yaml document for complete files (FileSummary or Recording), in order."""
+def bag_metadata(recordings, stopped=None):
+    """The metadata.yaml document for complete files (FileSummary or Recording), in order.
+
+    stopped: what stopped the recorder (a write error), kept in custom_data[STOPPED_KEY].
+    """
     topics = {}
     files = []
     for recording in recordings:
@@ -191,37 +265,72 @@ def bag_metadata(recordings):
         'compression_mode': '',
         'relative_file_paths': [file['path'] for file in files],
         'files': files,
-        'custom_data': {},
+        'custom_data': {STOPPED_KEY: stopped} if stopped else {},
         'ros_distro': 'jazzy',
     }}
 
 
-def write_metadata(directory, recordings):
-    """Write metadata.yaml for `recordings` atomically (a temporary file, then a rename)."""
-    text = yaml.safe_dump(bag_metadata(recordings), sort_keys=False,
-                          default_flow_style=False)
-    target = os.path.join(directory, METADATA_FILE)
-    temporary = target + '.tmp'
-    with open(temporary, 'w', encoding='utf-8') as stream:
-        stream.write(text)
-        stream.flush()
-        os.fsync(stream.fileno())
-    os.replace(temporary, target)
+def metadata_text(recordings, stopped=None):
+    return yaml.dump(bag_metadata(recordings, stopped), Dumper=_DUMPER, sort_keys=False,
+                     default_flow_style=False)
 
 
-def missing_metadata(directory):
-    """What a directory without metadata.yaml is, for the one line that refuses it."""
-    if numbered_files(directory):
-        return (f'has no {METADATA_FILE}: its recorder was killed before it finished a '
-                f'file; ball_world_repair {directory} writes it')
+def write_metadata(folder, recordings, stopped=None):
+    """Write metadata.yaml for `recordings` atomically (a temporary file in the bag
+    directory, then a rename) in `folder` (recording.files.Folder); when the disk is full,
+    into the space set aside (reserve_space). Returns the bytes written."""
+    data = metadata_text(recordings, stopped).encode('utf-8')
+    folder.write_atomically(METADATA_FILE, data, spare=RESERVE_FILE)
+    return len(data)
+
+
+def reserve_space(folder, metadata_bytes=0):
+    """Set aside room for the metadata.yaml of a recorder stopped by a full disk: twice the
+    current one's size and at least RESERVE_BYTES (it lists one more file, and the reason).
+    """
+    folder.reserve(RESERVE_FILE, max(RESERVE_BYTES, 2 * metadata_bytes + 4096))
+
+
+def missing_metadata(directory, stopped=None):
+    """What a directory without a usable listing is, for the one line that refuses it.
+
+    stopped: what metadata.yaml says stopped the recorder before it finished a file.
+    """
+    files = numbered_files(directory)
+    repair = f'ball_world_repair {directory} keeps their complete records'
+    if stopped:
+        return f'its recorder stopped before it finished a file ({stopped}); {repair}'
+    if files:
+        return (f'has no {METADATA_FILE}: its recorder stopped before it finished a file '
+                f'(it was killed, or could not write{_free_space(directory)}); {repair}')
     return f'is a directory without {METADATA_FILE}, not a bag of split files'
 
 
-def listed_files(directory, load):
-    """The file names metadata.yaml lists, in order (ValueError says what is wrong).
+def _free_space(directory):
+    """'; its file system has N bytes free now' when that is under 1 MiB (a full disk)."""
+    try:
+        status = os.statvfs(directory)
+    except OSError:
+        return ''
+    free = status.f_bavail * status.f_frsize
+    return f'; its file system has {free:,} bytes free now' if free < (1 << 20) else ''
+
+
+@dataclass(frozen=True)
+class Listing:
+    """What metadata.yaml says: the files in order, and what stopped the recorder, if it was
+    stopped by an error (None when it finished or was killed)."""
+
+    names: list
+    stopped: Optional[str]
+
+
+def read_listing(directory, load):
+    """The Listing of a bag directory's metadata.yaml (ValueError says what is wrong).
 
     load(text, what, limit): the caller's bounded YAML parser for untrusted text. A name
-    must be a plain file name inside the directory.
+    must be a plain file name inside the directory. A listing of no files is accepted only
+    when it says what stopped the recorder.
     """
     path = os.path.join(directory, METADATA_FILE)
     try:
@@ -233,11 +342,21 @@ def listed_files(directory, load):
     information = document.get('rosbag2_bagfile_information') \
         if isinstance(document, dict) else None
     names = information.get('relative_file_paths') if isinstance(information, dict) else None
-    if not isinstance(names, list) or not names:
+    custom = information.get('custom_data') if isinstance(information, dict) else None
+    stopped = custom.get(STOPPED_KEY) if isinstance(custom, dict) else None
+    stopped = stopped[:500] if isinstance(stopped, str) and stopped.isprintable() else None
+    if not isinstance(names, list) or (not names and not stopped):
         raise ValueError(f'{METADATA_FILE} lists no files (relative_file_paths)')
     for name in names:
         if not isinstance(name, str) or name in ('', '.', '..') or '/' in name \
                 or '\0' in name:
             raise ValueError(f'{METADATA_FILE} lists {repr(name)[:60]}, which is not a file '
                              'name in the directory')
-    return names
+    if len(set(names)) != len(names):
+        raise ValueError(f'{METADATA_FILE} lists a file twice')
+    return Listing(list(names), stopped)
+
+
+def listed_files(directory, load):
+    """The file names metadata.yaml lists, in order (read_listing's names)."""
+    return read_listing(directory, load).names

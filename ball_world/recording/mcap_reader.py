@@ -165,6 +165,16 @@ def chunk_records(chunk):
                              f'{error or type(error).__name__}') from None
 
 
+class CorruptChunk(RecordingError):
+    """A chunk whose framing holds but whose content does not (its CRC, its compression, a
+    record inside): `start_ns` and `end_ns` are the log times its header says it held."""
+
+    def __init__(self, message, start_ns, end_ns):
+        super().__init__(message)
+        self.start_ns = start_ns
+        self.end_ns = end_ns
+
+
 def _parse(opcode, body):
     """The records of one complete record body: [record] or [chunk, *its records] or []."""
     if opcode == Opcode.MESSAGE:
@@ -177,7 +187,11 @@ def _parse(opcode, body):
         # The fixed fields are 40 bytes; a shorter body means the data length field lies.
         if len(body) != 40 + len(record.compression.encode()) + len(record.data):
             raise ValueError('chunk data length does not match the record length')
-        return [record, *chunk_records(record)]
+        try:
+            return [record, *chunk_records(record)]
+        except RecordingError as error:
+            raise CorruptChunk(str(error), record.message_start_time,
+                               record.message_end_time) from None
     return [record]
 
 
@@ -196,11 +210,26 @@ def _read_record(stream, offset, size, opcode):
                              'ends before')
     try:
         return _parse(opcode, stream.read(length))
+    except CorruptChunk as error:
+        raise RecordingError(f'the record at byte {offset}: {error} (ball_world_repair '
+                             'keeps every other record)') from None
     except RecordingError as error:
         raise RecordingError(f'the record at byte {offset}: {error}') from None
     except Exception as error:  # noqa: B902 - corrupt bytes raise anything
         raise RecordingError(f'the record at byte {offset} is corrupt: '
                              f'{error or type(error).__name__}') from None
+
+
+@dataclass(frozen=True)
+class Damage:
+    """Bytes of a file that hold no readable record, skipped by a Scan told to go on:
+    [start, end) in the file, why, and the log times they held when known (a chunk's)."""
+
+    start: int
+    end: int
+    reason: str
+    start_ns: Optional[int] = None
+    end_ns: Optional[int] = None
 
 
 class Scan:
@@ -213,15 +242,35 @@ class Scan:
     is True when the data section ended properly (DataEnd or Footer), and `problem`
     otherwise says where and why reading stopped; `corrupt` is True when that was a
     complete record with bad content, rather than a file cut short.
+
+    go_on=True (ball_world_repair): a complete record with bad content is skipped, and
+    said in `damage` (Damage), instead of ending the scan; where the framing itself is
+    broken (a zero opcode, a length past the end), reading resumes at the next of
+    `resume_at` (record offsets a valid summary lists) if there is one.
     """
 
-    def __init__(self, stream, size):
+    def __init__(self, stream, size, go_on=False, resume_at=()):
         self.stream = stream
         self.size = size
         self.end = 0
         self.finished = False
         self.problem = None
         self.corrupt = False
+        self.go_on = go_on
+        self.resume_at = sorted(resume_at)
+        self.damage = []
+        self.chunk_offsets = set()  # where the chunks that were read whole begin
+
+    def _resume(self, offset, reason):
+        """The offset to read on from after broken framing at `offset`, or None."""
+        if not self.go_on:
+            return None
+        position = bisect.bisect_right(self.resume_at, offset)
+        if position == len(self.resume_at) or self.resume_at[position] >= self.size:
+            return None
+        following = self.resume_at[position]
+        self.damage.append(Damage(offset, following, reason))
+        return following
 
     def records(self):
         stream = self.stream
@@ -238,20 +287,36 @@ class Scan:
                 return
             opcode, length = _RECORD_HEAD.unpack(head)
             body_at = offset + _RECORD_HEAD.size
+            broken = None
             if opcode == 0:
-                self.problem = f'no valid record at byte {offset} (zero bytes)'
-                return
-            if length > self.size - body_at:
-                self.problem = (f'the record at byte {offset} is cut off: it needs {length} '
-                                f'bytes, {self.size - body_at} are left')
-                return
+                broken = f'no valid record at byte {offset} (zero bytes)'
+            elif length > self.size - body_at:
+                broken = (f'the record at byte {offset} is cut off: it needs {length} '
+                          f'bytes, {self.size - body_at} are left')
+            if broken is not None:
+                following = self._resume(offset, broken)
+                if following is None:
+                    self.problem = broken
+                    return
+                offset = self.end = following
+                stream.seek(offset)
+                continue
             try:
                 parsed = _parse(opcode, stream.read(length))
             except Exception as error:  # noqa: B902 - corrupt bytes raise anything
-                self.problem = (f'the record at byte {offset} is corrupt: '
-                                f'{error or type(error).__name__}')
-                self.corrupt = True
-                return
+                reason = (f'the record at byte {offset} is corrupt: '
+                          f'{error or type(error).__name__}')
+                if not self.go_on:
+                    self.problem = reason
+                    self.corrupt = True
+                    return
+                self.damage.append(Damage(offset, body_at + length, reason,
+                                          getattr(error, 'start_ns', None),
+                                          getattr(error, 'end_ns', None)))
+                offset = self.end = body_at + length
+                continue
+            if opcode == Opcode.CHUNK:
+                self.chunk_offsets.add(offset)
             offset = self.end = body_at + length
             yield from parsed
             if opcode in (Opcode.DATA_END, Opcode.FOOTER):

@@ -94,8 +94,10 @@ def open_sinks(values):
     """The recording sinks the parameters ask for, opened now so a bad path fails at start.
 
     Each file is claimed first (recording.files): an existing one needs record.overwrite,
-    and one that is not a regular file, is being recorded by another process, or is the
-    other recording's file is refused.
+    and a symlink, one that is not a regular file, is being recorded by another process, or
+    is the other recording's file is refused. With a split parameter set, record.mcap is a
+    bag directory and record.rerun names the parts of a split .rrd, which follow the MCAP's
+    files when both are recorded (recording.rrd_parts).
     """
     from ball_world.recording.files import claim_output, ClaimedSink
     from ball_world.recording.split_writer import open_split_sink, splits, unused_max_files
@@ -103,46 +105,82 @@ def open_sinks(values):
     unused = unused_max_files(values)
     if unused:
         logger.warning(unused)
+    split = splits(values)
     claims = []
     sinks = []
     name = None
     try:
         for name in ('record.mcap', 'record.rerun'):
-            if name == 'record.mcap' and values[name] and splits(values):
+            if not values[name]:
+                continue
+            if name == 'record.mcap' and split:
                 # a bag directory of split files: the sink claims it (and is the claim)
-                claims.append((name, open_split_sink(values, logger.info)))
-            elif values[name]:
+                claims.append((name, open_split_sink(values, logger.info, logger.error)))
+            elif split:
+                claims.append((name, _rrd_parts(values, 'record.mcap' not in dict(claims))))
+            else:
                 claims.append((name, claim_output(values[name], values['record.overwrite'],
                                                   'set record.overwrite:=true', claims)))
         claimed = dict(claims)
         if 'record.mcap' in claimed:
             from ball_world.recording.mcap_writer import McapSink
             mcap = claimed['record.mcap']
-            sinks.append(BackgroundSink(mcap if splits(values) else McapSink(mcap)))
-        if 'record.rerun' in claimed or values['view.rerun']:
+            sinks.append(BackgroundSink(mcap if split else McapSink(mcap)))
+        rerun_file = claimed.get('record.rerun')
+        if split and rerun_file is not None:
+            if 'record.mcap' in claimed:
+                claimed['record.mcap'].follower = rerun_file  # split at the MCAP's steps
+            else:
+                sinks.append(rerun_file)
+            rerun_file = None
+        if rerun_file is not None or values['view.rerun']:
             from ball_world.recording.rerun_log import RerunSink
-            rerun_file = claimed.get('record.rerun')
             name = 'record.rerun' if rerun_file else 'view.rerun'
             sink = RerunSink(
-                rerun_file.path if rerun_file else None, every=values['record.rerun_every'],
-                view=values['view.rerun'] or None, velocities=values['rerun.velocities'],
-                trail_seconds=values['rerun.trail_seconds'], clock=time.monotonic,
-                report=rclpy.logging.get_logger('ball_world').error,
+                rerun_file, view=values['view.rerun'] or None, **_rerun_options(values),
                 file_process=True)  # the SDK's index of a long file grows: not in the node
             sinks.append(ClaimedSink(sink, rerun_file) if rerun_file else sink)
     except ValueError as error:  # the only value a RerunSink checks is the view
-        for sink in sinks:
-            sink.close()
-        for _, claim in claims[len(sinks):]:
-            claim.discard()
+        _abandon_sinks(sinks, claims)
         raise StartupError(f"parameter 'view.rerun': {error}") from None
     except OSError as error:
-        for sink in sinks:
-            sink.close()  # nothing recorded yet: each removes the file it created
-        for _, claim in claims[len(sinks):]:
-            claim.discard()
+        _abandon_sinks(sinks, claims)
         raise StartupError(f"parameter '{name}': cannot record to {error}") from None
     return sinks
+
+
+def _rerun_options(values):
+    """The Rerun sink's options the parameters give (besides where it writes)."""
+    return dict(every=values['record.rerun_every'], velocities=values['rerun.velocities'],
+                trail_seconds=values['rerun.trail_seconds'], clock=time.monotonic,
+                report=rclpy.logging.get_logger('ball_world').error)
+
+
+def _rrd_parts(values, alone):
+    """The parts of a split .rrd (recording.rrd_parts); alone: no split MCAP to follow."""
+    from ball_world.recording.rrd_parts import RrdParts
+    from ball_world.recording.split_writer import SplitRule
+    rule = SplitRule(values['record.max_bytes'], values['record.max_seconds']) if alone \
+        else None
+    return RrdParts(values['record.rerun'], rule, values['record.max_files'],
+                    values['record.overwrite'], rclpy.logging.get_logger('ball_world').info,
+                    **_rerun_options(values))
+
+
+def _abandon_sinks(sinks, claims):
+    """A start that failed: close what was opened (nothing recorded: each removes the file
+    it created) and give up the claims not yet handed to a sink."""
+    opened = set()
+    for sink in sinks:
+        opened.add(id(getattr(sink, 'sink', sink)))
+        sink.close()
+    for _, claim in claims:
+        if id(claim) in opened:
+            continue
+        if hasattr(claim, 'discard'):
+            claim.discard()
+        else:
+            claim.close()
 
 
 class BallWorld(Node):

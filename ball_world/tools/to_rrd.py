@@ -61,7 +61,7 @@ def convert(args):
     progress = StepProgress(balls.message_count, PROG)
     sink = None
     try:
-        sink = ClaimedSink(RerunSink(output.path, every=args.every), output.claim)
+        sink = ClaimedSink(RerunSink(output.claim, every=args.every), output.claim)
         steps = feed_sinks(recording, [sink, progress], close=False)
         sink.close()
         if steps == 0:
