@@ -27,6 +27,8 @@ aside, and writes the last metadata.yaml into them, with what stopped it in cust
 """
 from dataclasses import dataclass
 import errno
+import functools
+import json
 import os
 import re
 import stat
@@ -49,6 +51,7 @@ RESERVE_BYTES = 64 << 10
 STOPPED_KEY = 'ball_world.stopped'
 #: YAML written by libyaml when it is there (a hundred times faster for a long listing).
 _DUMPER = getattr(yaml, 'CSafeDumper', yaml.SafeDumper)
+_LOADER = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)
 
 
 def file_stem(directory):
@@ -86,6 +89,35 @@ def lookalike_files(directory, names=None):
     names = os.listdir(directory) if names is None else names
     canonical = {name for _, name in _numbered(directory, names, True)}
     return [name for _, name in _numbered(directory, names, False) if name not in canonical]
+
+
+def classify_names(directory, names, listed):
+    """(candidates, strays) among a bag directory's names, given the names metadata.yaml
+    lists (None without one).
+
+    candidates: canonical files after the last listed one (or every canonical file when
+    nothing is listed), in order: the recorder's next files, not listed yet when it
+    stopped; they belong to the set if their log times go on after it. strays: (name,
+    why) of the other names that look like split files, which no tool takes for the set's.
+    """
+    canonical = numbered_files(directory, names)
+    strays = [(name, 'not a name the recorder writes (it numbers its files without leading '
+                     'zeros): a copy, not part of the set')
+              for name in lookalike_files(directory, names)]
+    listed = listed or []
+    numbers = dict((name, number) for number, name in canonical)
+    last = max((numbers[name] for name in listed if name in numbers), default=-1)
+    candidates = []
+    for number, name in canonical:
+        if name in listed:
+            continue
+        if number > last:
+            candidates.append(name)
+        else:
+            strays.append((name, f'numbered before {listed[-1]}, the last file '
+                                 f'{METADATA_FILE} lists, but not listed: not written in '
+                                 'this run'))
+    return candidates, strays
 
 
 class DirectoryClaim:
@@ -190,13 +222,18 @@ def _reuse(parent, name, path, overwrite, hint):
     return False
 
 
+@functools.lru_cache(maxsize=256)
+def _qos_list_cached(text):
+    try:
+        profiles = yaml.load(text, Loader=_LOADER) if text else []
+    except yaml.YAMLError:
+        return ()
+    return _freeze(profiles)[1] if isinstance(profiles, list) else ()
+
+
 def _qos_list(text):
     """offered_qos_profiles as version 9 writes it: the list the channel's YAML holds."""
-    try:
-        profiles = yaml.safe_load(text) if text else []
-    except yaml.YAMLError:
-        return []
-    return profiles if isinstance(profiles, list) else []
+    return [_thaw(profile) for profile in _qos_list_cached(text)]
 
 
 @dataclass(frozen=True)
@@ -271,8 +308,91 @@ def bag_metadata(recordings, stopped=None):
 
 
 def metadata_text(recordings, stopped=None):
-    return yaml.dump(bag_metadata(recordings, stopped), Dumper=_DUMPER, sort_keys=False,
-                     default_flow_style=False)
+    """bag_metadata(recordings, stopped) as YAML, rendered by hand: the same document
+    yaml.dump writes (block style, keys in order), at a cost that does not grow with the
+    work of a YAML emitter over every file of a long listing. Each file's entry and each
+    topic's QoS block are rendered once and kept."""
+    information = bag_metadata(recordings, stopped)['rosbag2_bagfile_information']
+    out = ['rosbag2_bagfile_information:\n',
+           f"  version: {information['version']}\n",
+           f"  storage_identifier: {information['storage_identifier']}\n",
+           f"  duration:\n    nanoseconds: {information['duration']['nanoseconds']}\n",
+           '  starting_time:\n    nanoseconds_since_epoch: '
+           f"{information['starting_time']['nanoseconds_since_epoch']}\n",
+           f"  message_count: {information['message_count']}\n"]
+    topics = information['topics_with_message_count']
+    out.append('  topics_with_message_count:\n' if topics
+               else '  topics_with_message_count: []\n')
+    for entry in topics:
+        topic = entry['topic_metadata']
+        out.append(f"  - topic_metadata:\n      name: {_scalar(topic['name'])}\n"
+                   f"      type: {_scalar(topic['type'])}\n"
+                   '      serialization_format: cdr\n')
+        out.append(_qos_block(_freeze(topic['offered_qos_profiles'])))
+        out.append(f"      type_description_hash: {_scalar(topic['type_description_hash'])}\n"
+                   f"    message_count: {entry['message_count']}\n")
+    out.append("  compression_format: ''\n  compression_mode: ''\n")
+    names = information['relative_file_paths']
+    out.append('  relative_file_paths:\n' if names else '  relative_file_paths: []\n')
+    out.extend(f'  - {_scalar(name)}\n' for name in names)
+    files = information['files']
+    out.append('  files:\n' if files else '  files: []\n')
+    out.extend(_file_entry(entry['path'], entry['starting_time']['nanoseconds_since_epoch'],
+                           entry['duration']['nanoseconds'], entry['message_count'])
+               for entry in files)
+    custom = information['custom_data']
+    out.append('  custom_data:\n' if custom else '  custom_data: {}\n')
+    out.extend(f'    {_scalar(key)}: {_scalar(value)}\n' for key, value in custom.items())
+    out.append(f"  ros_distro: {information['ros_distro']}\n")
+    return ''.join(out)
+
+
+#: Strings written as they are; anything else is quoted (JSON's quoting is valid YAML).
+_PLAIN = re.compile(r'[A-Za-z_/][A-Za-z0-9_./-]*')
+
+
+def _scalar(text):
+    text = str(text)
+    reserved = ('null', 'true', 'false', 'yes', 'no', 'on', 'off', '~')
+    if _PLAIN.fullmatch(text) and text.lower() not in reserved:
+        return text
+    return json.dumps(text)
+
+
+@functools.lru_cache(maxsize=4096)
+def _file_entry(path, start, duration, count):
+    return (f'  - path: {_scalar(path)}\n    starting_time:\n      nanoseconds_since_epoch: '
+            f'{start}\n    duration:\n      nanoseconds: {duration}\n    message_count: '
+            f'{count}\n')
+
+
+def _freeze(value):
+    """A hashable copy of plain YAML data (lists and dicts as tuples), for the cache."""
+    if isinstance(value, dict):
+        return ('dict', tuple((key, _freeze(item)) for key, item in value.items()))
+    if isinstance(value, list):
+        return ('list', tuple(_freeze(item) for item in value))
+    return value
+
+
+def _thaw(value):
+    if isinstance(value, tuple) and value and value[0] == 'dict':
+        return {key: _thaw(item) for key, item in value[1]}
+    if isinstance(value, tuple) and value and value[0] == 'list':
+        return [_thaw(item) for item in value[1]]
+    return value
+
+
+@functools.lru_cache(maxsize=256)
+def _qos_block(profiles):
+    """offered_qos_profiles of a topic entry (frozen), at its indentation, as yaml.dump
+    writes it."""
+    value = _thaw(profiles)
+    if not value:
+        return '      offered_qos_profiles: []\n'
+    text = yaml.dump(value, Dumper=_DUMPER, sort_keys=False, default_flow_style=False)
+    return '      offered_qos_profiles:\n' + ''.join(
+        f'      {line}\n' for line in text.splitlines())
 
 
 def write_metadata(folder, recordings, stopped=None):
@@ -291,6 +411,16 @@ def reserve_space(folder, metadata_bytes=0):
     folder.reserve(RESERVE_FILE, max(RESERVE_BYTES, 2 * metadata_bytes + 4096))
 
 
+def what_stopped(stopped):
+    """What a recorded write error means, when it says: ' (the disk filled up)', ..."""
+    if 'No space left' in stopped or 'Disk quota' in stopped:
+        return ' (the disk filled up)'
+    if 'File too large' in stopped:
+        return (" (the file reached the largest size allowed it: the process's file size "
+                "limit, RLIMIT_FSIZE, or the file system's)")
+    return ''
+
+
 def missing_metadata(directory, stopped=None):
     """What a directory without a usable listing is, for the one line that refuses it.
 
@@ -299,7 +429,8 @@ def missing_metadata(directory, stopped=None):
     files = numbered_files(directory)
     repair = f'ball_world_repair {directory} keeps their complete records'
     if stopped:
-        return f'its recorder stopped before it finished a file ({stopped}); {repair}'
+        return (f'its recorder stopped before it finished a file: {stopped}'
+                f'{what_stopped(stopped)}; {repair}')
     if files:
         return (f'has no {METADATA_FILE}: its recorder stopped before it finished a file '
                 f'(it was killed, or could not write{_free_space(directory)}); {repair}')

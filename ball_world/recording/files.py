@@ -477,10 +477,21 @@ def claim_output(path, overwrite=False, hint='', others=()):
     a file with other names. Raises FileRefused, whose message names the path.
     """
     folder_path, name = split_path(path)
-    with Folder(folder_path) as folder:
+    with open_folder_of(path, folder_path) as folder:
         claim = folder.claim(name, overwrite, hint, others)
     claim.path = os.fspath(path)
     return claim
+
+
+def open_folder_of(path, folder_path):
+    """The Folder a file `path` is written in; a folder that is not there (or may not be
+    entered) is refused naming the file, as the user wrote it."""
+    try:
+        return Folder(folder_path)
+    except FileRefused as error:
+        if error.errno in (errno.ENOENT, errno.EACCES):
+            raise FileRefused(error.errno, error.strerror, os.fspath(path)) from None
+        raise
 
 
 def write_file(path, data, overwrite=False, hint=''):
@@ -572,7 +583,7 @@ class PartialOutput:
         if folder is None:
             self.target = os.fspath(target)
             folder_path, self.name = split_path(self.target)
-            self.folder = Folder(folder_path)
+            self.folder = open_folder_of(self.target, folder_path)
         else:
             self.name = plain_name(os.fspath(target), folder.path)
             self.target = folder.join(self.name)

@@ -1220,25 +1220,43 @@ def _ignore(events):
     """write_pending of a sink that does not record edits."""
 
 
-def feed_sinks(path, sinks, close=True):
+def feed_sinks(path, sinks, close=True, passed_over=None):
     """Replay a recording into Sinks as the node would have: returns the steps fed.
 
     Each segment starts with start_segment(WorldSnapshot, RunInfo), then every complete
     step goes to write_step in order (a step cut off by a crash is skipped, but its edits
     still count), and a closing record to write_pending, for the sinks that take it. The
     sinks are flushed at the end, and closed unless close=False.
+
+    A segment that jumps over steps (a damaged chunk dropped by ball_world_repair) cannot
+    be followed past the jump: the balls' names, sizes and masses there are not known. Its
+    steps are passed over up to the next segment, or the next state a split file resumes
+    from (recording_set.RecordingSet), and said in `passed_over` (a list, if given) as
+    (segment index, first step, last step).
     """
     recording = Recording(path) if isinstance(path, (str, os.PathLike)) else path
     current = started = None  # segment positions: followed, and begun in the sinks
     roster = snapshot = info = None
     fed = 0
+    last = skipping = None  # the last step followed; the steps being passed over
     for step in recording.steps():
         if step.segment != current:
             segment = recording.segments[step.segment]
             snapshot, info = snapshot_and_info(segment, step)
             roster = BallRoster(snapshot, segment.index)
             current = step.segment
+            last = skipping = None
+        elif skipping is not None:
+            skipping[2] = max(skipping[2], step.step)
+            continue
+        elif last is not None and step.step > last + 1 and not step.closing:
+            skipping = [recording.segments[current].index, step.step, step.step]
+            if passed_over is not None:
+                passed_over.append(skipping)
+            continue
         impulses = roster.follow(step)
+        if not step.closing:
+            last = step.step
         if step.closing and started == current:
             events = PendingEvents(step=step.step, stamp_ns=step.stamp_ns,
                                    log_time_ns=step.log_time_ns, impulses=impulses,

@@ -592,14 +592,20 @@ class _Feed:
     # Sink protocol ----------------------------------------------------------------------
 
     def start_segment(self, world, info):
+        """A segment's start; or, for a segment begun before (the same index: a recording
+        picked up after a gap, from the state a split file resumes from), its going on,
+        on the same step timeline and with the same energy at step 0."""
+        same = self._start is not None and self._start[1].segment == info.segment
         if not self._opened:
             self._open(world, info.parameters)
         else:
             self._finish_segment()
-            self._segment_base = self._last_global + 1
+            if not same:
+                self._segment_base = self._last_global + 1
         self._segment = _Segment(world)
-        self._totals[:] = 0
-        self._energy0 = None
+        if not same:
+            self._totals[:] = 0
+            self._energy0 = None
         self._shown_names = None
         self._impulses = []
         self._impulses_changed = False

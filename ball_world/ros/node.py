@@ -162,9 +162,11 @@ def _rrd_parts(values, alone):
     from ball_world.recording.split_writer import SplitRule
     rule = SplitRule(values['record.max_bytes'], values['record.max_seconds']) if alone \
         else None
+    options = _rerun_options(values)
+    del options['report']  # a file alone: its failure is the sink's, reported as any
     return RrdParts(values['record.rerun'], rule, values['record.max_files'],
                     values['record.overwrite'], rclpy.logging.get_logger('ball_world').info,
-                    **_rerun_options(values))
+                    **options)
 
 
 def _abandon_sinks(sinks, claims):
@@ -659,9 +661,19 @@ class BallWorld(Node):
             'goes on without it')
 
     def close(self):
-        """Finish the recordings (called on every way out)."""
+        """Finish the recordings (called on every way out); say in all how far behind its
+        schedule the node fell, if it did (the warnings while it ran are throttled)."""
+        waited = sum(getattr(sink, 'waited', 0.0) for sink in self._sinks)
         self.simulation.close()
         self.agent_topics.destroy()
+        dropped = getattr(self, '_dropped_steps', 0)
+        if dropped:
+            self.get_logger().warning(
+                f'in all, {dropped} steps of wall time were dropped behind the '
+                f'{1.0 / self._step_period:g} Hz schedule (the world kept every step it took, '
+                'and the recordings hold them all)'
+                + (f'; the recordings held stepping back for {waited:.1f} s: their writer '
+                   'could not keep up' if waited >= 0.1 else ''))
 
 
 def usage():

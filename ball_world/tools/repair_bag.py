@@ -24,7 +24,7 @@ import os
 
 from mcap.records import Message
 
-from ball_world.recording.bag import (lookalike_files, METADATA_FILE, missing_metadata,
+from ball_world.recording.bag import (classify_names, METADATA_FILE, missing_metadata,
                                       numbered_files, open_bag, read_listing, RESERVE_FILE,
                                       summarize, write_metadata)
 from ball_world.recording.files import open_regular
@@ -96,32 +96,6 @@ def file_state(path):
     return state
 
 
-def classify(directory, folder_names, listed):
-    """(members, candidates, strays) of a bag directory.
-
-    members: the listed names; candidates: canonical files after the last listed one (the
-    recorder's next files), in order; strays: (name, why) of everything else that looks
-    like a split file.
-    """
-    canonical = numbered_files(directory, folder_names)
-    strays = [(name, 'not a name the recorder writes (it numbers files without leading '
-                     'zeros): a copy, not part of the set')
-              for name in lookalike_files(directory, folder_names)]
-    listed = listed or []
-    numbers = {name: number for number, name in canonical}
-    last = max((numbers[name] for name in listed if name in numbers), default=-1)
-    candidates = []
-    for number, name in canonical:
-        if name in listed:
-            continue
-        if number > last:
-            candidates.append(name)
-        else:
-            strays.append((name, f'numbered before {listed[-1] if listed else "the set"} '
-                                 f'but not in {METADATA_FILE}: not written in this run'))
-    return listed, candidates, strays
-
-
 def repair_bag(directory, stream=None):
     """Mend every file of the set in `directory` that needs it and rewrite metadata.yaml.
 
@@ -142,7 +116,8 @@ def _repair(directory, folder, stream):
     if stopped:
         report.lines.append(f'{METADATA_FILE} says the recorder stopped: {stopped}')
     names = folder.names()
-    members, candidates, strays = classify(directory, names, listed)
+    members = listed or []
+    candidates, strays = classify_names(directory, names, listed)
     kept = []
     last_end = None
     for name in members:
