@@ -198,12 +198,37 @@ def claim_directory(path, overwrite=False, hint=''):
         folder.close()
         raise
     if not created:
-        names = folder.names()
+        try:
+            names = refuse_links(folder, path)
+        except BaseException:
+            folder.close()
+            raise
         for _, old in numbered_files(path, names):
             folder.remove(old)
         for old in (METADATA_FILE, RESERVE_FILE):
             folder.remove(old)
     return DirectoryClaim(path, folder, created)
+
+
+def ours(directory, name):
+    """Whether `name` is one the recorder or repair writes, reads or removes in a bag
+    directory: its split files (and look-alikes), metadata.yaml and its temporaries."""
+    stem = re.escape(file_stem(directory))
+    return bool(re.fullmatch(stem + r'_[0-9]+\.mcap(\.partial-[0-9]+)?', name)
+                or name == METADATA_FILE or name.startswith(METADATA_FILE + '.')
+                or name == RESERVE_FILE)
+
+
+def refuse_links(folder, directory):
+    """The folder's names, or FileRefused if a symlink stands where a bag's files go: it
+    was not made by the recorder, and a writer that followed it would write elsewhere."""
+    names = folder.names()
+    for name in sorted(names):
+        if ours(directory, name) and stat.S_ISLNK(folder.lstat(name).st_mode):
+            raise FileRefused(errno.ELOOP, f'holds {name}, a symbolic link where the '
+                                           "recorder's own files go; ball_world never writes "
+                                           'through one: remove it', directory)
+    return names
 
 
 def _reuse(parent, name, path, overwrite, hint):

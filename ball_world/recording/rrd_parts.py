@@ -118,6 +118,8 @@ class RrdParts:
             raise FileRefused(errno.EEXIST, f'has parts already ({existing[0][1]}, ...)'
                                             f'{advice}', self.path)
         for _, name in existing:
+            self.folder.refuse_symlink(name)  # not one of ours: never removed, said
+        for _, name in existing:
             self.folder.remove(name)
 
     @property

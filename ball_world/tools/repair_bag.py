@@ -25,8 +25,8 @@ import os
 from mcap.records import Message
 
 from ball_world.recording.bag import (classify_names, METADATA_FILE, missing_metadata,
-                                      numbered_files, open_bag, read_listing, RESERVE_FILE,
-                                      summarize, write_metadata)
+                                      numbered_files, open_bag, read_listing, refuse_links,
+                                      RESERVE_FILE, summarize, write_metadata)
 from ball_world.recording.files import open_regular
 from ball_world.recording.mcap_reader import (load_untrusted, MAGIC, Recording,
                                               RecordingError, Scan)
@@ -112,6 +112,7 @@ def repair_bag(directory, stream=None):
 
 def _repair(directory, folder, stream):
     report = BagReport()
+    refuse_links(folder, directory)
     listed, stopped = _listing(directory)
     if stopped:
         report.lines.append(f'{METADATA_FILE} says the recorder stopped: {stopped}')
