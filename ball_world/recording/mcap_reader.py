@@ -1247,8 +1247,16 @@ def feed_sinks(path, sinks, close=True, passed_over=None):
             current = step.segment
             last = skipping = None
         elif skipping is not None:
-            skipping[2] = max(skipping[2], step.step)
-            continue
+            segment = recording.segments[current]
+            point = getattr(recording, 'resume_points', {}).get(
+                (segment.index, segment.log_offset_ns, step.step - 1))
+            if point is None:
+                skipping[2] = max(skipping[2], step.step)
+                continue
+            # a later file of a set picks the segment up here: on from its state
+            snapshot, info = snapshot_and_info(point, step)
+            roster = BallRoster(snapshot, point.index)
+            started = skipping = None
         elif last is not None and step.step > last + 1 and not step.closing:
             skipping = [recording.segments[current].index, step.step, step.step]
             if passed_over is not None:

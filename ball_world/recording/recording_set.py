@@ -56,6 +56,14 @@ class Gap:
         return f'segment {self.segment}: {steps} are not in the set ({self.why})'
 
 
+def _first_log_time(path):
+    """The first log time of a file's messages, or None when it cannot say."""
+    try:
+        return Recording(path).start_ns
+    except RecordingError:
+        return None
+
+
 def _start_of(segment):
     """Log time of a segment's first step in its file: its resume step's next, or step 0."""
     if segment.resume is None:
@@ -112,7 +120,18 @@ class RecordingSet:
         self.complete_bytes = sum(f.complete_bytes for f in files)
         self.has_summary = all(f.has_summary for f in files)
         problems = [f'{os.path.basename(f.path)}: {f.problem}' for f in files if f.problem]
-        unlisted, self.strays = classify_names(self.path, os.listdir(self.path), names)
+        candidates, self.strays = classify_names(self.path, os.listdir(self.path), names)
+        unlisted = []
+        last_end = max((f.end_ns for f in files if f.end_ns is not None), default=None)
+        for name in candidates:  # the recorder's next files, unless they go back in time
+            first = _first_log_time(os.path.join(self.path, name))
+            if first is not None and last_end is not None and first <= last_end:
+                self.strays.append((name, f'its log times begin at {first / 1e9:.9g} s, not '
+                                          f'after the set before it ({last_end / 1e9:.9g} s): '
+                                          'not part of this run'))
+            else:
+                unlisted.append(name)
+        self.unlisted = unlisted
         if unlisted:
             problems.append(f"{', '.join(unlisted)} not listed in metadata.yaml (a file "
                             'being written when the recorder stopped)')
@@ -142,6 +161,11 @@ class RecordingSet:
                 self.topics[topic] = info if previous is None else dataclasses.replace(
                     previous, message_count=previous.message_count + info.message_count)
         self._merge_segments()
+        # Where each file picks a segment up (its copy with a resume state), merged or not:
+        # after a jump inside a file (a damaged chunk dropped), the run goes on from there.
+        self.resume_points = {
+            (segment.index, segment.log_offset_ns, segment.resume.step): segment
+            for f in files for segment in f.segments if segment.resume is not None}
         self.roles = {}
         self.agent_roles = {}  # the agents' topics (Recording.agent_roles) of every file
         for f in files:

@@ -10,7 +10,7 @@ import sys
 
 from ball_world.msgs.cdr import decode_pose_array, decode_vector3_stamped
 from ball_world.recording import agent_topics
-from ball_world.recording.bag import classify_names, what_stopped
+from ball_world.recording.bag import what_stopped
 from ball_world.recording.mcap_reader import decode_stats, EDIT_KINDS, RecordingError
 from ball_world.recording.recording_set import open_recording
 from ball_world.step_record import STATS_FIELDS
@@ -127,18 +127,13 @@ def _file_lines(recording):
     if recording.stopped:
         lines.append(f'  STOPPED: the recorder stopped on an error: {recording.stopped}'
                      f'{what_stopped(recording.stopped)}')
-    unlisted = [name for name in _unlisted(recording)]
+    unlisted = recording.unlisted
     if unlisted:
         lines.append(f"  NOT LISTED: {', '.join(unlisted)} (a file being written when the "
                      f'recorder stopped); {repair} adds it')
     for name, why in recording.strays:
         lines.append(f'  left out: {name}: {why}')
     return lines
-
-
-def _unlisted(recording):
-    names = [os.path.basename(f.path) for f in recording.files] + list(recording.missing)
-    return classify_names(recording.path, os.listdir(recording.path), names)[0]
 
 
 def describe(recording):

@@ -177,6 +177,11 @@ def _mend(directory, folder, name, report, stream, candidate=False):
                                           folder=folder)
             report.lines.extend(repair_mcap.describe(repaired, path, path).splitlines())
             report.lost = report.lost or repaired.lost_data
+            if not candidate and repaired.problem:
+                # listed: its recorder had finished it, so what is missing was cut off since
+                report.lines.append(f'  DAMAGED: {name} was finished by its recorder (it is '
+                                    f'listed in {METADATA_FILE}); its end is gone, lost')
+                report.lost = True
             recording = Recording(path)
     except RecordingError as error:
         report.lines.append(f'{name}: left in place and no longer listed, it cannot be read: '

@@ -368,9 +368,15 @@ def resimulate(recording, progress=None):
                               else _resume(segment))
                 result.resumed = step.step != 0
         elif result.skipping is not None:
-            if not step.closing:
-                result.skipping.last = step.step
-            continue
+            point = _resume_point(recording, segment, step)
+            if point is None:
+                if not step.closing:
+                    result.skipping.last = step.step
+                continue
+            # a later file of the set picks the segment up here: on from its state
+            result = SegmentResult(segment.index, step.segment, resumed=True)
+            comparison.segments.append(result)
+            simulation = _resume(point)
         elif result.closing is not None:
             raise RecordingError(f'segment {segment.index} has step {step.step} after the '
                                  'closing record of its last step')
@@ -408,6 +414,12 @@ def resimulate(recording, progress=None):
         if not same:
             result.differing_steps += 1
     return comparison
+
+
+def _resume_point(recording, segment, step):
+    """The copy of `segment` a file of a set resumes from just before `step`, if any."""
+    points = getattr(recording, 'resume_points', {})
+    return points.get((segment.index, segment.log_offset_ns, step.step - 1))
 
 
 def _begin(recording, segment, step, comparison, gaps):
