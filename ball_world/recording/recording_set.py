@@ -24,7 +24,7 @@ import dataclasses
 from dataclasses import dataclass
 import os
 
-from ball_world.recording.bag import classify_names, read_listing, what_stopped
+from ball_world.recording.bag import classify_names, missing_metadata, read_listing
 from ball_world.recording.mcap_reader import load_untrusted, Recording, RecordingError
 
 
@@ -107,10 +107,10 @@ class RecordingSet:
             self._names.append((name, gone))
             gone = []
         if not self.files:
-            why = (f'its recorder stopped before it finished a file: {self.stopped}'
-                   f'{what_stopped(self.stopped)}' if self.stopped else
-                   f"none of the files metadata.yaml lists is there ({', '.join(self.missing)})")
-            raise RecordingError(f'{why}; ball_world_repair {self.path} keeps what can be kept')
+            if self.stopped:
+                raise RecordingError(missing_metadata(self.path, self.stopped))
+            raise RecordingError('none of the files metadata.yaml lists is there '
+                                 f"({', '.join(self.missing)})")
         self._combine(listing.names)
 
     def _combine(self, names):

@@ -141,6 +141,7 @@ class SplitMcapSink:
         self._tf_static = None  # the segment's last /tf_static, for each file's start
         self._file_steps = 0
         self._file_start_ns = None
+        self._stopped = False  # a write error stopped it (said in metadata.yaml)
         try:
             reserve_space(self._folder)
             self._open()
@@ -254,7 +255,10 @@ class SplitMcapSink:
             raise
 
     def _record_stop(self, failed, error):
-        """metadata.yaml once more, with what stopped the recorder (best effort)."""
+        """metadata.yaml once more, with what stopped the recorder (best effort, once)."""
+        if self._stopped:
+            return
+        self._stopped = True
         if failed is not None:
             failed.abandon()
         name = os.path.basename(failed.path) if failed is not None else 'metadata.yaml'
@@ -305,7 +309,11 @@ class SplitMcapSink:
         """Close the open file, keep its summary and at most `keep` files (None: all), and
         rewrite metadata.yaml."""
         sink, self._sink = self._sink, None
-        sink.close()
+        try:
+            sink.close()
+        except Exception as error:
+            self._record_stop(sink, error)
+            raise
         if sink.removed:
             return  # it held no segment: McapSink removed it
         self._finished.append(sink.summary())
