@@ -265,17 +265,26 @@ def _agent_lines(recording):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(
-        prog='ball_world_info', description='Summarise a ball_world MCAP recording.')
-    parser.add_argument('file', help='the .mcap recording, or a bag directory of split files')
+        prog='ball_world_info', description='Summarise a ball_world recording: MCAP, a bag '
+                                            'directory of split files, or Rerun .rrd (a '
+                                            'file, or the name of split parts NAME_<i>.rrd).')
+    parser.add_argument('file', help='the .mcap recording, a bag directory of split files, an '
+                                     '.rrd, or the .rrd name of split parts')
     args = parser.parse_args(argv)
     try:
-        recording = open_recording(args.file)
-        lines = describe(recording)
+        if args.file.endswith('.rrd'):
+            from ball_world.tools.info_rrd import describe as describe_rrd
+            lines = describe_rrd(args.file)
+        else:
+            lines = describe(open_recording(args.file))
     except RecordingError as error:
         print(f'ball_world_info: {args.file}: {error}', file=sys.stderr)
         return 2
     except ValueError as error:  # an undecodable message
         print(f'ball_world_info: {args.file}: {error}', file=sys.stderr)
+        return 2
+    except OSError as error:  # an .rrd that is not there, or not a file
+        print(f'ball_world_info: {args.file}: {error.strerror or error}', file=sys.stderr)
         return 2
     print_report('\n'.join(lines))
     return 0
