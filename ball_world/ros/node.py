@@ -17,6 +17,7 @@ from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import PublisherEventCallbacks
 import rclpy.logging
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -46,6 +47,8 @@ from ball_world.simulation import build, Simulation
 
 #: Seconds between the node's progress lines (achieved rate, real-time factor, impulses).
 REPORT_PERIOD = 10.0
+#: A step's publishing that takes this long (s) is said in the next progress line.
+SLOW_PUBLISH = 0.25
 #: Seconds between flushes of the recordings: what a SIGKILL can lose at most.
 FLUSH_PERIOD = 1.0
 #: Largest share of wall time the RViz markers may take (they are costly at 10,000 balls).
@@ -242,7 +245,10 @@ class BallWorld(Node):
                                f'{failures[0].error}')
         self.simulation.on_sink_failure = self._on_sink_failure
 
-        self.balls_pub = self.create_publisher(PoseArray, 'balls', STEP_QOS)
+        self.balls_pub = self.create_publisher(
+            PoseArray, 'balls', STEP_QOS, event_callbacks=PublisherEventCallbacks(
+                matched=self._on_balls_matched))
+        self._slowest_publish = 0.0  # s, the longest publish of a step in this window
         self.state_pub = self.create_publisher(Float64MultiArray, 'state', STEP_QOS)
         self.stats_pub = self.create_publisher(Float64MultiArray, 'stats', STEP_QOS)
         self.markers_pub = self.create_publisher(MarkerArray, 'markers', MARKER_QOS)
@@ -402,12 +408,24 @@ class BallWorld(Node):
         return record
 
     def _publish(self, record):
+        began = time.monotonic()
         self.balls_pub.publish(record.balls_cdr)
         self.state_pub.publish(record.state_cdr)
         self.stats_pub.publish(record.stats_cdr)
         self.agent_topics.publish(record)
         if self.get_parameter('publish_clock').value:
             self.clock_pub.publish(encode_clock(record.stamp_ns))
+        self._slowest_publish = max(self._slowest_publish, time.monotonic() - began)
+
+    def _on_balls_matched(self, info):
+        """A subscriber of `balls` came or went (DDS matched or unmatched it): said, so that
+        a subscriber that stops hearing the world can tell whether the node still counts
+        it (docs/reliability.md, "The probe that stopped hearing balls")."""
+        change = info.current_count_change
+        if change:
+            what = 'a subscriber joined' if change > 0 else 'a subscriber left'
+            self.get_logger().info(f'{self.balls_pub.topic_name}: {what} '
+                                   f'({info.current_count} now)')
 
     # Markers ----------------------------------------------------------------------------
 
@@ -651,7 +669,15 @@ class BallWorld(Node):
             f'impulses applied {simulation.applied}, rejected {rejected}'
             + (f' ({detail})' if detail else '')
             + f', discarded by reset {simulation.discarded}'
+            + f'; balls subscribers {self.balls_pub.get_subscription_count()}'
             + (' [paused]' if self.paused else ''))
+        if self._slowest_publish >= SLOW_PUBLISH:
+            # rmw_fastrtps publishes synchronously: a send that blocks holds stepping up
+            self.get_logger().warning(
+                f'publishing a step took up to {self._slowest_publish:.2f} s in the last '
+                f'{REPORT_PERIOD:g} s: the middleware could not send it at once (a '
+                'subscriber not taking the data, or a full socket buffer)')
+        self._slowest_publish = 0.0
         self._window = (now, self.steps_done)
 
     def _on_sink_failure(self, failure):
