@@ -8,10 +8,12 @@ mends a part left without footer in place, ball_world_info lists the parts, and
 ball_world_to_rrd --split writes one part per MCAP file the same way.
 """
 import shutil
+import time
 
 from ball_world_testing.harness import open_rrd, rrd_ball_steps, run_rerun
 import pytest
 
+from ball_world.recording import rerun_process
 from ball_world.recording.recording_set import open_recording
 from ball_world.recording.rrd_parts import part_names, RrdParts
 from ball_world.recording.split_writer import SplitMcapSink, SplitRule
@@ -126,3 +128,41 @@ def test_to_rrd_split_writes_a_part_per_mcap_file_like_the_node(followed, tmp_pa
             entities(converted), entities(folder / f'run_{number}.rrd'))
         assert made.keys() == logged.keys() and made_blueprints == blueprints == 1
         assert made['/arena/balls'] == logged['/arena/balls']
+
+
+def test_a_writer_hands_its_parts_over_to_a_spare_and_exits(tmp_path, monkeypatch):
+    """Each file the SDK writes leaves threads and memory behind in its process: a writer
+    that has written long enough (here: at once) gives the next part to its spare, which was
+    started beforehand, finishes its own part and exits. No part is lost or cut."""
+    monkeypatch.setattr(rerun_process, 'WRITER_SECONDS', 0.0)
+    parts = RrdParts(tmp_path / 'run.rrd', SplitRule(max_seconds=1.0))
+    simulation = Simulation(PARAMS, sinks=[parts])
+    stream = parts.sink._feeds[0].outlet.stream
+    writers = set()
+    for k in range(1, 81):
+        simulation.step()
+        if k % 10 == 0:  # each part's second flush: its spare ready by then (the node: 1 s)
+            deadline = time.monotonic() + 120.0
+            simulation.flush()
+            while k % 20 == 10 and not getattr(stream._spare, 'ready', False) \
+                    and time.monotonic() < deadline:
+                time.sleep(0.2)
+                simulation.flush()
+        writers.add(stream.pid)
+    simulation.close()
+    assert len(writers) >= 2
+    names = [name for _, name in part_names(tmp_path / 'run.rrd')]
+    assert names == [f'run_{i}.rrd' for i in range(5)]  # the last holds step 80 alone
+    steps = []
+    for name in names:
+        assert run_rerun('rrd', 'verify', tmp_path / name).returncode == 0, name
+        [held] = rrd_ball_steps(tmp_path / name)
+        steps += held
+    assert steps == list(range(81))
+    assert not rerun_process_children()  # the writers and the spare have all exited
+
+
+def rerun_process_children():
+    import psutil
+    return [child for child in psutil.Process().children(recursive=True)
+            if 'rerun_process' in ' '.join(child.cmdline()) and child.status() != 'zombie']

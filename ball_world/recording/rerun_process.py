@@ -267,6 +267,8 @@ class ProcessStream:
         finally:
             if name == 'disconnect':
                 self._end()
+        if name == 'flush' and self._spare is not None:
+            self._spare_ready()  # noted now (a second's flush), taken at the next part
 
     def save_file(self, claim, blueprint):
         """Write the claimed file (recording.files.OutputClaim): its descriptor is sent."""
@@ -289,7 +291,7 @@ class ProcessStream:
             raise OSError(self._failure)
         spare = self._spare
         if spare is not None and time.monotonic() - self._child.began >= WRITER_SECONDS \
-                and spare.poll_ready():
+                and self._spare_ready():
             old, self._child, self._spare = self._child, spare, None
             try:
                 old.call('disconnect', (), {})
@@ -304,6 +306,16 @@ class ProcessStream:
         else:
             self._child.call('part', (), {'default_blueprint': blueprint},
                              descriptor=claim.fileno())
+
+    def _spare_ready(self):
+        """Whether the spare can take over now; a spare that died is replaced (the child
+        writing goes on meanwhile)."""
+        try:
+            return self._spare.poll_ready()
+        except OSError:
+            self._spare.end()
+            self._spare = _Child()
+            return False
 
     def _end(self):
         self._child.end()
