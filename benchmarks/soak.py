@@ -618,12 +618,21 @@ class StallWatch:
 
 
 def _fit(times, values, since):
-    """(slope MB/min, max - min) of values from `since` s on."""
+    """(slope MB/min of the per-minute medians, max - min) of values from `since` s on.
+
+    Per-minute medians: the .rrd writer's memory is a saw-tooth (it grows through a part, a
+    fresh writer takes over every half minute or so, its spare is small while it starts),
+    and samples every 10 s catch it at random phases; a fit of every sample reads that noise
+    as growth, a fit of each minute's median does not.
+    """
     later = times >= since
     if later.sum() < 2:
         return 0.0, 0.0
-    return (float(np.polyfit(times[later] / 60.0, values[later], 1)[0]),
-            float(values[later].max() - values[later].min()))
+    minutes = np.floor(times[later] / 60.0)
+    marks = np.unique(minutes)
+    medians = np.array([np.median(values[later][minutes == mark]) for mark in marks])
+    slope = float(np.polyfit(marks, medians, 1)[0]) if len(marks) >= 2 else 0.0
+    return slope, float(values[later].max() - values[later].min())
 
 
 def run_memory(args, workdir):
@@ -733,11 +742,12 @@ def run_memory(args, workdir):
     per_minute = ' '.join(f'{t / 60:.0f}:{r:.0f}+{c:.0f}' for t, r, c, _ in samples
                           if round(t) % 60 < args.every)
     row(f'memory --minutes {args.minutes:g} --record {args.record}{split}', what,
-        f'from minute {flat_after / 60:g} on: node {slope:+.2f} MB/min (within '
-        f'{spread:.1f} MB), its children (.rrd writer and spare) {kids_slope:+.2f} MB/min '
-        f'(within {kids_spread:.1f} MB), together {total_slope:+.2f} MB/min (flat: at most '
-        f'{args.flat_slope:g}); node RSS {rss[0]:.0f} -> {rss[-1]:.0f} MB, children '
-        f'{kids[0]:.0f} -> {kids[-1]:.0f} MB; minute:node+children MB {per_minute}')
+        f'from minute {flat_after / 60:g} on, fitted to the per-minute medians: node '
+        f'{slope:+.2f} MB/min (within {spread:.1f} MB), its children (.rrd writer and spare) '
+        f'{kids_slope:+.2f} MB/min (within {kids_spread:.1f} MB), together '
+        f'{total_slope:+.2f} MB/min (flat: at most {args.flat_slope:g}); node RSS '
+        f'{rss[0]:.0f} -> {rss[-1]:.0f} MB, children {kids[0]:.0f} -> {kids[-1]:.0f} MB; '
+        f'minute:node+children MB {per_minute}')
     return 0 if fine else 1
 
 
