@@ -491,6 +491,9 @@ def open_folder_of(path, folder_path):
     except FileRefused as error:
         if error.errno in (errno.ENOENT, errno.EACCES):
             raise FileRefused(error.errno, error.strerror, os.fspath(path)) from None
+        if error.errno == errno.ENOTDIR:
+            raise FileRefused(error.errno, f'its folder {folder_path} {error.strerror}',
+                              os.fspath(path)) from None
         raise
 
 
