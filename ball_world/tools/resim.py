@@ -493,8 +493,11 @@ def _scan_text(data):
 
 
 def describe(comparison):
-    lines = []
-    for result in comparison.segments:
+    entries = []  # (segment, step, order, line): what was compared and what was not, in order
+    for order, unchecked in enumerate(comparison.unchecked):
+        step = unchecked.first if unchecked.first is not None else unchecked.last
+        entries.append((unchecked.segment, step, order, unchecked.describe()))
+    for order, result in enumerate(comparison.segments):
         if result.skipping is not None and not result.steps:
             continue  # said with the steps not checked
         verdict = ('identical' if not result.differing_steps
@@ -507,10 +510,11 @@ def describe(comparison):
         if result.resumed:
             picked = (f' (picked up at step {result.first_step} from the state a split file '
                       'resumes from)')
-        lines.append(f'segment {result.index}: {result.steps} steps compared (last step '
-                     f'{result.last_step}), {result.impulses} impulses{edits}: '
-                     f'{verdict}{picked}')
-    lines.extend(unchecked.describe() for unchecked in comparison.unchecked)
+        entries.append((result.index, result.first_step or 0, order,
+                        f'segment {result.index}: {result.steps} steps compared (last step '
+                        f'{result.last_step}), {result.impulses} impulses{edits}: '
+                        f'{verdict}{picked}'))
+    lines = [line for _, _, _, line in sorted(entries, key=lambda entry: entry[:3])]
     total = sum(result.steps for result in comparison.segments)
     if comparison.identical and not comparison.unchecked:
         lines.append(f'all {total} recorded steps re-simulate bit-identically (largest '
