@@ -116,10 +116,13 @@ class _Child:
     def __init__(self):
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
+            # The SDK's own log lines (several, coloured, per failure) stay out of the
+            # node's terminal unless asked for (RUST_LOG): the node reports a failure itself.
             self.process = subprocess.Popen(
                 [sys.executable, '-m', __name__, str(theirs.fileno())], stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE, close_fds=True, pass_fds=(theirs.fileno(),),
-                process_group=0)
+                process_group=0, env={**os.environ, 'RUST_LOG': os.environ.get('RUST_LOG',
+                                                                               'off')})
         except BaseException:
             ours.close()
             raise
