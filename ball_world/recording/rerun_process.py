@@ -405,6 +405,28 @@ class Gathered:
         self.stream.send_columns(entity, times, components)
 
 
+#: How a finished .rrd ends (rerun-sdk 0.41): its footer's magic, then 4 bytes.
+FOOTER_MAGIC = b'RRF2FOOT'
+
+
+def _check_finished(descriptor):
+    """Raise OSError unless the file written through `descriptor` ends with its footer.
+
+    The SDK's file writer can die on a write error (a full disk, EFBIG) and disconnect then
+    return as if all went well: the file, read back, says whether it was finished.
+    """
+    if descriptor is None:
+        return
+    with open(f'{_PROC_FDS}/{descriptor}', 'rb') as written:
+        size = os.fstat(written.fileno()).st_size
+        head = written.read(4)
+        written.seek(max(0, size - 12))
+        tail = written.read(12)
+    if head == b'RRF2' and tail[:8] != FOOTER_MAGIC:
+        raise OSError(f'the file was left unfinished (no footer after {size:,} bytes): the '
+                      'writer could not write it')
+
+
 def _receive(channel):
     """A descriptor sent by the node (SCM_RIGHTS) over `channel`."""
     _, descriptors, _, _ = socket.recv_fds(channel, 1, 1)
@@ -443,6 +465,7 @@ def serve(source, answers, channel=None):
                     stream.flush(timeout_sec=float(FINISH_SECONDS))
                     stream.disconnect()
                     signal.alarm(0)
+                    _check_finished(descriptor)
                     if descriptor is not None:
                         os.close(descriptor)
                         descriptor = None
@@ -458,6 +481,8 @@ def serve(source, answers, channel=None):
                     signal.alarm(FINISH_SECONDS)
                     gathered.send_all()
                 getattr(stream, name)(*args, **kwargs)
+                if name == 'disconnect':
+                    _check_finished(descriptor)
             if gathered is not None:
                 gathered.send_due()
         except Exception as error:  # noqa: B902 - any SDK failure ends this file only

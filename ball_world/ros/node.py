@@ -694,10 +694,12 @@ class BallWorld(Node):
         self.agent_topics.destroy()
         dropped = getattr(self, '_dropped_steps', 0)
         if dropped:
+            # The rate may have changed since (rate_hz is set at run time; 0: no schedule).
+            schedule = (f'the {1.0 / self._step_period:g} Hz schedule' if self._step_period
+                        else 'its schedule')
             self.get_logger().warning(
-                f'in all, {dropped} steps of wall time were dropped behind the '
-                f'{1.0 / self._step_period:g} Hz schedule (the world kept every step it took, '
-                'and the recordings hold them all)'
+                f'in all, {dropped} steps of wall time were dropped behind {schedule} (the '
+                'world kept every step it took, and the recordings hold them all)'
                 + (f'; the recordings held stepping back for {waited:.1f} s: their writer '
                    'could not keep up' if waited >= 0.1 else ''))
 
