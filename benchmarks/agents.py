@@ -15,6 +15,8 @@ import sys
 import tempfile
 import time
 
+from benchmarks.scenes import box_side, RADIUS
+
 from ball_world.recording.mcap_writer import McapSink
 from ball_world.simulation import Simulation
 
@@ -28,7 +30,6 @@ NOTE = ('Median ms of Simulation.step (the drive rule, its impulses, the physics
 
 def world(n, agents, seed, path):
     """n balls (radii 0.25-0.5 m) in the benchmark's box for n, the first `agents` agents."""
-    from benchmarks.bench import box_side, RADIUS  # bench imports this module for its report
     side = box_side(n)
     simulation = Simulation({'arena': [0.0, 0.0, side, side], 'random.count': n,
                              'random.radius': [RADIUS / 2, RADIUS], 'random.speed': 1.0,

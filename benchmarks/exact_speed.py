@@ -28,6 +28,7 @@ import sys
 import time
 
 from benchmarks.gas import Gas
+from benchmarks.scenes import radius_spread_world
 import numpy as np
 
 from ball_world.core import exact
@@ -93,8 +94,6 @@ def bidisperse_worlds(n, seed=1):
 
 def spread_worlds(n):
     """Two copies of bench.py's radius-ratio-100 world of about n balls (numba backend)."""
-    # Imported here: bench imports this module at its top.
-    from benchmarks.bench import radius_spread_world
     arrays = radius_spread_world(n, np.random.default_rng(1))
     return [World(*arrays[:4], walls=arrays[4], backend='numba') for _ in range(2)]
 

@@ -16,6 +16,7 @@ import statistics
 import sys
 import time
 
+from benchmarks.scenes import DT, OurEngine, Scene
 import numpy as np
 
 from ball_world.core import lidar
@@ -46,7 +47,6 @@ def _median_seconds(call, repeats, inner):
 
 def measure(n, repeats, seed=1, warmup_steps=20):
     """(balls within range, step s, numba scan s or None, numpy scan s) at N balls."""
-    from benchmarks.bench import DT, OurEngine, Scene  # bench imports this module
     scene = Scene(n, seed)
     engine = OurEngine(scene, resolve_backend(AUTO))
     world = engine.world

@@ -162,8 +162,8 @@ class Listener:
         self.first_arrivals = []
         self.real_time_factor = math.nan
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-        self.probe.node.create_subscription(PoseArray, f'{namespace}/balls', self._on_balls,
-                                            qos, raw=True)
+        self.subscription = self.probe.node.create_subscription(
+            PoseArray, f'{namespace}/balls', self._on_balls, qos, raw=True)
         if stats:
             self.probe.node.create_subscription(Float64MultiArray, f'{namespace}/stats',
                                                 self._on_stats, qos, raw=True)
@@ -565,39 +565,122 @@ def run_steps(args, workdir):
 
 # memory ---------------------------------------------------------------------------------------
 
+def children_rss(pid):
+    """{pid: (RSS MiB, what)} of every process `pid` started (its .rrd writer and spare)."""
+    import psutil
+    found = {}
+    for child in psutil.Process(pid).children(recursive=True):
+        try:
+            what = 'rrd writer' if 'rerun_process' in ' '.join(child.cmdline()) else \
+                child.name()
+            found[child.pid] = (child.memory_info().rss / 2**20, what)
+        except psutil.Error:
+            pass
+    return found
+
+
+class StallWatch:
+    """Tells when the probe stops hearing `balls` while the node goes on, and finds out whose
+    side stopped: whether the probe's subscription still matches the node's publisher,
+    whether the node said a subscriber left, whether a fresh probe (another participant)
+    hears the node. Its findings go into the row."""
+
+    #: Seconds without a message that count as the probe having stopped hearing.
+    QUIET = 10.0
+
+    def __init__(self, listener, node, namespace):
+        self.listener, self.node, self.namespace = listener, node, namespace
+        self.heard, self.since = listener.heard, time.monotonic()
+        self.findings = []
+
+    def check(self):
+        now = time.monotonic()
+        if self.listener.heard != self.heard:
+            self.heard, self.since = self.listener.heard, now
+            return
+        if now - self.since < self.QUIET:
+            return
+        self.since = now  # look again in QUIET s if it stays silent
+        matched = self.listener.subscription.get_publisher_count()
+        left = [line for line in self.node.log().splitlines() if 'a subscriber left' in line]
+        fresh = Listener(self.namespace)
+        try:
+            fresh.probe.spin_for(5.0)
+            fresh_heard = fresh.heard
+        finally:
+            fresh.close()
+        finding = (f'at {time.strftime("%H:%M:%S")} the probe had heard nothing for '
+                   f'{self.QUIET:g} s (last step {self.listener.last_step}); its subscription '
+                   f'matched {matched} publisher(s); the node said a subscriber left '
+                   f'{len(left)}x; a fresh probe heard {fresh_heard} messages in 5 s')
+        self.findings.append(finding)
+        progress(f'memory: STALL: {finding}')
+
+
+def _fit(times, values, since):
+    """(slope MB/min of the per-minute medians, max - min) of values from `since` s on.
+
+    Per-minute medians: the .rrd writer's memory is a saw-tooth (it grows through a part, a
+    fresh writer takes over every half minute or so, its spare is small while it starts),
+    and samples every 10 s catch it at random phases; a fit of every sample reads that noise
+    as growth, a fit of each minute's median does not.
+    """
+    later = times >= since
+    if later.sum() < 2:
+        return 0.0, 0.0
+    minutes = np.floor(times[later] / 60.0)
+    marks = np.unique(minutes)
+    medians = np.array([np.median(values[later][minutes == mark]) for mark in marks])
+    slope = float(np.polyfit(marks, medians, 1)[0]) if len(marks) >= 2 else 0.0
+    return slope, float(values[later].max() - values[later].min())
+
+
 def run_memory(args, workdir):
+    """The node recording over minutes: its memory and its children's, the files it keeps.
+
+    With --split-seconds the MCAP is a bag directory and the .rrd is split at the same steps
+    (parts memory_<i>.rrd), at most --max-files of each kept; every part is then checked
+    with `rerun rrd verify`, and the parts must begin at the steps their MCAP files do.
+    Memory is flat when, from --flat-after minutes on, the fitted growth of the node and of
+    its children together stays under --flat-slope MB a minute.
+    """
     from ball_world.recording.recording_set import open_recording
+    from ball_world.recording.rrd_parts import part_names
     ns = namespace()
     mcap_path, rrd_path = Path(workdir) / 'memory.mcap', Path(workdir) / 'memory.rrd'
     recordings = {}
     if args.record in ('mcap', 'both'):
         recordings['record.mcap'] = mcap_path
-        if args.split_seconds:  # a bag directory of split files (issue 23)
-            recordings.update({'record.max_seconds': args.split_seconds,
-                               'record.max_files': args.max_files})
     if args.record in ('rrd', 'both'):
         recordings['record.rerun'] = rrd_path
+    if args.split_seconds and recordings:  # a bag directory, .rrd parts (issue 23, 26)
+        recordings.update({'record.max_seconds': args.split_seconds,
+                           'record.max_files': args.max_files})
     node = NodeProcess(workdir, ns, 'memory', {**world_parameters(args), 'rate_hz': 100.0,
                                                **recordings})
     listener = Listener(ns)
-    samples = []
-    writer = []  # RSS of the node's .rrd writer process at each sample
+    samples = []  # (s since the first step, node RSS MiB, children's RSS MiB, children)
+    load = []
     try:
         listener.spin_until(lambda: listener.heard > 0, 'the first step', node)
+        watch = StallWatch(listener, node, ns)
         began = time.monotonic()
         end = began + args.minutes * 60.0
         next_sample = began + args.every
         while time.monotonic() < end:
             node.check_alive()
             listener.spin(0.1)
+            watch.check()
             if time.monotonic() >= next_sample:
-                samples.append((time.monotonic() - began, rss_mb(node.pid)))
-                writer.append(writer_rss_mb(node.pid))
+                children = children_rss(node.pid)
+                samples.append((time.monotonic() - began, rss_mb(node.pid),
+                                sum(rss for rss, _ in children.values()), len(children)))
+                load.append(os.getloadavg()[0])
                 next_sample += args.every
-                progress(f'memory: {samples[-1][0]:.0f} s, RSS {samples[-1][1]:.1f} MB '
-                         f'(.rrd writer {writer[-1]:.1f} MB), '
+                progress(f'memory: {samples[-1][0]:.0f} s, node RSS {samples[-1][1]:.1f} MB, '
+                         f'{len(children)} children {samples[-1][2]:.1f} MB, '
                          f'step {listener.last_step}, MCAP {_size_mb(mcap_path):.0f} MB, '
-                         f'.rrd {_size_mb(rrd_path):.0f} MB')
+                         f'.rrd {_rrd_mb(rrd_path):.0f} MB, load {load[-1]:.1f}')
         steps = listener.last_step
         code = node.stop(signal.SIGINT)
     finally:
@@ -605,47 +688,88 @@ def run_memory(args, workdir):
         listener.close()
     if len(samples) < 2:
         raise SoakError('fewer than two RSS samples: give --minutes more than --every')
-    times = np.array([t for t, _ in samples])
-    rss = np.array([r for _, r in samples])
-    growth = (rss[-1] - rss[0]) / rss[0] * 100.0
-    warm = min(60.0, times[-1] / 2)  # the first minute (or half) is warm-up
-    later = times >= warm
-    slope = np.polyfit(times[later] / 60.0, rss[later], 1)[0] if later.sum() >= 2 else 0.0
-    writer = np.array(writer)
-    writer_slope = (np.polyfit(times[later] / 60.0, writer[later], 1)[0]
-                    if later.sum() >= 2 else 0.0)
+    times = np.array([t for t, _, _, _ in samples])
+    rss = np.array([r for _, r, _, _ in samples])
+    kids = np.array([c for _, _, c, _ in samples])
+    flat_after = min(args.flat_after * 60.0, times[-1] / 2)
+    slope, spread = _fit(times, rss, flat_after)
+    kids_slope, kids_spread = _fit(times, kids, flat_after)
+    total_slope, _ = _fit(times, rss + kids, flat_after)
     checks = [f'SIGINT exit {code}']
-    fine = code == 0
+    fine = code == 0 and not watch.findings
     if 'record.mcap' in recordings:
         recording = open_recording(mcap_path)
         finished = recording.has_summary
-        fine = fine and finished
-        split = (f' in {len(recording.files)} files kept of {args.split_seconds:g} s each '
+        kept = len(getattr(recording, 'files', [recording]))
+        fine = fine and finished and (not args.split_seconds or kept <= args.max_files)
+        split = (f' in {kept} files kept of {args.split_seconds:g} s each '
                  f'(record.max_files {args.max_files})' if args.split_seconds else '')
         checks.append(f'MCAP {_size_mb(mcap_path):,.0f} MB{split}, summary {finished}')
     if 'record.rerun' in recordings:
-        verify = rerun_cli('rrd', 'verify', rrd_path)
-        fine = fine and verify[0] == 0
-        checks.append(f'.rrd {_size_mb(rrd_path):,.0f} MB, `rerun rrd verify` '
-                      + ('passes' if verify[0] == 0 else f'FAILS: {verify[1][-200:]}'))
+        parts = ([Path(workdir) / name for _, name in part_names(rrd_path)]
+                 if args.split_seconds else [rrd_path])
+        verified = [rerun_cli('rrd', 'verify', part) for part in parts]
+        passed = sum(code == 0 for code, _ in verified)
+        fine = fine and parts and passed == len(parts) and (
+            not args.split_seconds or len(parts) <= args.max_files)
+        failed = [said for code, said in verified if code != 0]
+        checks.append(f'.rrd {_rrd_mb(rrd_path):,.0f} MB in {len(parts)} file(s) kept '
+                      f'({", ".join(p.name for p in parts)}), `rerun rrd verify` passes '
+                      f'{passed}/{len(parts)}' + (f' ({failed[0][-200:]})' if failed else ''))
+        if args.split_seconds and 'record.mcap' in recordings:
+            same = _parts_follow(recording, parts)
+            fine = fine and same
+            checks.append('each part begins at the step its MCAP file begins at'
+                          if same else 'the parts do NOT begin where the MCAP files do')
     if not args.keep:
-        for path in (mcap_path, rrd_path):
+        for path in [mcap_path, rrd_path, *Path(workdir).glob('memory_*.rrd')]:
             if path.is_dir():
                 shutil.rmtree(path)
             elif path.exists():
                 path.unlink()
+    fine = fine and slope <= args.flat_slope and total_slope <= args.flat_slope
     rtf = node.real_time_factors()
     recorded = {'both': 'MCAP and .rrd', 'mcap': 'MCAP', 'rrd': '.rrd', 'none': 'nothing'}
     what = (f'{args.balls} balls at 100 Hz recording {recorded[args.record]} for '
-            f'{args.minutes:g} min ({steps:,} steps); real-time factor '
-            + (f'{min(rtf):.2f}-{max(rtf):.2f}' if rtf else 'n/a') + '; ' + ', '.join(checks))
-    split = f' --split-seconds {args.split_seconds:g}' if args.split_seconds else ''
+            f'{args.minutes:g} min ({steps:,} steps, the probe in another process hearing '
+            + ('them all' if not watch.findings else
+               f'NOT all: {"; ".join(watch.findings)}')
+            + '); real-time factor '
+            + (f'{min(rtf):.2f}-{max(rtf):.2f}' if rtf else 'n/a')
+            + f'; load average {min(load):.1f}-{max(load):.1f}; ' + ', '.join(checks))
+    split = (f' --split-seconds {args.split_seconds:g} --max-files {args.max_files}'
+             if args.split_seconds else '')
+    per_minute = ' '.join(f'{t / 60:.0f}:{r:.0f}+{c:.0f}' for t, r, c, _ in samples
+                          if round(t) % 60 < args.every)
     row(f'memory --minutes {args.minutes:g} --record {args.record}{split}', what,
-        f'RSS {rss[0]:.0f} MB at {times[0]:.0f} s -> {rss[-1]:.0f} MB at {times[-1]:.0f} s: '
-        f'{growth:+.1f}% ({slope:+.2f} MB/min fitted from {warm:.0f} s on)'
-        + (f'; its .rrd writer process {writer[0]:.0f} -> {writer[-1]:.0f} MB '
-           f'({writer_slope:+.2f} MB/min)' if writer.any() else ''))
+        f'from minute {flat_after / 60:g} on, fitted to the per-minute medians: node '
+        f'{slope:+.2f} MB/min (within {spread:.1f} MB), its children (.rrd writer and spare) '
+        f'{kids_slope:+.2f} MB/min (within {kids_spread:.1f} MB), together '
+        f'{total_slope:+.2f} MB/min (flat: at most {args.flat_slope:g}); node RSS '
+        f'{rss[0]:.0f} -> {rss[-1]:.0f} MB, children {kids[0]:.0f} -> {kids[-1]:.0f} MB; '
+        f'minute:node+children MB {per_minute}')
     return 0 if fine else 1
+
+
+def _parts_follow(recording, parts):
+    """Whether each .rrd part holds the steps of the MCAP file of its number."""
+    files = {int(Path(f.path).stem.rpartition('_')[2]): f for f in recording.files}
+    for part in parts:
+        number = int(part.stem.rpartition('_')[2])
+        if number not in files:
+            return False
+        mcap = [s.step for s in files[number].steps() if s.complete]
+        rrd = rrd_steps(part)
+        if not isinstance(rrd, list) or rrd != mcap:
+            return False
+    return True
+
+
+def _rrd_mb(path):
+    """An .rrd's size, or that of its parts beside it, MB."""
+    if path.exists():
+        return _size_mb(path)
+    return sum(_size_mb(part) for part in path.parent.glob(f'{path.stem}_*.rrd'))
 
 
 def _sink_for_memory(args, path):
@@ -1277,11 +1401,12 @@ def main(argv=None):
         description='Long reliability runs of the ball_world node. Each prints progress to '
                     'stderr and a Markdown table row (case | what happened | figure) to '
                     'stdout; exit 0 if its checks held, 1 if not, 2 if it could not run.')
-    parser.add_argument('--dir', help='where to write recordings and node logs (default: a '
-                                      'new temporary directory, removed at the end)')
+    parser.add_argument('--dir', help="where to make the run's new directory for its "
+                                      "recordings and node logs (default: the system's "
+                                      'temporary directory); removed at the end unless --keep')
     parser.add_argument('--keep', action='store_true',
                         help='keep the recordings (and the temporary directory)')
-    cases = parser.add_subparsers(dest='case', required=True)
+    cases = parser.add_subparsers(dest='case')
     kill = cases.add_parser('kill', help='SIGKILL the recording node at random moments, '
                                          'repair each file, count the steps lost')
     kill.add_argument('--times', type=int, default=10)
@@ -1300,16 +1425,30 @@ def main(argv=None):
     steps.add_argument('--balls', type=int, default=1000)
     steps.add_argument('--seed', type=int, default=0)
     memory = cases.add_parser('memory', help='RSS of a recording node over minutes')
-    memory.add_argument('--minutes', type=float, default=10.0)
-    memory.add_argument('--every', type=float, default=10.0, help='seconds between samples')
-    memory.add_argument('--balls', type=int, default=1000)
-    memory.add_argument('--record', choices=('both', 'mcap', 'rrd', 'none'), default='both',
-                        help='what the node records (default both), to tell whose memory grows')
-    memory.add_argument('--split-seconds', type=float, default=0.0, metavar='S',
-                        help='record the MCAP as a bag directory split every S simulated '
-                             'seconds (record.max_seconds; default 0: one file)')
-    memory.add_argument('--max-files', type=int, default=0, metavar='K',
-                        help='with --split-seconds: keep the newest K files (record.max_files)')
+    recordings = cases.add_parser(
+        'recordings', help='the long-run check (the default case): 20 min recording MCAP and '
+                           '.rrd split every 60 s keeping 3 of each; the node and its children '
+                           'flat from minute 5, every .rrd part verified, at most 3 kept')
+    for case, minutes, split, kept in ((memory, 10.0, 0.0, 0), (recordings, 20.0, 60.0, 3)):
+        case.add_argument('--minutes', type=float, default=minutes)
+        case.add_argument('--every', type=float, default=10.0, help='seconds between samples')
+        case.add_argument('--balls', type=int, default=1000)
+        case.add_argument('--record', choices=('both', 'mcap', 'rrd', 'none'), default='both',
+                          help='what the node records (default both), to tell whose memory '
+                               'grows')
+        case.add_argument('--split-seconds', type=float, default=split, metavar='S',
+                          help='split the MCAP (a bag directory) and the .rrd (parts) every S '
+                               f'simulated seconds (record.max_seconds; default {split:g}: '
+                               + ('one file)' if not split else 'split)'))
+        case.add_argument('--max-files', type=int, default=kept, metavar='K',
+                          help='with --split-seconds: keep the newest K files of each '
+                               f'(record.max_files; default {kept})')
+        case.add_argument('--flat-after', type=float, default=5.0, metavar='MIN',
+                          help='memory is judged from this minute on (default 5)')
+        case.add_argument('--flat-slope', type=float, default=0.25, metavar='MB',
+                          help='flat: the fitted growth of the node, and of the node and its '
+                               'children together, at most this many MB a minute (default '
+                               '0.25)')
     sinkmemory = cases.add_parser('sinkmemory', help='RSS of a Simulation writing through '
                                                      'one kind of sink, without ROS')
     sinkmemory.add_argument('--minutes', type=float, default=10.0,
@@ -1362,12 +1501,14 @@ def main(argv=None):
                           help='s into the run when the second page opens (default 300)')
     liveview.add_argument('--late-shots', type=_seconds, default=[10.0, 40.0],
                           help='shots of the late page, s after it loaded (default 10,40)')
-    for case in (kill, flood, steps, memory, sinkmemory, rtf, fulldisk, viewer):
+    for case in (kill, flood, steps, memory, recordings, sinkmemory, rtf, fulldisk, viewer):
         case.add_argument('--backend', choices=('auto', 'numpy', 'numba'), default='auto',
                           help='physics.backend of the world (default auto, as the node)')
         case.add_argument('--mode', choices=('seed', 'exact'), default='seed',
                           help='physics.mode of the world (default seed, as the node)')
-    args = parser.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    args = parser.parse_args(argv if any(a in cases.choices for a in argv) or '-h' in argv
+                             or '--help' in argv else [*argv, 'recordings'])
     # Started as a background job (nohup, `make soak &`), this process ignores SIGINT and its
     # children would inherit that: the node could then not be stopped as Ctrl-C stops it.
     if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
@@ -1376,10 +1517,14 @@ def main(argv=None):
         if getattr(args, name, 1) < 1:
             parser.error(f'--{name} must be at least 1')
     runs = {'kill': run_kill, 'flood': run_flood, 'steps': run_steps, 'memory': run_memory,
+            'recordings': run_memory,
             'sinkmemory': run_sink_memory, 'rtf': run_rtf, 'startup': run_startup,
             'fulldisk': run_fulldisk, 'viewer': run_viewer, 'liveview': run_liveview}
-    workdir = args.dir or tempfile.mkdtemp(prefix='ball_world_soak_')
-    os.makedirs(workdir, exist_ok=True)
+    if args.dir:
+        os.makedirs(args.dir, exist_ok=True)
+    # A directory of its own, new (mkdtemp), even inside --dir: nothing planted in it
+    # beforehand (a symlink at a recording's or log's name) can redirect a write.
+    workdir = tempfile.mkdtemp(prefix='ball_world_soak_', dir=args.dir or None)
     try:
         return runs[args.case](args, workdir)
     except (SoakError, AssertionError) as error:  # AssertionError: the harness's HarnessError
@@ -1389,9 +1534,9 @@ def main(argv=None):
         print(f'ball_world_soak {args.case}: interrupted', file=sys.stderr)
         return 2
     finally:
-        if not args.dir and not args.keep:
+        if not args.keep:
             shutil.rmtree(workdir, ignore_errors=True)
-        elif args.keep:
+        else:
             progress(f'kept {workdir}')
 
 

@@ -37,22 +37,39 @@ def recorded(path, steps=5):
 
 # The rules -------------------------------------------------------------------------------
 
-def test_existing_files_and_symlinks_are_refused_unless_overwrite(tmp_path):
+def test_existing_files_are_refused_unless_overwrite_and_symlinks_always(tmp_path):
     old = tmp_path / 'old.mcap'
     old.write_bytes(OLD)
+    with pytest.raises(FileRefused) as raised:
+        claim_output(old, hint='set record.overwrite:=true')
+    assert str(raised.value) == \
+        f'{old}: already exists; set record.overwrite:=true to replace it'
     to_old = tmp_path / 'link.mcap'
     to_old.symlink_to(old)
     dangling = tmp_path / 'dangling.mcap'
     dangling.symlink_to(tmp_path / 'nowhere.mcap')
-    for path in (old, to_old, dangling):
-        with pytest.raises(FileRefused) as raised:
-            claim_output(path, hint='set record.overwrite:=true')
-        assert str(raised.value) == \
-            f'{path}: already exists; set record.overwrite:=true to replace it'
+    for path in (to_old, dangling):
+        for overwrite in (False, True):  # told to overwrite, still never through a link
+            with pytest.raises(FileRefused) as raised:
+                claim_output(path, overwrite=overwrite, hint='set record.overwrite:=true')
+            assert str(raised.value).startswith(f'{path}: is a symbolic link (to ')
+            assert 'ball_world never writes through one' in str(raised.value)
     assert old.read_bytes() == OLD and not (tmp_path / 'nowhere.mcap').exists()
-    claim = claim_output(to_old, overwrite=True)  # told to: through the link, truncated
+    assert to_old.is_symlink() and dangling.is_symlink()
+    claim = claim_output(old, overwrite=True)  # told to: the file itself, truncated
     claim.release()
-    assert old.read_bytes() == b'' and to_old.is_symlink()
+    assert old.read_bytes() == b''
+
+
+def test_a_file_with_other_names_is_never_truncated(tmp_path):
+    old = tmp_path / 'old.mcap'
+    old.write_bytes(OLD)
+    os.link(old, tmp_path / 'backup.mcap')
+    with pytest.raises(FileRefused) as raised:
+        claim_output(old, overwrite=True)
+    assert str(raised.value) == (f'{old}: has 2 names (hard links); overwriting it would '
+                                 'change the others too')
+    assert (tmp_path / 'backup.mcap').read_bytes() == OLD
 
 
 def test_non_regular_files_are_refused_at_once_even_with_overwrite(tmp_path):
@@ -133,8 +150,13 @@ def test_node_refuses_existing_recordings_unless_record_overwrite(tmp_path):
     assert refusal(f'record.mcap:={mcap}') == (
         f"ball_world: parameter 'record.mcap': cannot record to {mcap}: already exists; set "
         'record.overwrite:=true to replace it')
-    assert refusal(f'record.rerun:={rrd}').startswith(
-        f"ball_world: parameter 'record.rerun': cannot record to {rrd}: already exists")
+    assert refusal(f'record.rerun:={rrd}') == (
+        f"ball_world: parameter 'record.rerun': cannot record to {rrd}: is a symbolic link "
+        f'(to {mcap}); ball_world never writes through one: name the file itself or remove '
+        'the link')
+    # told to overwrite, the link is still refused and what it points to left as it was
+    assert refusal(f'record.rerun:={rrd}', 'record.overwrite:=true').startswith(
+        f"ball_world: parameter 'record.rerun': cannot record to {rrd}: is a symbolic link")
     assert mcap.read_bytes() == OLD
     code, _, err = finish(start_node('max_steps:=3', 'rate_hz:=0.0', 'dt:=0.01',
                                      f'record.mcap:={mcap}', 'record.overwrite:=true'),

@@ -17,8 +17,8 @@ import sys
 import textwrap
 import time
 
-from ball_world_testing.harness import (finish, rewrite_recording, ROSBAGS_TYPES, start_node,
-                                        Truth)
+from ball_world_testing.harness import (finish, rewrite_recording, ROSBAGS_TYPES,
+                                        rrd_ball_steps, start_node, Truth)
 from geometry_msgs.msg import PoseArray
 from mcap.reader import make_reader
 import numpy as np
@@ -389,15 +389,36 @@ def test_max_files_keeps_the_newest_and_says_so(tmp_path, capsys):
     assert steps[0].step == 80 and bits_equal(steps[0].positions, truth.records[80].positions)
 
 
-def test_a_missing_file_is_refused_naming_it(tmp_path, capsys):
+def test_a_missing_middle_file_is_a_gap_resim_picks_the_run_up_after(tmp_path, capsys):
     directory = tmp_path / 'gap'
-    record(directory, steps=50, reset_steps=0, max_seconds=1.0)
-    (directory / 'gap_1.mcap').unlink()
-    for tool, prog in ((resim, 'ball_world_resim'), (info, 'ball_world_info')):
-        assert tool.main([str(directory)]) == 2
-        err = capsys.readouterr().err.strip().splitlines()
-        assert err == [f'{prog}: {directory}: gap_1.mcap, listed in metadata.yaml, is '
-                       'missing: the set is incomplete']
+    truth, _ = record(directory, steps=50, reset_steps=0, max_seconds=1.0)
+    (directory / 'gap_1.mcap').unlink()  # steps 20-39
+    assert resim.main([str(directory)]) == 3
+    out = capsys.readouterr().out
+    assert 'segment 0: 20 steps compared (last step 19), ' in out
+    assert ('segment 0: steps 20-39 NOT CHECKED: gap_1.mcap, listed in metadata.yaml, is '
+            'missing') in out
+    assert ('segment 0: 11 steps compared (last step 50), 1 impulses: identical (picked up '
+            'at step 40 from the state a split file resumes from)') in out
+    assert out.strip().endswith('NOT ALL STEPS COULD BE CHECKED (see above)')
+    assert info.main([str(directory)]) == 0
+    out = capsys.readouterr().out
+    assert '  MISSING: gap_1.mcap, listed in metadata.yaml: the steps it held are lost' in out
+    assert ('  GAP: segment 0: steps 20-39 are not in the set (gap_1.mcap, listed in '
+            'metadata.yaml, is missing)') in out
+    assert '  0: from log time 0 s, steps 0-19' in out and '  0: ' in out and 'steps 40-50' in out
+    # to_rrd converts what is there, on the run's step timeline, and says what is not
+    assert to_rrd.main([str(directory), '-o', str(tmp_path / 'gap.rrd')]) == 0
+    err = capsys.readouterr().err
+    assert 'warning: segment 0: steps 20-39 are not in the set' in err
+    # (51: the reset's step 0, on the timeline after the last step)
+    assert rrd_steps(tmp_path / 'gap.rrd') == list(range(20)) + list(range(40, 52))
+
+
+def rrd_steps(path):
+    """The steps of the balls' positions in an .rrd (one recording)."""
+    [steps] = rrd_ball_steps(path)
+    return steps
 
 
 def crafted_resume(state):

@@ -232,7 +232,7 @@ def test_max_files_without_a_split_is_said_at_start(tmp_path, processes):
                                  'record.max_files:=2', *parameters,
                                  ros_args=['-r', f'__ns:=/run{k}'])
             for k, parameters in enumerate(((f'record.mcap:={path}',),
-                                            ('record.max_seconds:=0.1', f'record.mcap:={bag}'),
+                                            ('record.max_seconds:=1.0', f'record.mcap:={bag}'),
                                             ()))]
     code, out, err = finish(runs[0], NODE_TIMEOUT)
     assert code == 0, err
@@ -249,10 +249,10 @@ def test_max_files_without_a_split_is_said_at_start(tmp_path, processes):
 
 def test_a_node_run_with_agents_split_resimulates_file_by_file(probe, processes, tmp_path,
                                                                capsys):
-    """The node, cmd_vel from another participant, files of 25 steps: each file alone."""
+    """The node, cmd_vel from another participant, files of 50 steps: each file alone."""
     directory = tmp_path / 'node'
     process = processes.start(node_command(*AGENT_WORLD, f'record.mcap:={directory}',
-                                           'record.max_seconds:=0.5'))
+                                           'record.max_seconds:=1.0'))
     odom = probe.listen(Odometry, 'ball_1/odom')
     command = probe.node.create_publisher(Twist, 'ball_1/cmd_vel', 10)
     probe.spin_until(lambda: command.get_subscription_count() > 0 and odom,
@@ -274,7 +274,7 @@ def test_a_node_run_with_agents_split_resimulates_file_by_file(probe, processes,
                             capsys.readouterr().out)
     last = int(resimulated.group(1)) - 1
     names = metadata(directory)['relative_file_paths']
-    assert len(names) == last // 25 + 1  # steps 0-24, 25-49, ..., then the last ones
+    assert len(names) == last // 50 + 1  # steps 0-49, 50-99, ..., then the last ones
     commanded = 0
     for name in names:
         assert resim.main([str(directory / name)]) == 0, (name, capsys.readouterr())
@@ -287,13 +287,12 @@ def test_a_node_run_with_agents_split_resimulates_file_by_file(probe, processes,
 def test_the_node_records_a_closing_record_in_a_split_run(probe, processes, tmp_path):
     """Pause, step, push, spawn, delete, Ctrl-C: through the node's writer thread too.
 
-    Started paused: a world running at 60 Hz until the probe finds it wrote a file every
-    step for as long as discovery took (hundreds on a busy machine), each then re-simulated.
+    Started paused, steps of 1 s split at the least record.max_seconds: a file every step.
     """
-    directory = _node_edits_then_stops(probe, processes, tmp_path, 'sigint',
-                                       'record.max_seconds:=0.01', 'start_paused:=true')
+    directory = _node_edits_then_stops(probe, processes, tmp_path, 'sigint', 'dt:=1.0',
+                                       'record.max_seconds:=1.0', 'start_paused:=true')
     names = metadata(directory)['relative_file_paths']
-    assert len(names) == 2  # a file every step (dt 1/60 s): steps 0 and 1, then the edits
+    assert len(names) == 2  # a file every step (dt 1 s): steps 0 and 1, then the edits
     steps = list(open_recording(directory).steps())
     last = steps[-2].step
     assert [(s.step, len(s.impulses), len(s.edits)) for s in steps if s.closing] == [

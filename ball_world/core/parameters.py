@@ -98,6 +98,8 @@ class Parameter:
     max_size: Optional[int] = None  # most array entries
     max_length: Optional[int] = None  # longest string
     rule: Optional[Callable] = None  # more checks of the one value: returns a reason or None
+    # The least value but 0 (which turns the feature off): values between are refused.
+    least: Optional[float] = None
 
     @property
     def read_only(self):
@@ -108,7 +110,9 @@ class Parameter:
         if self.choices:
             return ', '.join(self.choices)
         parts = []
-        if self.low is not None:
+        if self.least is not None:
+            parts.append(f'0, or {number_text(self.least)} to {number_text(self.high)}')
+        elif self.low is not None:
             parts.append(f'{number_text(self.low)} to {number_text(self.high)}')
         if self.sizes is not None:
             parts.append(' or '.join(str(s) for s in self.sizes) + ' entries')
@@ -162,6 +166,11 @@ class Parameter:
     def _check_range(self, value):
         if not math.isfinite(value):
             raise ParameterError(self.name, f'must be finite, got {value}')
+        if self.least is not None and value != 0 and not self.least <= value <= self.high:
+            raise ParameterError(self.name, f'must be 0 (off), or between '
+                                            f'{number_text(self.least)} and '
+                                            f'{number_text(self.high)}, got '
+                                            f'{number_text(value)}')
         if self.low is not None and not self.low <= value <= self.high:
             raise ParameterError(self.name, f'must be between {number_text(self.low)} and '
                                             f'{number_text(self.high)}, got '
@@ -277,6 +286,14 @@ def _min_max(pair):
 _XY = dict(low=-limits.COORDINATE_LIMIT, high=limits.COORDINATE_LIMIT)
 _BALLS = dict(max_size=limits.MAX_BALLS)
 
+#: The smallest split a recording takes (record.max_bytes, record.max_seconds) besides 0:
+#: each file costs its start (the parameters, the state it resumes from: about 60 bytes a
+#: ball), its summary and a new metadata.yaml, and its .rrd part a footer; files of one step
+#: each (record.max_bytes 1) made the node fall a third behind its rate. docs/reliability.md
+#: has what the node does at these edges.
+MIN_SPLIT_BYTES = 1 << 20
+MIN_SPLIT_SECONDS = 1.0
+
 PARAMETERS = (
     Parameter('rate_hz', DOUBLE, 60.0, 'Steps per second of wall time; 0 runs as fast as '
               'possible (then dt must be > 0).', AT_ONCE, 0.0, 1e6),
@@ -381,14 +398,18 @@ PARAMETERS = (
     Parameter('record.mcap', STRING, '', 'MCAP file to record to; empty records nothing.',
               AT_START, max_length=MAX_PATH_LENGTH),
     Parameter('record.max_bytes', INTEGER, 0, 'Start a new MCAP file past this size, in '
-              'bytes: record.mcap is then a rosbag2 bag directory; 0: one file.', AT_START, 0,
-              _INT64_MAX),
+              'bytes: record.mcap is then a rosbag2 bag directory, and record.rerun is split '
+              'at the same steps; 0: one file.', AT_START, 0, _INT64_MAX,
+              least=MIN_SPLIT_BYTES),
     Parameter('record.max_seconds', DOUBLE, 0.0, 'Start a new MCAP file past this much '
-              'simulated time, s: record.mcap is then a rosbag2 bag directory; 0: one file.',
-              AT_START, 0.0, 1e9),
-    Parameter('record.max_files', INTEGER, 0, 'Keep at most this many split MCAP files (the '
-              'oldest removed, logged); 0: all.', AT_START, 0, 1_000_000),
-    Parameter('record.rerun', STRING, '', 'Rerun .rrd file to log to; empty logs nothing.',
+              'simulated time, s: record.mcap is then a rosbag2 bag directory, and '
+              'record.rerun is split at the same steps; 0: one file.', AT_START, 0.0, 1e9,
+              least=MIN_SPLIT_SECONDS),
+    Parameter('record.max_files', INTEGER, 0, 'Keep at most this many split files (MCAP and '
+              '.rrd parts alike; the oldest removed, logged); 0: all.', AT_START, 0,
+              1_000_000),
+    Parameter('record.rerun', STRING, '', 'Rerun .rrd file to log to; empty logs nothing. '
+              'With a split, the parts NAME_0.rrd, NAME_1.rrd, ... beside it.',
               AT_START, max_length=MAX_PATH_LENGTH),
     Parameter('record.rerun_every', INTEGER, 1, 'Log every k-th step to the .rrd (steps with '
               'impulses are always logged).', AT_START, 1, 1_000_000),

@@ -176,6 +176,16 @@ def chunk_records(chunk):
                              f'{error or type(error).__name__}') from None
 
 
+class CorruptChunk(RecordingError):
+    """A chunk whose framing holds but whose content does not (its CRC, its compression, a
+    record inside): `start_ns` and `end_ns` are the log times its header says it held."""
+
+    def __init__(self, message, start_ns, end_ns):
+        super().__init__(message)
+        self.start_ns = start_ns
+        self.end_ns = end_ns
+
+
 def _parse(opcode, body):
     """The records of one complete record body: [record] or [chunk, *its records] or []."""
     if opcode == Opcode.MESSAGE:
@@ -188,7 +198,11 @@ def _parse(opcode, body):
         # The fixed fields are 40 bytes; a shorter body means the data length field lies.
         if len(body) != 40 + len(record.compression.encode()) + len(record.data):
             raise ValueError('chunk data length does not match the record length')
-        return [record, *chunk_records(record)]
+        try:
+            return [record, *chunk_records(record)]
+        except RecordingError as error:
+            raise CorruptChunk(str(error), record.message_start_time,
+                               record.message_end_time) from None
     return [record]
 
 
@@ -207,11 +221,26 @@ def _read_record(stream, offset, size, opcode):
                              'ends before')
     try:
         return _parse(opcode, stream.read(length))
+    except CorruptChunk as error:
+        raise RecordingError(f'the record at byte {offset}: {error} (ball_world_repair '
+                             'keeps every other record)') from None
     except RecordingError as error:
         raise RecordingError(f'the record at byte {offset}: {error}') from None
     except Exception as error:  # noqa: B902 - corrupt bytes raise anything
         raise RecordingError(f'the record at byte {offset} is corrupt: '
                              f'{error or type(error).__name__}') from None
+
+
+@dataclass(frozen=True)
+class Damage:
+    """Bytes of a file that hold no readable record, skipped by a Scan told to go on:
+    [start, end) in the file, why, and the log times they held when known (a chunk's)."""
+
+    start: int
+    end: int
+    reason: str
+    start_ns: Optional[int] = None
+    end_ns: Optional[int] = None
 
 
 class Scan:
@@ -224,15 +253,35 @@ class Scan:
     is True when the data section ended properly (DataEnd or Footer), and `problem`
     otherwise says where and why reading stopped; `corrupt` is True when that was a
     complete record with bad content, rather than a file cut short.
+
+    go_on=True (ball_world_repair): a complete record with bad content is skipped, and
+    said in `damage` (Damage), instead of ending the scan; where the framing itself is
+    broken (a zero opcode, a length past the end), reading resumes at the next of
+    `resume_at` (record offsets a valid summary lists) if there is one.
     """
 
-    def __init__(self, stream, size):
+    def __init__(self, stream, size, go_on=False, resume_at=()):
         self.stream = stream
         self.size = size
         self.end = 0
         self.finished = False
         self.problem = None
         self.corrupt = False
+        self.go_on = go_on
+        self.resume_at = sorted(resume_at)
+        self.damage = []
+        self.chunk_offsets = set()  # where the chunks that were read whole begin
+
+    def _resume(self, offset, reason):
+        """The offset to read on from after broken framing at `offset`, or None."""
+        if not self.go_on:
+            return None
+        position = bisect.bisect_right(self.resume_at, offset)
+        if position == len(self.resume_at) or self.resume_at[position] >= self.size:
+            return None
+        following = self.resume_at[position]
+        self.damage.append(Damage(offset, following, reason))
+        return following
 
     def records(self):
         stream = self.stream
@@ -249,20 +298,36 @@ class Scan:
                 return
             opcode, length = _RECORD_HEAD.unpack(head)
             body_at = offset + _RECORD_HEAD.size
+            broken = None
             if opcode == 0:
-                self.problem = f'no valid record at byte {offset} (zero bytes)'
-                return
-            if length > self.size - body_at:
-                self.problem = (f'the record at byte {offset} is cut off: it needs {length} '
-                                f'bytes, {self.size - body_at} are left')
-                return
+                broken = f'no valid record at byte {offset} (zero bytes)'
+            elif length > self.size - body_at:
+                broken = (f'the record at byte {offset} is cut off: it needs {length} '
+                          f'bytes, {self.size - body_at} are left')
+            if broken is not None:
+                following = self._resume(offset, broken)
+                if following is None:
+                    self.problem = broken
+                    return
+                offset = self.end = following
+                stream.seek(offset)
+                continue
             try:
                 parsed = _parse(opcode, stream.read(length))
             except Exception as error:  # noqa: B902 - corrupt bytes raise anything
-                self.problem = (f'the record at byte {offset} is corrupt: '
-                                f'{error or type(error).__name__}')
-                self.corrupt = True
-                return
+                reason = (f'the record at byte {offset} is corrupt: '
+                          f'{error or type(error).__name__}')
+                if not self.go_on:
+                    self.problem = reason
+                    self.corrupt = True
+                    return
+                self.damage.append(Damage(offset, body_at + length, reason,
+                                          getattr(error, 'start_ns', None),
+                                          getattr(error, 'end_ns', None)))
+                offset = self.end = body_at + length
+                continue
+            if opcode == Opcode.CHUNK:
+                self.chunk_offsets.add(offset)
             offset = self.end = body_at + length
             yield from parsed
             if opcode in (Opcode.DATA_END, Opcode.FOOTER):
@@ -1273,25 +1338,51 @@ def _ignore(events):
     """write_pending of a sink that does not record edits."""
 
 
-def feed_sinks(path, sinks, close=True):
+def feed_sinks(path, sinks, close=True, passed_over=None):
     """Replay a recording into Sinks as the node would have: returns the steps fed.
 
     Each segment starts with start_segment(WorldSnapshot, RunInfo), then every complete
     step goes to write_step in order (a step cut off by a crash is skipped, but its edits
     still count), and a closing record to write_pending, for the sinks that take it. The
     sinks are flushed at the end, and closed unless close=False.
+
+    A segment that jumps over steps (a damaged chunk dropped by ball_world_repair) cannot
+    be followed past the jump: the balls' names, sizes and masses there are not known. Its
+    steps are passed over up to the next segment, or the next state a split file resumes
+    from (recording_set.RecordingSet), and said in `passed_over` (a list, if given) as
+    (segment index, first step, last step).
     """
     recording = Recording(path) if isinstance(path, (str, os.PathLike)) else path
     current = started = None  # segment positions: followed, and begun in the sinks
     roster = snapshot = info = None
     fed = 0
+    last = skipping = None  # the last step followed; the steps being passed over
     for step in recording.steps():
         if step.segment != current:
             segment = recording.segments[step.segment]
             snapshot, info = snapshot_and_info(segment, step)
             roster = BallRoster(snapshot, segment.index)
             current = step.segment
+            last = skipping = None
+        elif skipping is not None:
+            segment = recording.segments[current]
+            point = getattr(recording, 'resume_points', {}).get(
+                (segment.index, segment.log_offset_ns, step.step - 1))
+            if point is None:
+                skipping[2] = max(skipping[2], step.step)
+                continue
+            # a later file of a set picks the segment up here: on from its state
+            snapshot, info = snapshot_and_info(point, step)
+            roster = BallRoster(snapshot, point.index)
+            started = skipping = None
+        elif last is not None and step.step > last + 1 and not step.closing:
+            skipping = [recording.segments[current].index, step.step, step.step]
+            if passed_over is not None:
+                passed_over.append(skipping)
+            continue
         impulses = roster.follow(step)
+        if not step.closing:
+            last = step.step
         if step.closing and started == current:
             events = PendingEvents(step=step.step, stamp_ns=step.stamp_ns,
                                    log_time_ns=step.log_time_ns, impulses=impulses,

@@ -49,6 +49,7 @@ from ball_world import __version__
 from ball_world.msgs.cdr import encode_clock, encode_string
 from ball_world.msgs.definitions import message_definition, type_hash
 from ball_world.recording import agent_topics
+from ball_world.recording.bag import FileSummary, TopicCount
 from ball_world.recording.files import claim_output, OutputClaim
 from ball_world.recording.resume import RESUME_STEP
 from ball_world.step_record import PACKAGE_NAME
@@ -348,6 +349,11 @@ class McapSink:
         self._roles = {}  # logical name -> channel id, for the current segment
         self._topics = {}  # logical name -> recorded topic, for the current segment
         self._sequences = {}  # channel id -> last sequence number
+        self._counts = {}  # channel id -> messages written
+        self._channel_info = {}  # channel id -> (topic, type name, role)
+        self._first_ns = None  # log times of the first and last message written
+        self._end_ns = None
+        self.removed = False  # closed before any segment: the file was removed
         self._pending = 0  # uncompressed bytes in the open chunk
         self._last_log_ns = None
         self._clock = False  # whether this segment records /clock
@@ -420,6 +426,30 @@ class McapSink:
         self._closed = True
         if not self._segments:
             self._claim.discard()
+            self.removed = True
+        else:
+            self._claim.release()
+
+    def abandon(self):
+        """After a write error: close what is left of the file, keep it, drop the claim."""
+        self._closed = True
+        try:
+            self._file.close()
+        except OSError:
+            pass  # the bytes it held cannot be written either
+        self._claim.release()
+
+    def summary(self):
+        """What metadata.yaml says of this file (recording.bag.FileSummary), from what was
+        written: no need to read the file back."""
+        topics = {}
+        for channel, count in sorted(self._counts.items()):
+            topic, type_name, role = self._channel_info[channel]
+            topics[topic] = TopicCount(topic=topic, type=type_name, message_count=count,
+                                       offered_qos_profiles=ROLE_QOS[role],
+                                       type_hash=type_hash(type_name))
+        return FileSummary(path=self.path, start_ns=self._first_ns, end_ns=self._end_ns,
+                           message_count=sum(self._counts.values()), topics=topics)
 
     # Implementation ---------------------------------------------------------------------
 
@@ -483,6 +513,7 @@ class McapSink:
                 topic, 'cdr', schema, metadata={'offered_qos_profiles': ROLE_QOS[role],
                                                 'topic_type_hash': type_hash(type_name)})
             self._channels[topic] = channel
+            self._channel_info[channel] = (topic, type_name, role)
         return channel
 
     def _add(self, role, log_time_ns, data):
@@ -501,6 +532,11 @@ class McapSink:
     def _put(self, channel, log_time_ns, data):
         sequence = (self._sequences.get(channel, 0) + 1) % _SEQUENCE_MODULO
         self._sequences[channel] = sequence
+        self._counts[channel] = self._counts.get(channel, 0) + 1
+        if self._first_ns is None or log_time_ns < self._first_ns:
+            self._first_ns = log_time_ns
+        if self._end_ns is None or log_time_ns > self._end_ns:
+            self._end_ns = log_time_ns
         self._writer.add_message(channel, log_time=log_time_ns, data=data,
                                  publish_time=log_time_ns, sequence=sequence)
         self._pending += len(data) + 31  # message record overhead
@@ -567,4 +603,5 @@ class McapSink:
                 self._file.close()
             except OSError:
                 pass  # the buffered bytes cannot be written either; the first error says why
+            self._claim.release()
             raise _recording_error(self.path, error) from error

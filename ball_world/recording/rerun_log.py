@@ -78,7 +78,6 @@ carry `radii` and `masses` for names its segment did not start with.
 from collections import deque
 import json
 import math
-import os
 from pathlib import Path
 import sys
 import time
@@ -90,6 +89,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from ball_world.core.parameters import BY_NAME
+from ball_world.recording.files import claim_output, OutputClaim
 from ball_world.recording.rerun_agents import AGENTS, BUMPERS, BumperView, heading_arrows
 from ball_world.recording.rerun_labels import LabelPlacer
 from ball_world.recording.rerun_map import map_bounds, map_entities
@@ -539,7 +539,7 @@ class RerunSink:
 
     def __init__(self, path=None, every=1, view=None, velocities=False, trail_seconds=0.0,
                  clock=None, report=None, view_fps=VIEW_FPS, file_process=False,
-                 view_recording_id=None):
+                 view_recording_id=None, spare=False):
         if isinstance(every, bool) or not isinstance(every, int) or every < 1:
             raise ValueError(f'every must be a whole number >= 1, got {every!r}')
         if not (isinstance(trail_seconds, (int, float)) and 0.0 <= trail_seconds < math.inf):
@@ -550,18 +550,22 @@ class RerunSink:
             raise ValueError('RerunSink needs a path, a view or both')
         if view is not None:
             parse_view(view)  # refuse a bad view now, before anything is opened
-        self.path = None if path is None else Path(path)
-        if self.path is not None:
-            _probe_file(self.path)
+        self._own_claim = None
+        if path is not None and not isinstance(path, OutputClaim):
+            # Claimed here: a regular file, replaced if it exists, never through a symlink.
+            path = self._own_claim = claim_output(path, overwrite=True)
+        self.claim = path
+        self.path = None if path is None else Path(path.path)
         self.view = view
         self.report = report or (lambda line: print(f'ball_world: {line}', file=sys.stderr))
         layers = dict(velocities=bool(velocities), trail_seconds=float(trail_seconds),
                       clock=clock)
         self._feeds = []
-        if self.path is not None:
-            path = self.path
-            self._feeds.append(_Feed(lambda stream, plan: Outlet.file(path, stream, plan),
-                                     every=every, stream_factory=_file_stream(file_process),
+        if self.claim is not None:
+            claim = self.claim
+            self._feeds.append(_Feed(lambda stream, plan: Outlet.file(claim, stream, plan),
+                                     every=every,
+                                     stream_factory=_file_stream(file_process, spare),
                                      **layers))
         if view is not None:
             self._feeds.append(_Feed(lambda stream, plan: Outlet.view(view, stream, plan),
@@ -587,6 +591,18 @@ class RerunSink:
         if not self._closed:
             self._each_feed(lambda feed: feed.flush())
 
+    def next_part(self, claim, done=None):
+        """Finish the file (its last step logged, its footer written) and go on in the
+        claimed one (recording.files.OutputClaim), which opens on its own: the arena's
+        transform, the plots' styles, the walls, the scale and the blueprint are logged in
+        it again, the balls' looks and the impulses on screen at its first step, which is
+        always logged. done() is called once the old file is complete (rrd_parts)."""
+        if self._closed:
+            raise RuntimeError('RerunSink is closed')
+        self.claim = claim
+        self.path = Path(claim.path)
+        self._each_feed(lambda feed: feed.next_part(claim, done), files_only=True)
+
     def close(self):
         """Log the final state, send everything and finish the file (footer included)."""
         if self._closed:
@@ -598,16 +614,21 @@ class RerunSink:
                 feed.close()
             except OutletFailed as error:
                 errors.append(str(error))
+        if self._own_claim is not None:
+            self._own_claim.release()
         if errors:
             raise OutletFailed('; '.join(errors))
 
-    def _each_feed(self, action):
-        """Run action on every live destination; drop one that failed and say so once.
+    def _each_feed(self, action, files_only=False):
+        """Run action on every live destination (or file); drop one that failed and say so
+        once.
 
         When the last one fails the error is raised, so the Simulation drops the sink and
         its owner reports it; the sink then holds nothing that could block.
         """
         for feed in list(self._feeds):
+            if files_only and feed.live:
+                continue
             try:
                 action(feed)
             except OutletFailed as error:
@@ -676,28 +697,43 @@ class _Feed:
         self._trail = deque()  # (log ns, positions) of the trail's steps
         self._map_files = None  # the files of the map logged (static), if any
         self._closed = False
+        self._plan = None  # the blueprint the file was opened with
+        self._start = None  # (world, info) of the segment: what a new part logs again
+        self._part_begun = False  # a new part: its first step is logged whatever `every`
 
     # Sink protocol ----------------------------------------------------------------------
 
     def start_segment(self, world, info):
+        """A segment's start; or, for a segment begun before (the same index: a recording
+        picked up after a gap, from the state a split file resumes from), its going on,
+        on the same step timeline and with the same energy at step 0."""
+        same = self._start is not None and self._start[1].segment == info.segment
         if not self._opened:
             self._open(world, info.parameters)
         else:
             self._finish_segment()
-            self._segment_base = self._last_global + 1
+            if not same:
+                self._segment_base = self._last_global + 1
         self._segment = _Segment(world)
         self._labels = LabelPlacer(self._segment.view)
         self._scans = {}
         self._clock_due = None
-        self._headroom.clear()
-        self._totals[:] = 0
-        self._energy0 = None
+        if not same:
+            self._headroom.clear()
+            self._totals[:] = 0
+            self._energy0 = None
         self._shown_names = None
         self._impulses = []
         self._impulses_changed = False
         self._trail.clear()
         if self._rtf is not None:
             self._rtf.clear()
+        self._start = (world, info)
+        self._log_segment(world, info)
+        self._emit('log', IMPULSES, rr.Arrows2D.cleared(), rr.Points2D.cleared())
+
+    def _log_segment(self, world, info):
+        """The segment's walls and scale, at its start (logged again in each new part)."""
         self._set_time(self._segment_base, info.log_offset_ns)
         strips = np.asarray(world.walls, dtype=np.float64).reshape(-1, 2, 2)
         self._emit('log', WALLS, rr.LineStrips2D(
@@ -708,14 +744,33 @@ class _Feed:
         self._log_ruler(world)
 
     def _log_map(self, world):
-        """The map (rerun_map), static, once: `map` is read-only, every segment has the
-        same one."""
+        """The map (rerun_map), static, once per file: `map` is read-only, every segment has
+        the same one."""
         occupancy_map = getattr(world, 'occupancy_map', None)
         if occupancy_map is None or occupancy_map.files == self._map_files:
             return
         self._map_files = occupancy_map.files
         for path, archetype in map_entities(occupancy_map, WALL_COLOR):
             self._emit('log', path, archetype, static=True)
+
+    def next_part(self, claim, done=None):
+        """Finish this file and go on in `claim` (RerunSink.next_part)."""
+        if not self._opened or self._closed:
+            raise RuntimeError('RerunSink.next_part before start_segment or after close')
+        self._finish_segment()
+        self._send()
+        self.outlet.next_file(claim, self._plan, done)
+        self._log_statics()
+        self._map_files = None  # a new file: its statics again, the map among them
+        if self._start is not None:
+            self._log_segment(*self._start)
+            if self._energy0 is not None:
+                self._emit('log', ENERGY, rr.SeriesLines(names=energy_legend(self._energy0)),
+                           static=self.live)
+        self._shown_names = None  # the looks, at the part's first step
+        self._impulses_changed = bool(self._impulses)
+        self._part_begun = True
+        self._each_outlet(lambda outlet: outlet.check())
 
     def _log_ruler(self, world):
         """Ticks and labels in metres along the bottom and left of the scene (rerun_scale),
@@ -753,7 +808,9 @@ class _Feed:
         if self.live:
             logged = self._frame_due(record)
         else:
-            logged = record.step % self.every == 0 or pushed or record.edits
+            logged = (record.step % self.every == 0 or pushed or record.edits
+                      or self._part_begun)
+            self._part_begun = False
         if logged:
             self._log(record, rtf)
         else:
@@ -791,9 +848,14 @@ class _Feed:
         self._opened = True
         plan = None if world is None else blueprint(
             world, parameters, VIEW_PLOT_SECONDS if self.live else None)
+        self._plan = plan
         stream = self._new_stream(APPLICATION_ID, self._recording_id or recording_id(parameters),
                                   VIEW_FLUSH_SECONDS if self.live else None)
         self.outlet = self._open_outlet(stream, plan)
+        self._log_statics()
+
+    def _log_statics(self):
+        """What every file and view holds static: the arena's flip and the plots' styles."""
         self._emit('log', ARENA, rr.Transform3D(
             rotation=rr.RotationAxisAngle(axis=(1.0, 0.0, 0.0), degrees=180.0)), static=True)
         self._emit('log', ENERGY, rr.SeriesLines(colors=ENERGY_COLOR), static=True)
@@ -1201,23 +1263,10 @@ class _Feed:
                 rr.TimeColumn(SIM_TIME, duration=np.array(times_ns, dtype='timedelta64[ns]'))]
 
 
-def _file_stream(in_child):
+def _file_stream(in_child, spare=False):
     """What makes a file's stream: the SDK's own, or its stand-in in a child process (which
-    starts now, so that it is ready by the first step)."""
+    starts now, so that it is ready by the first step), with a spare for a split .rrd."""
     if not in_child:
         return new_stream
     from ball_world.recording.rerun_process import ProcessStream
-    return ProcessStream().open
-
-
-def _probe_file(path):
-    """Fail now on a path that cannot be written: the SDK opens it later, on its thread."""
-    directory = path.parent
-    if not directory.is_dir() or not os.access(directory, os.W_OK):
-        raise OSError(f'{str(path)!r}: {str(directory)!r} is not a writable directory')
-    try:
-        with open(path, 'wb') as probe:
-            probe.write(b'\0')
-            probe.flush()
-    except OSError as error:
-        raise OSError(f'{str(path)!r}: {error.strerror or error}') from None
+    return ProcessStream(spare=spare).open

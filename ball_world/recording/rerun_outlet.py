@@ -118,9 +118,15 @@ class Outlet:
     holds the reason).
     """
 
-    def __init__(self, description, stream, connect, probe=None, explain=None):
+    #: A file's claim (recording.files.OutputClaim): the file being written.
+    claim = None
+
+    def __init__(self, description, stream, connect, probe=None, explain=None, claim=None):
         self.description = description
         self.stream = stream
+        self.claim = claim
+        if claim is not None and explain is None:
+            explain = self._file_state
         self.failed = None
         self._probe = probe
         self._explain = explain
@@ -135,10 +141,29 @@ class Outlet:
         self._put(connect, ())
 
     @classmethod
-    def file(cls, path, stream, blueprint):
-        return cls(f'file {str(path)!r}', stream,
-                   lambda: stream.save(Path(path), default_blueprint=blueprint),
-                   explain=lambda: _file_state(path))
+    def file(cls, claim, stream, blueprint):
+        """Write the claimed file (recording.files.OutputClaim): the stream saves to its
+        descriptor (OutputClaim.fd_path), never to a path that could have changed since."""
+        return cls(f'file {str(claim.path)!r}', stream, lambda: _save(stream, claim, blueprint),
+                   claim=claim)
+
+    def next_file(self, claim, blueprint, done=None):
+        """Queue the move to the next file of a split .rrd: the file being written is
+        finished (its footer written) and the stream goes on in `claim`; done() is called
+        on the worker once the old file is complete (not when the move failed)."""
+        def move():
+            stream = self.stream
+            if hasattr(stream, 'next_file'):
+                stream.next_file(claim, blueprint)
+            else:
+                stream.flush(timeout_sec=FLUSH_TIMEOUT)
+                stream.disconnect()
+                stream.save(claim.fd_path(), default_blueprint=blueprint)
+            self.description = f'file {str(claim.path)!r}'
+            self.claim = claim
+            if done is not None:
+                done()
+        self._put(move, ())
 
     @classmethod
     def view(cls, target, stream, blueprint):
@@ -233,6 +258,9 @@ class Outlet:
         except queue.Full:
             pass
 
+    def _file_state(self):
+        return _file_state(self.claim)
+
     # Worker's side ----------------------------------------------------------------------
 
     def _work(self):
@@ -287,11 +315,19 @@ def _probe(address, reason):
         raise OSError(f'{reason} ({error.strerror or error})') from None
 
 
-def _file_state(path):
+def _save(stream, claim, blueprint):
+    """Make the stream write the claimed file: a child is sent its descriptor."""
+    if hasattr(stream, 'save_file'):
+        stream.save_file(claim, blueprint)
+    else:
+        stream.save(claim.fd_path(), default_blueprint=blueprint)
+
+
+def _file_state(claim):
     """How far a file got and the room left beside it: what a write error usually means."""
     try:
-        size = os.path.getsize(path)
-        free = shutil.disk_usage(os.path.dirname(os.path.abspath(path))).free
+        size = claim.size()
+        free = shutil.disk_usage(os.path.dirname(os.path.abspath(claim.path))).free
     except OSError as error:
         return error.strerror or str(error)
     return f'{size:,} bytes written, {free:,} bytes free on its file system'

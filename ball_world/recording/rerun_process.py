@@ -16,6 +16,15 @@ pickled to the child's stdin, in order; flush and disconnect wait for the child'
 a write error (a full disk) is raised where the in-process stream raises it. A child that
 died is raised as an OSError saying how, and the Outlet reports it once.
 
+A split .rrd (recording.rrd_parts) moves to its next part with next_file(claim, blueprint):
+the child finishes the part (footer included), answers, and saves the next, given to it as
+an open descriptor (sent over a socket, SCM_RIGHTS) and opened as /proc/self/fd/N, so it
+writes the very file the node claimed. The SDK never frees a file sink's threads and some
+of its memory (rerun issue #2116: about 1.3 MB and two threads per file), so a child that
+has written for WRITER_SECONDS hands over, at the next part, to a spare started in advance
+(ProcessStream(spare=True)), and finishes its own part and exits: memory stays flat however
+many parts a run makes, and no part waits for a child to start.
+
 The child runs in a process group of its own and ignores SIGINT: a Ctrl-C in a terminal,
 which reaches the whole foreground group, stops the node, and the node closes the file when
 it stops. If the node dies first (SIGKILL, the OOM killer), the child reads the end of its
@@ -27,6 +36,7 @@ import os
 import pickle
 import select
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -37,14 +47,15 @@ from rerun_bindings import ComponentDescriptor
 #: The SDK calls an Outlet.file makes on its stream; anything else is a programming error.
 CALLS = frozenset(('save', 'log', 'send_columns', 'set_time', 'flush', 'disconnect'))
 #: Calls the child answers (None: done; else the error, one line) before the next is sent.
-ANSWERED = frozenset(('new', 'flush', 'disconnect'))
+ANSWERED = frozenset(('new', 'flush', 'disconnect', 'save_fd', 'part'))
 #: Longest wait for the child to have started (imported the SDK) and made its stream. It
 #: starts with the sink, so this wait usually overlaps the node's own start-up.
 STARTUP_SECONDS = 60.0
 #: Longest wait for an answer beyond the call's own timeout (the child may be busy writing
 #: what was queued before it).
 ANSWER_MARGIN = 3.0
-#: Longest wait for the child's answer to disconnect (the footer is written then).
+#: Longest wait for the child's answer to disconnect (the footer is written then), and to a
+#: move to the next part (the last part's footer, then the next file).
 DISCONNECT_SECONDS = 8.0
 #: From the end of its input or a disconnect on, the child is ended by its own alarm
 #: (SIGALRM) if still running this long.
@@ -55,6 +66,13 @@ GATHER_SECONDS = 5.0
 #: chunk then grows by one entry per entity per 5 s, not ten a second (the node sends
 #: each second what it has).
 GATHER_BYTES = 4 << 20
+#: A child that has written parts this long (wall time) hands over to its spare at the next
+#: part: each file the SDK writes leaves threads and memory behind (see the module).
+WRITER_SECONDS = 30.0
+#: What a child writes once it has imported the SDK and can take calls.
+READY = 'ready'
+#: Where the child finds the descriptors it is sent (Linux); elsewhere it is sent paths.
+_PROC_FDS = '/proc/self/fd'
 
 
 class _Pickler(pickle.Pickler):
@@ -92,26 +110,149 @@ def _pickled(message):
     return buffer.getvalue()
 
 
+class _Child:
+    """One writer process: its pipes, the socket its descriptors go through, its age."""
+
+    def __init__(self):
+        ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            # The SDK's own log lines (several, coloured, per failure) stay out of the
+            # node's terminal unless asked for (RUST_LOG): the node reports a failure itself.
+            self.process = subprocess.Popen(
+                [sys.executable, '-m', __name__, str(theirs.fileno())], stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE, close_fds=True, pass_fds=(theirs.fileno(),),
+                process_group=0, env={**os.environ, 'RUST_LOG': os.environ.get('RUST_LOG',
+                                                                               'off')})
+        except BaseException:
+            ours.close()
+            raise
+        finally:
+            theirs.close()
+        self.socket = ours
+        self.pid = self.process.pid
+        self.began = time.monotonic()
+        self.ready = False
+        self.failure = None
+
+    def poll_ready(self, timeout=0.0):
+        """Whether the child has imported the SDK (its READY read), waiting up to timeout."""
+        if not self.ready:
+            readable, _, _ = select.select([self.process.stdout], [], [], timeout)
+            if readable:
+                said = self._load()
+                if said != READY:
+                    self.failure = said or self._ended()
+                    raise OSError(self.failure)
+                self.ready = True
+        return self.ready
+
+    def call(self, name, args, kwargs, descriptor=None):
+        """Send one call (a descriptor first, if any); wait for its answer if it has one."""
+        if self.failure is not None:
+            raise OSError(self.failure)
+        if name in ANSWERED and not self.poll_ready(STARTUP_SECONDS):
+            raise RuntimeError(f'the .rrd writer process (pid {self.pid}) did not start '
+                               f'within {STARTUP_SECONDS:g} s')
+        try:
+            if descriptor is not None:
+                socket.send_fds(self.socket, [b'f'], [descriptor])
+            self.process.stdin.write(_pickled((name, args, kwargs)))
+            self.process.stdin.flush()
+        except (BrokenPipeError, ConnectionError, ValueError):
+            self._died()
+        if name == 'new':
+            self._answer(STARTUP_SECONDS)
+        elif name == 'flush':
+            self._answer(kwargs.get('timeout_sec', 0.0) + ANSWER_MARGIN)
+        elif name in ('disconnect', 'part'):
+            self._answer(DISCONNECT_SECONDS + ANSWER_MARGIN)
+        elif name == 'save_fd':
+            self._answer(ANSWER_MARGIN)
+
+    def _load(self):
+        try:
+            return pickle.load(self.process.stdout)
+        except (EOFError, pickle.UnpicklingError, OSError, ValueError):
+            return None
+
+    def _answer(self, timeout):
+        """Wait for the child's answer to the call just sent; raise its error if any."""
+        readable, _, _ = select.select([self.process.stdout], [], [], timeout)
+        if not readable:
+            raise RuntimeError(f'the .rrd writer process (pid {self.pid}) timed out: '
+                               f'no answer for {timeout:g} s')
+        try:
+            error = pickle.load(self.process.stdout)
+        except (EOFError, pickle.UnpicklingError):
+            self._died()
+        if error is not None:
+            self.failure = error
+            raise OSError(error)
+
+    def _ended(self):
+        """How the child ended, as one line."""
+        try:
+            code = self.process.wait(timeout=ANSWER_MARGIN)
+        except subprocess.TimeoutExpired:
+            code = None
+        if code is not None and code < 0:
+            return (f'the .rrd writer process (pid {self.pid}) was killed by '
+                    f'{signal.Signals(-code).name}')
+        return (f'the .rrd writer process (pid {self.pid}) ended '
+                + ('(exit status unknown)' if code is None else f'(exit {code})'))
+
+    def _died(self):
+        """Raise how the child ended (its own error line if it wrote one)."""
+        said = None
+        try:
+            said = pickle.load(self.process.stdout)
+        except Exception:  # noqa: B902 - nothing (or a torn answer) from a dead child
+            pass
+        self.failure = said if said and said != READY else self._ended()
+        raise OSError(self.failure)
+
+    def end(self):
+        """Close its input (it finishes what it has and exits) and wait for it, bounded."""
+        for pipe in (self.process.stdin, self.process.stdout, self.socket):
+            try:
+                pipe.close()
+            except OSError:
+                pass
+        try:
+            self.process.wait(timeout=ANSWER_MARGIN)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait()
+
+
 class ProcessStream:
     """The calls of a RecordingStream, run by a child process that owns the real one.
 
     Made in two steps: ProcessStream() starts the child, which then imports the SDK while
     its owner goes on; open() takes the arguments of rerun_outlet.new_stream and waits for
     the child's stream. Then used from one thread at a time (an Outlet's worker).
+    spare=True (a split .rrd) keeps a second child started, to take over at a part once
+    the first has written for WRITER_SECONDS.
     """
 
-    def __init__(self):
-        self._child = subprocess.Popen(
-            [sys.executable, '-m', __name__], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-            close_fds=True, process_group=0)
-        self.pid = self._child.pid
+    def __init__(self, spare=False):
+        self._child = _Child()
+        self._spare = _Child() if spare else None
+        self._wants_spare = spare
+        self._opened = None  # the arguments of open(), for a spare that takes over
         self._failure = None
+        self._descriptor = None  # the claimed file being written, when given one
+
+    @property
+    def pid(self):
+        return self._child.pid
 
     def open(self, application_id, recording_id, flush_seconds=None):
         """The child's stream made; self. A failure is kept and raised by the first call
         (Outlet.file's save), so the Outlet reports it as any other."""
+        self._opened = (application_id, recording_id, flush_seconds)
         try:
-            self._call('new', (application_id, recording_id, flush_seconds), {})
+            self._child.call('new', self._opened, {})
         except (OSError, RuntimeError) as error:
             self._failure = self._failure or _one_line(error)
         return self
@@ -122,72 +263,68 @@ class ProcessStream:
         return lambda *args, **kwargs: self._call(name, args, kwargs)
 
     def _call(self, name, args, kwargs):
-        self._send((name, args, kwargs))
-        if name == 'new':
-            self._answer(STARTUP_SECONDS)
-        elif name == 'flush':
-            self._answer(kwargs.get('timeout_sec', 0.0) + ANSWER_MARGIN)
-        elif name == 'disconnect':
-            try:
-                self._answer(DISCONNECT_SECONDS)
-            finally:
-                self._end()
-
-    def _send(self, message):
         if self._failure is not None:
             raise OSError(self._failure)
         try:
-            self._child.stdin.write(_pickled(message))
-            self._child.stdin.flush()
-        except (BrokenPipeError, ValueError):
-            self._died()
+            self._child.call(name, args, kwargs)
+        finally:
+            if name == 'disconnect':
+                self._end()
+        if name == 'flush' and self._spare is not None:
+            self._spare_ready()  # noted now (a second's flush), taken at the next part
 
-    def _answer(self, timeout):
-        """Wait for the child's answer to the call just sent; raise its error if any."""
-        readable, _, _ = select.select([self._child.stdout], [], [], timeout)
-        if not readable:
-            raise RuntimeError(f'the .rrd writer process (pid {self.pid}) timed out: '
-                               f'no answer for {timeout:g} s')
-        try:
-            error = pickle.load(self._child.stdout)
-        except (EOFError, pickle.UnpicklingError):
-            self._died()
-        if error is not None:
-            self._failure = error
-            raise OSError(error)
+    def save_file(self, claim, blueprint):
+        """Write the claimed file (recording.files.OutputClaim): its descriptor is sent."""
+        if self._failure is not None:
+            raise OSError(self._failure)
+        if not os.path.isdir(_PROC_FDS):
+            self._child.call('save', (claim.path,), {'default_blueprint': blueprint})
+            return
+        self._child.call('save_fd', (), {'default_blueprint': blueprint},
+                         descriptor=claim.fileno())
 
-    def _died(self):
-        """Raise how the child ended (its own error line if it wrote one)."""
-        try:
-            code = self._child.wait(timeout=ANSWER_MARGIN)
-        except subprocess.TimeoutExpired:
-            code = None
-        said = None
-        try:
-            said = pickle.load(self._child.stdout)
-        except Exception:  # noqa: B902 - nothing (or a torn answer) from a dead child
-            pass
-        if said:
-            self._failure = said
-        elif code is not None and code < 0:
-            self._failure = (f'the .rrd writer process (pid {self.pid}) was killed by '
-                             f'{signal.Signals(-code).name}')
+    def next_file(self, claim, blueprint):
+        """Finish the file being written (footer included) and go on in the claimed one.
+
+        A child that has written for WRITER_SECONDS hands over to its spare when the spare
+        is ready: the spare's stream is made and saves the new file, the old child finishes
+        and exits, and a new spare starts. Returns when the old file is complete.
+        """
+        if self._failure is not None:
+            raise OSError(self._failure)
+        spare = self._spare
+        if spare is not None and time.monotonic() - self._child.began >= WRITER_SECONDS \
+                and self._spare_ready():
+            old, self._child, self._spare = self._child, spare, None
+            try:
+                old.call('disconnect', (), {})
+            finally:
+                old.end()
+            self._child.call('new', self._opened, {})
+            self.save_file(claim, blueprint)
+            self._spare = _Child()
+            return
+        if not os.path.isdir(_PROC_FDS):
+            self._child.call('part', (claim.path,), {'default_blueprint': blueprint})
         else:
-            self._failure = (f'the .rrd writer process (pid {self.pid}) ended '
-                             + ('(exit status unknown)' if code is None else f'(exit {code})'))
-        raise OSError(self._failure)
+            self._child.call('part', (), {'default_blueprint': blueprint},
+                             descriptor=claim.fileno())
+
+    def _spare_ready(self):
+        """Whether the spare can take over now; a spare that died is replaced (the child
+        writing goes on meanwhile)."""
+        try:
+            return self._spare.poll_ready()
+        except OSError:
+            self._spare.end()
+            self._spare = _Child()
+            return False
 
     def _end(self):
-        for pipe in (self._child.stdin, self._child.stdout):
-            try:
-                pipe.close()
-            except OSError:
-                pass
-        try:
-            self._child.wait(timeout=ANSWER_MARGIN)
-        except subprocess.TimeoutExpired:
-            self._child.kill()
-            self._child.wait()
+        self._child.end()
+        if self._spare is not None:
+            self._spare.end()
+            self._spare = None
 
 
 def _one_line(error):
@@ -268,16 +405,48 @@ class Gathered:
         self.stream.send_columns(entity, times, components)
 
 
-def serve(source, answers):
-    """Run the calls read from `source` on a RecordingStream, answering flush/disconnect.
+#: How a finished .rrd ends (rerun-sdk 0.41): its footer's magic, then 4 bytes.
+FOOTER_MAGIC = b'RRF2FOOT'
+
+
+def _check_finished(descriptor):
+    """Raise OSError unless the file written through `descriptor` ends with its footer.
+
+    The SDK's file writer can die on a write error (a full disk, EFBIG) and disconnect then
+    return as if all went well: the file, read back, says whether it was finished.
+    """
+    if descriptor is None:
+        return
+    with open(f'{_PROC_FDS}/{descriptor}', 'rb') as written:
+        size = os.fstat(written.fileno()).st_size
+        head = written.read(4)
+        written.seek(max(0, size - 12))
+        tail = written.read(12)
+    if head == b'RRF2' and tail[:8] != FOOTER_MAGIC:
+        raise OSError(f'the file was left unfinished (no footer after {size:,} bytes): the '
+                      'writer could not write it')
+
+
+def _receive(channel):
+    """A descriptor sent by the node (SCM_RIGHTS) over `channel`."""
+    _, descriptors, _, _ = socket.recv_fds(channel, 1, 1)
+    if not descriptors:
+        raise OSError('no file descriptor came with the call')
+    return descriptors[0]
+
+
+def serve(source, answers, channel=None):
+    """Run the calls read from `source` on a RecordingStream, answering what ANSWERED names.
 
     send_columns calls are gathered (Gathered); a flush writes what the stream has, the
-    end (disconnect, or the end of the input) sends everything first. The first error is
-    written to `answers` and ends the child: the parent fails the outlet on it, as it
-    would on the in-process stream's error.
+    end (disconnect, or the end of the input) sends everything first. save_fd and part
+    take a descriptor from `channel` (a socket): the file is written as /proc/self/fd/N.
+    The first error is written to `answers` and ends the child: the parent fails the
+    outlet on it, as it would on the in-process stream's error.
     """
     from ball_world.recording.rerun_outlet import new_stream
     stream = gathered = None
+    descriptor = None
     while True:
         try:
             name, args, kwargs = pickle.load(source)
@@ -289,6 +458,22 @@ def serve(source, answers):
                 gathered = Gathered(stream)
             elif name == 'send_columns':
                 gathered.add(*args, **kwargs)
+            elif name in ('save_fd', 'part'):
+                if name == 'part':
+                    signal.alarm(FINISH_SECONDS)  # a part the disk cannot take ends it
+                    gathered.send_all()
+                    stream.flush(timeout_sec=float(FINISH_SECONDS))
+                    stream.disconnect()
+                    signal.alarm(0)
+                    _check_finished(descriptor)
+                    if descriptor is not None:
+                        os.close(descriptor)
+                        descriptor = None
+                if args:  # a path: where /proc/self/fd is not
+                    stream.save(args[0], **kwargs)
+                else:
+                    descriptor = _receive(channel)
+                    stream.save(f'{_PROC_FDS}/{descriptor}', **kwargs)
             else:
                 if name == 'disconnect':
                     # The SDK's disconnect waits for good on a file whose writer thread
@@ -296,6 +481,8 @@ def serve(source, answers):
                     signal.alarm(FINISH_SECONDS)
                     gathered.send_all()
                 getattr(stream, name)(*args, **kwargs)
+                if name == 'disconnect':
+                    _check_finished(descriptor)
             if gathered is not None:
                 gathered.send_due()
         except Exception as error:  # noqa: B902 - any SDK failure ends this file only
@@ -317,8 +504,14 @@ def serve(source, answers):
 
 def main():
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    channel = None
+    if len(sys.argv) > 1:
+        channel = socket.socket(fileno=int(sys.argv[1]))
+    import rerun  # noqa: F401 - the SDK loaded before READY: a spare is then quick to take over
+    pickle.dump(READY, sys.stdout.buffer)
+    sys.stdout.buffer.flush()
     try:
-        code = serve(sys.stdin.buffer, sys.stdout.buffer)
+        code = serve(sys.stdin.buffer, sys.stdout.buffer, channel)
     except OSError:  # the node closed its end first (it gave up waiting): it reports that
         code = 1
     # The SDK's at-exit hook would flush again; the file is finished or failed by now.

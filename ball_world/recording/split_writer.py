@@ -18,14 +18,27 @@ segment in whichever file is open (a due split is made first, so the new file be
 the segment). A segment's closing record (edits after its last step) goes to the open file.
 
 After each finished file metadata.yaml is rewritten (recording.bag), after record.max_files
-is applied: the oldest files beyond it are removed, each said through `report`. Errors are
-OSErrors whose text names the file (McapRecordingError): a full disk while the next file
-starts leaves every finished file and the last metadata.yaml as they were.
+is applied: the oldest files beyond it are removed, each said through `report`. A file's
+entry in metadata.yaml is made from what its writer counted (McapSink.summary), so a split
+costs the same whether the run has made ten files or ten thousand. Every file is made,
+replaced and removed in the bag directory's Folder (recording.files): never through a
+symlink, never outside it.
+
+Errors are OSErrors whose text names the file (McapRecordingError): a full disk while the
+next file starts leaves every finished file as it was, and metadata.yaml is written once
+more, into space set aside for it (recording.bag.reserve_space), saying what stopped the
+recorder (custom_data), so `ball_world_info` tells a full disk from a killed recorder.
+
+A follower (the .rrd parts, recording.rrd_parts) splits with the MCAP files: it is given
+every call after the MCAP writer, and told of each new file (roll) before the record that
+begins it, so its parts begin at the same steps. A follower that fails is dropped and said
+through `warn`; the MCAP goes on.
 """
 import dataclasses
 import os
 
-from ball_world.recording.bag import (claim_directory, file_name, summarize, write_metadata)
+from ball_world.recording.bag import (claim_directory, file_name, reserve_space,
+                                      write_metadata)
 from ball_world.recording.mcap_writer import CHUNK_BYTES, McapRecordingError, McapSink
 from ball_world.recording.resume import CommandsInForce, resume_metadata
 
@@ -56,26 +69,47 @@ def unused_max_files(values):
     Only split files are removed: without record.max_bytes or record.max_seconds the run
     is one file, which is never deleted, and the user asked for bounded disk.
     """
-    if values['record.max_files'] and values['record.mcap'] and not splits(values):
+    if values['record.max_files'] and (values['record.mcap'] or values['record.rerun']) \
+            and not splits(values):
         return (f"record.max_files {values['record.max_files']} has no effect: the recording "
                 'is one file unless record.max_bytes or record.max_seconds is set')
     return None
 
 
-def open_split_sink(values, report=None):
+def open_split_sink(values, report=None, warn=None):
     """The SplitMcapSink the record.* parameters describe (raises OSError naming the path)."""
     return SplitMcapSink(values['record.mcap'], values['record.max_bytes'],
                          values['record.max_seconds'], values['record.max_files'],
-                         values['record.overwrite'], report)
+                         values['record.overwrite'], report, warn=warn)
+
+
+class SplitRule:
+    """When a split recording starts its next file (or part): past max_bytes, or past
+    max_ns of log time since the file's first step; never before a file holds a step."""
+
+    def __init__(self, max_bytes=0, max_seconds=0.0):
+        self.max_bytes = int(max_bytes)
+        self.max_ns = round(float(max_seconds) * 1e9)
+
+    def due(self, steps, size, first_ns, log_time_ns):
+        """steps: steps in the open file; size: its bytes; first_ns: its first step's log
+        time; log_time_ns: the next record's (None at a segment start)."""
+        if not steps:
+            return False
+        if self.max_bytes and size >= self.max_bytes:
+            return True
+        return bool(self.max_ns and log_time_ns is not None
+                    and log_time_ns - first_ns >= self.max_ns)
 
 
 class SplitMcapSink:
     """A Sink writing `<dir>/<name>_0.mcap`, `_1.mcap`, ... and `<dir>/metadata.yaml`.
 
     max_bytes, max_seconds: when to start the next file (0: never by that measure).
-    max_files: how many files to keep (0: all). report(line): where removals are said.
-    The directory is claimed at once (recording.bag.claim_directory: an existing one is
-    refused unless overwrite). Other keyword arguments go to each McapSink.
+    max_files: how many files to keep (0: all). report(line): where removals are said;
+    warn(line): where a follower's failure is said (report when None). The directory is
+    claimed at once (recording.bag.claim_directory: an existing one is refused unless
+    overwrite). Other keyword arguments go to each McapSink.
     """
 
     #: Each file after the first starts with the state of the step it follows, which in exact
@@ -83,15 +117,19 @@ class SplitMcapSink:
     wants_carried_state = True
 
     def __init__(self, directory, max_bytes=0, max_seconds=0.0, max_files=0, overwrite=False,
-                 report=None, **options):
+                 report=None, warn=None, **options):
         self.path = os.fspath(directory)
-        self.max_bytes = int(max_bytes)
-        self.max_ns = round(float(max_seconds) * 1e9)
+        self.rule = SplitRule(max_bytes, max_seconds)
+        self.max_bytes = self.rule.max_bytes
+        self.max_ns = self.rule.max_ns
         self.max_files = int(max_files)
         self.report = report
+        self.warn = warn or report
+        self.follower = None
         options.setdefault('chunk_bytes', split_chunk_bytes(self.max_bytes))
         self._options = options
         self._claim = claim_directory(self.path, overwrite, 'set record.overwrite:=true')
+        self._folder = self._claim.folder
         self._finished = []  # bag.FileSummary of each complete file kept, in order
         self._number = 0
         self._sink = None
@@ -103,7 +141,9 @@ class SplitMcapSink:
         self._tf_static = None  # the segment's last /tf_static, for each file's start
         self._file_steps = 0
         self._file_start_ns = None
+        self._stopped = False  # a write error stopped it (said in metadata.yaml)
         try:
+            reserve_space(self._folder)
             self._open()
         except OSError:
             self._claim.discard()
@@ -113,6 +153,11 @@ class SplitMcapSink:
     def identity(self):
         """(device, inode) of the directory: another output of the run may not be it."""
         return self._claim.identity
+
+    @property
+    def number(self):
+        """The number of the file being written."""
+        return self._number - 1
 
     def discard(self):
         """Give up a recording that never began: as close(), which then removes it all."""
@@ -135,6 +180,7 @@ class SplitMcapSink:
         self._commands.restart()
         self._tf_static = None
         self._run(self._sink.start_segment, world, info)
+        self._follow('start_segment', world, info)
 
     def write_step(self, record):
         self._check_open()
@@ -150,6 +196,7 @@ class SplitMcapSink:
         self._file_steps += 1
         self._last = record
         self._retired.update(edit.name for edit in record.edits if edit.kind == 'delete')
+        self._follow('write_step', record)
 
     def write_pending(self, events):
         """The segment's closing record (step_record.PendingEvents), into the open file.
@@ -162,10 +209,13 @@ class SplitMcapSink:
         self._run(self._sink.write_pending, events)
         self._retired.update(edit.name for edit in events.edits if edit.kind == 'delete')
         self._commands.follow(events)
+        if hasattr(self.follower, 'write_pending'):
+            self._follow('write_pending', events)
 
     def flush(self):
         self._check_open()
         self._run(self._sink.flush)
+        self._follow('flush')
 
     def close(self):
         """Finish the open file and metadata.yaml; a second call does nothing.
@@ -179,6 +229,7 @@ class SplitMcapSink:
             if self._sink is not None:
                 self._finish(self.max_files or None)
         finally:
+            self._close_follower()
             if self._finished:
                 self._claim.release()
             else:
@@ -191,26 +242,65 @@ class SplitMcapSink:
             raise ValueError(f'{self.path}: the recording is closed')
 
     def _run(self, action, *args):
-        """Run action; any error finishes this sink (the files already complete stay)."""
+        """Run action; any error finishes this sink (the files already complete stay, and
+        metadata.yaml says what stopped it)."""
         try:
             action(*args)
-        except Exception:
+        except Exception as error:
             self._closed = True
-            self._sink = None
+            failed, self._sink = self._sink, None
+            self._record_stop(failed, error)
+            self._close_follower()
             self._claim.release()
             raise
 
+    def _record_stop(self, failed, error):
+        """metadata.yaml once more, with what stopped the recorder (best effort, once)."""
+        if self._stopped:
+            return
+        self._stopped = True
+        if failed is not None:
+            failed.abandon()
+        name = os.path.basename(failed.path) if failed is not None else 'metadata.yaml'
+        reason = getattr(error, 'strerror', None) or str(error)
+        try:
+            write_metadata(self._folder, self._finished,
+                           stopped=f'{name} could not be written: {reason}')
+        except OSError:
+            pass  # the error itself is what the caller reports
+
+    def _follow(self, name, *args):
+        """Hand a call on to the follower; one that fails is dropped and said, once."""
+        if self.follower is None:
+            return
+        try:
+            getattr(self.follower, name)(*args)
+        except Exception as error:  # noqa: B902 - the follower's failure is its own
+            follower, self.follower = self.follower, None
+            if self.warn is not None:
+                self.warn(f'{_one_line(error)}; the .rrd parts stop, {self.path} goes on')
+            _close_quietly(follower)
+
+    def _close_follower(self):
+        follower, self.follower = self.follower, None
+        if follower is None:
+            return
+        try:
+            follower.close()
+        except Exception as error:  # noqa: B902 - reported, the MCAP is closed regardless
+            if self.warn is not None:
+                self.warn(f'{_one_line(error)}')
+
     def _due(self, log_time_ns):
-        if not self._file_steps:
+        if self._sink is None:
             return False
-        if self.max_bytes and self._sink.bytes_written >= self.max_bytes:
-            return True
-        return bool(self.max_ns and log_time_ns is not None
-                    and log_time_ns - self._file_start_ns >= self.max_ns)
+        return self.rule.due(self._file_steps, self._sink.bytes_written, self._file_start_ns,
+                             log_time_ns)
 
     def _open(self):
-        path = os.path.join(self.path, file_name(self.path, self._number))
-        self._sink = McapSink(path, **self._options)
+        name = file_name(self.path, self._number)
+        claim = self._folder.claim(name)
+        self._sink = McapSink(claim, **self._options)
         self._number += 1
         self._file_steps = 0
         self._file_start_ns = None
@@ -218,24 +308,25 @@ class SplitMcapSink:
     def _finish(self, keep):
         """Close the open file, keep its summary and at most `keep` files (None: all), and
         rewrite metadata.yaml."""
-        from ball_world.recording.mcap_reader import Recording, RecordingError
         sink, self._sink = self._sink, None
-        sink.close()
-        if not os.path.exists(sink.path):
-            return  # it held no segment: McapSink removed it
         try:
-            self._finished.append(summarize(Recording(sink.path)))
-        except RecordingError as error:
-            raise McapRecordingError(0, f'cannot be read back: {error}', sink.path) from None
+            sink.close()
+        except Exception as error:
+            self._record_stop(sink, error)
+            raise
+        if sink.removed:
+            return  # it held no segment: McapSink removed it
+        self._finished.append(sink.summary())
         while keep is not None and len(self._finished) > keep:
             oldest = self._finished.pop(0)
-            os.unlink(oldest.path)
+            self._folder.remove(os.path.basename(oldest.path))
             if self.report is not None:
                 self.report(f'record.max_files {self.max_files}: removed the oldest split '
                             f'file {oldest.path}')
         metadata = os.path.join(self.path, 'metadata.yaml')
         try:
-            write_metadata(self.path, self._finished)
+            size = write_metadata(self._folder, self._finished)
+            reserve_space(self._folder, size)
         except OSError as error:
             raise McapRecordingError(error.errno, error.strerror or str(error),
                                      metadata) from None
@@ -266,3 +357,15 @@ class SplitMcapSink:
                                        resume=resume_metadata(record, self._retired,
                                                               self._commands.commands))
             self._sink.start_segment(world, info)
+        self._follow('roll', self.number)
+
+
+def _one_line(error):
+    return ' '.join(str(error).split()) or type(error).__name__
+
+
+def _close_quietly(sink):
+    try:
+        sink.close()
+    except Exception:  # noqa: B902 - its failure was reported already
+        pass

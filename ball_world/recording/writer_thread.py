@@ -9,6 +9,7 @@ rather than dropping anything or growing memory without limit.
 """
 import queue
 import threading
+import time
 
 #: Steps that may wait for the writer; about 0.6 s at 100 Hz, about 0.8 GB at 10,000 balls.
 MAX_PENDING = 64
@@ -24,6 +25,7 @@ class BackgroundSink:
 
     def __init__(self, sink, max_pending=MAX_PENDING):
         self.sink = sink
+        self.waited = 0.0  # seconds the stepping thread waited for the writer, in all
         self._queue = queue.Queue(maxsize=max_pending)
         self._error = None
         self._closed = False
@@ -50,7 +52,12 @@ class BackgroundSink:
     def _submit(self, call, *args):
         if self._error is not None:
             raise self._error
-        self._queue.put((call, args))
+        try:
+            self._queue.put_nowait((call, args))
+        except queue.Full:  # the writer is behind: stepping waits for it (back-pressure)
+            began = time.monotonic()
+            self._queue.put((call, args))
+            self.waited += time.monotonic() - began
 
     def start_segment(self, world, info):
         self._submit(self.sink.start_segment, world, info)

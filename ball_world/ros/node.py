@@ -19,6 +19,7 @@ from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import PublisherEventCallbacks
 import rclpy.logging
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -50,6 +51,8 @@ from ball_world.simulation import build, Simulation
 
 #: Seconds between the node's progress lines (achieved rate, real-time factor, impulses).
 REPORT_PERIOD = 10.0
+#: A step's publishing that takes this long (s) is said in the next progress line.
+SLOW_PUBLISH = 0.25
 #: Seconds between flushes of the recordings: what a SIGKILL can lose at most.
 FLUSH_PERIOD = 1.0
 #: Largest share of wall time the RViz markers may take (they are costly at 10,000 balls).
@@ -107,8 +110,10 @@ def open_sinks(values):
     """The recording sinks the parameters ask for, opened now so a bad path fails at start.
 
     Each file is claimed first (recording.files): an existing one needs record.overwrite,
-    and one that is not a regular file, is being recorded by another process, or is the
-    other recording's file is refused.
+    and a symlink, one that is not a regular file, is being recorded by another process, or
+    is the other recording's file is refused. With a split parameter set, record.mcap is a
+    bag directory and record.rerun names the parts of a split .rrd, which follow the MCAP's
+    files when both are recorded (recording.rrd_parts).
     """
     from ball_world.recording.files import claim_output, ClaimedSink
     from ball_world.recording.split_writer import open_split_sink, splits, unused_max_files
@@ -116,47 +121,85 @@ def open_sinks(values):
     unused = unused_max_files(values)
     if unused:
         logger.warning(unused)
+    split = splits(values)
     claims = []
     sinks = []
     name = None
     try:
         for name in ('record.mcap', 'record.rerun'):
-            if name == 'record.mcap' and values[name] and splits(values):
+            if not values[name]:
+                continue
+            if name == 'record.mcap' and split:
                 # a bag directory of split files: the sink claims it (and is the claim)
-                claims.append((name, open_split_sink(values, logger.info)))
-            elif values[name]:
+                claims.append((name, open_split_sink(values, logger.info, logger.error)))
+            elif split:
+                claims.append((name, _rrd_parts(values, 'record.mcap' not in dict(claims))))
+            else:
                 claims.append((name, claim_output(values[name], values['record.overwrite'],
                                                   'set record.overwrite:=true', claims)))
         claimed = dict(claims)
         if 'record.mcap' in claimed:
             from ball_world.recording.mcap_writer import McapSink
             mcap = claimed['record.mcap']
-            sinks.append(BackgroundSink(mcap if splits(values) else McapSink(mcap)))
-        if 'record.rerun' in claimed or values['view.rerun']:
+            sinks.append(BackgroundSink(mcap if split else McapSink(mcap)))
+        rerun_file = claimed.get('record.rerun')
+        if split and rerun_file is not None:
+            if 'record.mcap' in claimed:
+                claimed['record.mcap'].follower = rerun_file  # split at the MCAP's steps
+            else:
+                sinks.append(rerun_file)
+            rerun_file = None
+        if rerun_file is not None or values['view.rerun']:
             from ball_world.recording.rerun_log import RerunSink
-            rerun_file = claimed.get('record.rerun')
             name = 'record.rerun' if rerun_file else 'view.rerun'
             sink = RerunSink(
-                rerun_file.path if rerun_file else None, every=values['record.rerun_every'],
-                view=values['view.rerun'] or None, velocities=values['rerun.velocities'],
-                trail_seconds=values['rerun.trail_seconds'], clock=time.monotonic,
-                view_recording_id=values['view.recording_id'] or None,
-                report=rclpy.logging.get_logger('ball_world').error,
+                rerun_file, view=values['view.rerun'] or None,
+                view_recording_id=values['view.recording_id'] or None, **_rerun_options(values),
                 file_process=True)  # the SDK's index of a long file grows: not in the node
             sinks.append(ClaimedSink(sink, rerun_file) if rerun_file else sink)
     except ValueError as error:  # the only value a RerunSink checks is the view
-        for sink in sinks:
-            sink.close()
-        for _, claim in claims[len(sinks):]:
-            claim.discard()
+        _abandon_sinks(sinks, claims)
         raise StartupError(f"parameter 'view.rerun': {error}") from None
     except OSError as error:
-        for sink in sinks:
-            sink.close()  # nothing recorded yet: each removes the file it created
-        for _, claim in claims[len(sinks):]:
-            claim.discard()
+        _abandon_sinks(sinks, claims)
         raise StartupError(f"parameter '{name}': cannot record to {error}") from None
     return sinks
+
+
+def _rerun_options(values):
+    """The Rerun sink's options the parameters give (besides where it writes)."""
+    return dict(every=values['record.rerun_every'], velocities=values['rerun.velocities'],
+                trail_seconds=values['rerun.trail_seconds'], clock=time.monotonic,
+                report=rclpy.logging.get_logger('ball_world').error)
+
+
+def _rrd_parts(values, alone):
+    """The parts of a split .rrd (recording.rrd_parts); alone: no split MCAP to follow."""
+    from ball_world.recording.rrd_parts import RrdParts
+    from ball_world.recording.split_writer import SplitRule
+    rule = SplitRule(values['record.max_bytes'], values['record.max_seconds']) if alone \
+        else None
+    options = _rerun_options(values)
+    del options['report']  # a file alone: its failure is the sink's, reported as any
+    return RrdParts(values['record.rerun'], rule, values['record.max_files'],
+                    values['record.overwrite'], rclpy.logging.get_logger('ball_world').info,
+                    **options)
+
+
+def _abandon_sinks(sinks, claims):
+    """A start that failed: close what was opened (nothing recorded: each removes the file
+    it created) and give up the claims not yet handed to a sink."""
+    opened = set()
+    for sink in sinks:
+        opened.add(id(getattr(sink, 'sink', sink)))
+        sink.close()
+    for _, claim in claims:
+        if id(claim) in opened:
+            continue
+        if hasattr(claim, 'discard'):
+            claim.discard()
+        else:
+            claim.close()
 
 
 class BallWorld(Node):
@@ -216,7 +259,10 @@ class BallWorld(Node):
                                f'{failures[0].error}')
         self.simulation.on_sink_failure = self._on_sink_failure
 
-        self.balls_pub = self.create_publisher(PoseArray, 'balls', STEP_QOS)
+        self.balls_pub = self.create_publisher(
+            PoseArray, 'balls', STEP_QOS, event_callbacks=PublisherEventCallbacks(
+                matched=self._on_balls_matched))
+        self._slowest_publish = 0.0  # s, the longest publish of a step in this window
         self.state_pub = self.create_publisher(Float64MultiArray, 'state', STEP_QOS)
         self.stats_pub = self.create_publisher(Float64MultiArray, 'stats', STEP_QOS)
         self.markers_pub = self.create_publisher(MarkerArray, 'markers', MARKER_QOS)
@@ -396,6 +442,7 @@ class BallWorld(Node):
         jumping back: its /clock and /tf are held (_release_held) so that a use_sim_time
         client handles the jump after every /tf of the old timeline and before any of the new.
         """
+        began = time.monotonic()
         clock = self.get_parameter('publish_clock').value
         hold = first and clock and record.agents is not None
         if clock and not hold:
@@ -408,6 +455,7 @@ class BallWorld(Node):
         # still sees the jump before the /tf.
         self._held = [('clock', record), ('clock', record), ('tf', record)] if hold else []
         self._held_due = time.monotonic() + TF_HOLD
+        self._slowest_publish = max(self._slowest_publish, time.monotonic() - began)
 
     def _release_held(self, now=None):
         """Publish the held /clock, then the held /tf, each once its time has come; return
@@ -446,6 +494,16 @@ class BallWorld(Node):
         if simulation.frame_id != simulation.parameters['frame_id']:
             data = encode_occupancy_grid(0, simulation.frame_id, simulation.occupancy_map)
         self.map_pub.publish(data)
+
+    def _on_balls_matched(self, info):
+        """A subscriber of `balls` came or went (DDS matched or unmatched it): said, so that
+        a subscriber that stops hearing the world can tell whether the node still counts
+        it (docs/reliability.md, "The probe that stopped hearing balls")."""
+        change = info.current_count_change
+        if change:
+            what = 'a subscriber joined' if change > 0 else 'a subscriber left'
+            self.get_logger().info(f'{self.balls_pub.topic_name}: {what} '
+                                   f'({info.current_count} now)')
 
     # Markers ----------------------------------------------------------------------------
 
@@ -701,7 +759,15 @@ class BallWorld(Node):
             + f', rejected {rejected}'
             + (f' ({detail})' if detail else '')
             + f', discarded by reset {simulation.discarded}'
+            + f'; balls subscribers {self.balls_pub.get_subscription_count()}'
             + (' [paused]' if self.paused else ''))
+        if self._slowest_publish >= SLOW_PUBLISH:
+            # rmw_fastrtps publishes synchronously: a send that blocks holds stepping up
+            self.get_logger().warning(
+                f'publishing a step took up to {self._slowest_publish:.2f} s in the last '
+                f'{REPORT_PERIOD:g} s: the middleware could not send it at once (a '
+                'subscriber not taking the data, or a full socket buffer)')
+        self._slowest_publish = 0.0
         self._window = (now, self.steps_done)
 
     def _on_sink_failure(self, failure):
@@ -711,9 +777,21 @@ class BallWorld(Node):
             'goes on without it')
 
     def close(self):
-        """Finish the recordings (called on every way out)."""
+        """Finish the recordings (called on every way out); say in all how far behind its
+        schedule the node fell, if it did (the warnings while it ran are throttled)."""
+        waited = sum(getattr(sink, 'waited', 0.0) for sink in self._sinks)
         self.simulation.close()
         self.agent_topics.destroy()
+        dropped = getattr(self, '_dropped_steps', 0)
+        if dropped:
+            # The rate may have changed since (rate_hz is set at run time; 0: no schedule).
+            schedule = (f'the {1.0 / self._step_period:g} Hz schedule' if self._step_period
+                        else 'its schedule')
+            self.get_logger().warning(
+                f'in all, {dropped} steps of wall time were dropped behind {schedule} (the '
+                'world kept every step it took, and the recordings hold them all)'
+                + (f'; the recordings held stepping back for {waited:.1f} s: their writer '
+                   'could not keep up' if waited >= 0.1 else ''))
 
 
 def usage():

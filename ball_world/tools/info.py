@@ -10,6 +10,7 @@ import sys
 
 from ball_world.msgs.cdr import decode_pose_array, decode_vector3_stamped
 from ball_world.recording import agent_topics
+from ball_world.recording.bag import what_stopped
 from ball_world.recording.mcap_reader import decode_stats, EDIT_KINDS, RecordingError
 from ball_world.recording.recording_set import open_recording
 from ball_world.step_record import STATS_FIELDS
@@ -63,7 +64,9 @@ def _segment_lines(recording):
     segments = recording.segments
     last_logs = []
     for position, segment in enumerate(segments):
-        if position + 1 < len(segments):
+        if hasattr(recording, 'segment_end_ns'):  # a bag directory: gaps taken into account
+            last_logs.append(recording.segment_end_ns(position) or 0)
+        elif position + 1 < len(segments):
             last_logs.append(segments[position + 1].log_offset_ns - segment.dt_ns)
         else:
             last_logs.append(recording.end_ns if recording.end_ns is not None else 0)
@@ -106,17 +109,30 @@ def _file_lines(recording):
     files = getattr(recording, 'files', None)
     if not files:
         return []
-    lines = [f'split into:  {len(files)} files (metadata.yaml)']
+    lines = [f'split into:  {len(files)} files (metadata.yaml)'
+             + (f', {len(recording.missing)} missing' if recording.missing else '')]
     for member in files:
         topic = member.topic_of('balls')
         steps = member.topics[topic].message_count if topic in member.topics else 0
         span = (f', log time {_seconds(member.start_ns)} to {_seconds(member.end_ns)}'
                 if member.start_ns is not None else '')
+        state = '' if member.has_summary else ' (NO summary: its writer did not finish it)'
         lines.append(f'  {os.path.basename(member.path)}: {member.size} bytes, {steps} steps'
-                     f'{span}')
-    if recording.problem and recording.has_summary:
-        lines.append(f'  NOTE: {recording.problem}; ball_world_repair {recording.path} '
-                     'adds it')
+                     f'{span}{state}')
+    repair = f'ball_world_repair {recording.path}'
+    for name in recording.missing:
+        lines.append(f'  MISSING: {name}, listed in metadata.yaml: the steps it held are lost')
+    for gap in recording.gaps:
+        lines.append(f'  GAP: {gap.describe()}')
+    if recording.stopped:
+        lines.append(f'  STOPPED: the recorder stopped on an error: {recording.stopped}'
+                     f'{what_stopped(recording.stopped)}')
+    unlisted = recording.unlisted
+    if unlisted:
+        lines.append(f"  NOT LISTED: {', '.join(unlisted)} (a file being written when the "
+                     f'recorder stopped); {repair} adds it')
+    for name, why in recording.strays:
+        lines.append(f'  left out: {name}: {why}')
     return lines
 
 
@@ -146,7 +162,7 @@ def describe(recording):
     poses = recording.topics[balls_topic].message_count if balls_topic in recording.topics \
         else 0
     segment_lines, taken = _segment_lines(recording)
-    count = len(recording.segments)
+    count = len({segment.index for segment in recording.segments})
     lines.append(f"steps:       {taken:,} after the initial state{'' if count == 1 else 's'} "
                  f'({_plural(poses, "message")} on {_shown(balls_topic)}), in '
                  f'{_plural(count, "segment")}')
@@ -277,17 +293,26 @@ def _agent_lines(recording):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(
-        prog='ball_world_info', description='Summarise a ball_world MCAP recording.')
-    parser.add_argument('file', help='the .mcap recording, or a bag directory of split files')
+        prog='ball_world_info', description='Summarise a ball_world recording: MCAP, a bag '
+                                            'directory of split files, or Rerun .rrd (a '
+                                            'file, or the name of split parts NAME_<i>.rrd).')
+    parser.add_argument('file', help='the .mcap recording, a bag directory of split files, an '
+                                     '.rrd, or the .rrd name of split parts')
     args = parser.parse_args(argv)
     try:
-        recording = open_recording(args.file)
-        lines = describe(recording)
+        if args.file.endswith('.rrd'):
+            from ball_world.tools.info_rrd import describe as describe_rrd
+            lines = describe_rrd(args.file)
+        else:
+            lines = describe(open_recording(args.file))
     except RecordingError as error:
         print(f'ball_world_info: {args.file}: {error}', file=sys.stderr)
         return 2
     except ValueError as error:  # an undecodable message
         print(f'ball_world_info: {args.file}: {error}', file=sys.stderr)
+        return 2
+    except OSError as error:  # an .rrd that is not there, or not a file
+        print(f'ball_world_info: {args.file}: {error.strerror or error}', file=sys.stderr)
         return 2
     print_report('\n'.join(lines))
     return 0

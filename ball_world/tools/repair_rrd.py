@@ -9,19 +9,23 @@ footer. This runs it into a temporary file, checks the result with `rerun rrd ve
 that it holds a ball_world recording, and only then moves it into place
 (recording.files.PartialOutput, as for MCAP): the input is never changed, and input that is
 not a Rerun recording of ball_world writes nothing.
+
+The parts of a split .rrd (recording.rrd_parts: `<name>_<i>.rrd` beside the name given) are
+repaired in place by repair_parts: each part `rerun rrd verify` refuses is rewritten, a part
+that holds nothing (its writer stopped as it began it) is removed, and anything that looks
+like a part but is none the recorder names (`run_003.rrd`) is left alone, said.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import os
-from pathlib import Path
+import re
 import subprocess
-import warnings
 
-from ball_world.recording.files import open_regular, PartialOutput, same_path
+from ball_world.recording.files import Folder, open_regular, PartialOutput, same_path, split_path
 from ball_world.recording.mcap_reader import RecordingError
-from ball_world.recording.rerun_log import BALLS, STEP
-
-#: The application id the node's Rerun streams are logged under.
-APPLICATION_ID = 'ball_world'
+from ball_world.recording.rerun_log import APPLICATION_ID
+from ball_world.recording.rrd_parts import part_names, part_stem
+from ball_world.recording.rrd_reading import (ball_steps, last_line, run_rerun, verify,
+                                              verify_error)
 
 
 @dataclass
@@ -36,65 +40,28 @@ class RrdReport:
     steps: list = None  # for each recording, (first, last) step with ball positions, or None
 
 
-def rerun_binary():
-    """The Rerun CLI of the installed rerun-sdk (the `rerun` script only runs it)."""
-    try:
-        import rerun_cli
-    except ImportError:
-        raise RecordingError('repairing an .rrd needs the Rerun CLI of rerun-sdk (pip install '
-                             'rerun-sdk)') from None
-    return Path(rerun_cli.__file__).parent / 'rerun'
-
-
-def _run(arguments, **options):
-    return subprocess.run([str(rerun_binary()), *map(str, arguments)], text=True, **options)
-
-
-def _last_line(text):
-    lines = [line.strip() for line in text.splitlines() if line.strip()]
-    return lines[-1] if lines else 'no message'
-
-
-def _ball_steps(path):
-    """(recordings, blueprints, [(first, last) step of the balls per recording]) of an .rrd."""
-    import rerun as rr  # its import takes a second: only when an .rrd is repaired
-    with warnings.catch_warnings():
-        warnings.filterwarnings('ignore', 'RRD file has no footer')
-        reader = rr.chunk.RrdReader(path)
-    recordings = [store for store in reader.recordings()
-                  if store.application_id == APPLICATION_ID]
-    spans = []
-    for store in recordings:
-        steps = []
-        for chunk in reader.stream(store=store):
-            batch = chunk.to_record_batch()
-            if chunk.entity_path == f'/{BALLS}' and 'Points2D:positions' in batch.schema.names:
-                steps += batch.column(STEP).to_pylist()
-        spans.append((min(steps), max(steps)) if steps else None)
-    return len(recordings), len(reader.blueprints()), spans
-
-
-def repair_rrd(source, target, force=False):
+def repair_rrd(source, target, force=False, folder=None):
     """Write every complete chunk of the .rrd `source` into a complete .rrd at `target`.
 
-    Raises RecordingError (not a Rerun recording of ball_world, or Rerun could not read it)
-    or OSError (files.FileRefused included); then nothing is written.
+    folder: a recording.files.Folder in which `target` is a plain name. Raises
+    RecordingError (not a Rerun recording of ball_world, or Rerun could not read it) or
+    OSError (files.FileRefused included); then nothing is written.
     """
     with open_regular(source) as stream:  # refuses a FIFO or a device, like the MCAP repair
         report = RrdReport(source_bytes=os.fstat(stream.fileno()).st_size)
-    checked = _run(['rrd', 'verify', source], capture_output=True)
-    report.problem = '' if checked.returncode == 0 else _last_error(checked)
-    output = PartialOutput(target, force or same_path(source, target), 'pass --force')
+    report.problem = verify(source)
+    in_place = same_path(source, folder.join(target) if folder is not None else target)
+    output = PartialOutput(target, force or in_place, 'pass --force', folder=folder)
     try:
         with output.claim.writer() as written:
-            merged = _run(['rrd', 'merge', '--continue-on-error', source], stdout=written,
-                          stderr=subprocess.PIPE)
+            merged = run_rerun(['rrd', 'merge', '--continue-on-error', source], stdout=written,
+                               stderr=subprocess.PIPE)
         if merged.returncode != 0:
-            raise RecordingError(f'Rerun could not read it: {_last_line(merged.stderr)}')
-        verified = _run(['rrd', 'verify', output.path], capture_output=True)
+            raise RecordingError(f'Rerun could not read it: {last_line(merged.stderr)}')
+        verified = run_rerun(['rrd', 'verify', output.path], capture_output=True)
         if verified.returncode != 0:
-            raise RecordingError(f'the copy does not verify: {_last_error(verified)}')
-        report.recordings, report.blueprints, report.steps = _ball_steps(output.path)
+            raise RecordingError(f'the copy does not verify: {verify_error(verified)}')
+        report.recordings, report.blueprints, report.steps = ball_steps(output.path)
         if not report.recordings:
             raise RecordingError(f"no recording of '{APPLICATION_ID}' in it: not a ball_world "
                                  '.rrd')
@@ -104,16 +71,6 @@ def repair_rrd(source, target, force=False):
         output.discard()
         raise
     return report
-
-
-def _last_error(done):
-    """The line of `rerun rrd verify`'s output that says what is wrong."""
-    lines = [line.strip() for line in (done.stdout + done.stderr).splitlines()
-             if line.strip() and not line.startswith('Error: Verification failed')]
-    if not lines:
-        return f'rerun rrd verify failed (exit code {done.returncode})'
-    quoted, _, said = lines[-1].partition('": ')  # '"PATH": what is wrong'
-    return f'rerun rrd verify: {said if quoted.startswith(chr(34)) and said else lines[-1]}'
 
 
 def describe(report, source, target):
@@ -126,3 +83,56 @@ def describe(report, source, target):
     lines.append(f'  kept {blueprints}; the copy verifies ({report.target_bytes} bytes)')
     lines.append(f'wrote {target}')
     return '\n'.join(lines)
+
+
+@dataclass
+class PartsReport:
+    """What a repair of a split .rrd's parts found and did, as lines; lost: a part that
+    could not be read at all (left in place)."""
+
+    lines: list = field(default_factory=list)
+    lost: bool = False
+
+
+def repair_parts(path):
+    """Repair in place every part of the split .rrd named `path` that does not verify.
+
+    Raises OSError (FileRefused) for the folder; returns a PartsReport.
+    """
+    folder_path, _ = split_path(path)
+    report = PartsReport()
+    with Folder(folder_path) as folder:
+        names = folder.names()
+        parts = part_names(path, names)
+        lookalike = re.compile(re.escape(part_stem(path)) + r'_[0-9]+\.rrd')
+        canonical = {name for _, name in parts}
+        for name in sorted(names):
+            if lookalike.fullmatch(name) and name not in canonical:
+                report.lines.append(f'{folder.join(name)}: left alone, not a name the '
+                                    'recorder gives a part (it numbers them without leading '
+                                    'zeros)')
+        verified = sum(_repair_part(folder, name, report) for _, name in parts)
+    report.lines.append(f'{len(parts)} parts of {path}: {verified} verify'
+                        + ('; NOT ALL COULD BE READ (see above)' if report.lost else ''))
+    return report
+
+
+def _repair_part(folder, name, report):
+    """Check one part and repair it in place if it needs it; whether it verifies now."""
+    path = folder.join(name)
+    if folder.lstat(name).st_size == 0:
+        folder.remove(name)
+        report.lines.append(f'{path}: removed, it held nothing (its writer stopped as it '
+                            'began it)')
+        return False
+    if not verify(path):
+        report.lines.append(f'{path}: verifies')
+        return True
+    try:
+        repaired = repair_rrd(path, name, force=True, folder=folder)
+    except RecordingError as error:
+        report.lost = True
+        report.lines.append(f'{path}: left in place, it cannot be read: {error}')
+        return False
+    report.lines.extend(describe(repaired, path, path).splitlines())
+    return True

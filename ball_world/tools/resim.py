@@ -14,7 +14,10 @@ mcap_reader.RecordedStep.closing) is made the same way, without a step, and chec
 way. An edit the re-simulation refuses,
 or a spawn that gets another name, is a difference too. Exit status: 0 all identical, 1 a
 difference, 2 an unreadable recording or parameters that no longer build a world (one line
-on stderr).
+on stderr), 3 identical where checked but some steps could not be checked: a gap in a split
+set (a file missing or cut short) is reported with the steps it lacks, and the run is picked
+up again from the state the next file resumes from; nothing is ever simulated through a
+gap.
 
 A split file (a bag directory's later file, or one given alone) that starts inside a
 segment is picked up from the state it resumes from (recording.resume): the balls, agents
@@ -47,6 +50,8 @@ from ball_world.tools import print_report
 from ball_world.tools.progress import Progress
 
 PROG = 'ball_world_resim'
+#: Exit status when every step checked is identical but some steps could not be checked.
+UNCHECKED = 3
 
 _POSITION_NAMES = ('x', 'y')
 _STATE_NAMES = ('x', 'y', 'vx', 'vy')
@@ -84,16 +89,41 @@ class SegmentResult:
     last_step: int = 0
     differing_steps: int = 0
     closing: Optional[tuple] = None  # (impulses, edits) made after the last step, if any
+    first_step: Optional[int] = None
+    resumed: bool = False  # picked up from the state a split file resumes from
+    skipping: Optional['Unchecked'] = None  # the steps being passed over, if so
+
+
+@dataclass
+class Unchecked:
+    """Steps of a segment that could not be re-simulated, and why: `first` to `last` (None:
+    not known, the recording holds none of them, or up to the end of what it holds)."""
+
+    segment: int
+    first: Optional[int]
+    last: Optional[int]
+    why: str
+
+    def describe(self):
+        if self.first is None:
+            steps = f'the steps before step {self.last + 1}'
+        elif self.last is None or self.last == self.first:
+            steps = f'step {self.first}'
+        else:
+            steps = f'steps {self.first}-{self.last}'
+        return f'segment {self.segment}: {steps} NOT CHECKED: {self.why}'
 
 
 class Comparison:
-    """Collects differences: the first one met, the largest one, and counts per segment."""
+    """Collects differences: the first one met, the largest one, and counts per segment;
+    and the steps that could not be checked (a gap in the recording)."""
 
     def __init__(self):
         self.first = None
         self.largest = None
         self.count = 0
         self.segments = []
+        self.unchecked = []
 
     @property
     def identical(self):
@@ -317,26 +347,39 @@ def _odom_text(data):
 def resimulate(recording, progress=None):
     """Re-simulate every segment of a Recording; returns a Comparison.
 
+    What cannot be re-simulated is passed over and said in Comparison.unchecked, never
+    simulated through: the steps a gap in a split set lacks (recording_set.Gap; the run is
+    picked up again from the state the next file resumes from), and the steps of a segment
+    after a jump inside it (a damaged chunk dropped by ball_world_repair, a crafted log time)
+    up to the next state to resume from.
+
     Raises ScenarioError when a segment's parameters do not build a world, RecordingError
     when the recording cannot be read. progress (tools.progress.Progress) counts steps.
     """
     comparison = Comparison()
     simulation = result = None
     scans = RecordedAgentMessages(recording)
+    gaps = {(gap.segment, gap.resumes): gap for gap in getattr(recording, 'gaps', ())}
     for step in recording.steps():
         if progress is not None and not step.closing:
             progress.advance()
         segment = recording.segments[step.segment]
         if result is None or result.position != step.segment:
-            if step.step == 0:
-                simulation = _rebuild(segment, step)
-            elif segment.resume is not None and step.step == segment.resume.step + 1:
-                simulation = _resume(segment)
-            else:
-                raise RecordingError(f'segment {segment.index} begins at '
-                                     f'step {step.step}: its first steps are not recorded')
-            result = SegmentResult(segment.index, step.segment)
+            result = _begin(recording, segment, step, comparison, gaps)
+            if result.skipping is None:
+                simulation = (_rebuild(segment, step) if step.step == 0
+                              else _resume(segment))
+                result.resumed = step.step != 0
+        elif result.skipping is not None:
+            point = _resume_point(recording, segment, step)
+            if point is None:
+                if not step.closing:
+                    result.skipping.last = step.step
+                continue
+            # a later file of the set picks the segment up here: on from its state
+            result = SegmentResult(segment.index, step.segment, resumed=True)
             comparison.segments.append(result)
+            simulation = _resume(point)
         elif result.closing is not None:
             raise RecordingError(f'segment {segment.index} has step {step.step} after the '
                                  'closing record of its last step')
@@ -346,9 +389,15 @@ def resimulate(recording, progress=None):
             continue
         elif step.step != result.last_step + 1:
             # Never re-simulate a gap: a crafted log time could ask for years of steps.
-            raise RecordingError(f'segment {segment.index} jumps from step '
-                                 f'{result.last_step} to step {step.step}: the steps between '
-                                 'are not recorded')
+            comparison.unchecked.append(Unchecked(
+                segment.index, result.last_step + 1, step.step - 1,
+                f'segment {segment.index} jumps from step {result.last_step} to step '
+                f'{step.step}: the steps between are not recorded'))
+            result.skipping = Unchecked(
+                segment.index, step.step, step.step,
+                'no state to go on from after the steps missing before them')
+            comparison.unchecked.append(result.skipping)
+            continue
         if step.closing:
             before = comparison.count
             _close(simulation, step, comparison, segment.index)
@@ -361,11 +410,41 @@ def resimulate(recording, progress=None):
         result.impulses += len(step.impulses)
         result.edits += len(step.edits)
         result.last_step = step.step
+        if result.first_step is None:
+            result.first_step = step.step
         same = _compare_step(step, record, comparison, segment.index)
         same = scans.compare(step, record, comparison, segment.index) and same
         if not same:
             result.differing_steps += 1
     return comparison
+
+
+def _resume_point(recording, segment, step):
+    """The copy of `segment` a file of a set resumes from just before `step`, if any."""
+    points = getattr(recording, 'resume_points', {})
+    return points.get((segment.index, segment.log_offset_ns, step.step - 1))
+
+
+def _begin(recording, segment, step, comparison, gaps):
+    """The SegmentResult of a segment (or of the part of it a split file resumes) whose
+    first step is `step`; the steps before it that are missing noted as unchecked."""
+    result = SegmentResult(segment.index, step.segment)
+    comparison.segments.append(result)
+    if segment.resume is not None:
+        gap = gaps.get((segment.index, segment.resume.step))
+        if gap is not None:
+            comparison.unchecked.append(Unchecked(
+                segment.index, None if gap.last is None else gap.last + 1,
+                segment.resume.step, gap.why))
+    if step.step == 0 or (segment.resume is not None and step.step == segment.resume.step + 1):
+        return result
+    resumes = ('' if segment.resume is None
+               else f' (its state is that of step {segment.resume.step})')
+    result.skipping = Unchecked(segment.index, step.step, step.step,
+                                f'the recording of segment {segment.index} begins at step '
+                                f'{step.step}{resumes}: no state to start from')
+    comparison.unchecked.append(result.skipping)
+    return result
 
 
 class RecordedAgentMessages:
@@ -456,20 +535,35 @@ _SHOWN = {agent_topics.SCAN: _scan_text, agent_topics.GROUND_TRUTH: _odom_text,
 
 
 def describe(comparison):
-    lines = []
-    for result in comparison.segments:
+    entries = []  # (segment, step, order, line): what was compared and what was not, in order
+    for order, unchecked in enumerate(comparison.unchecked):
+        step = unchecked.first if unchecked.first is not None else unchecked.last
+        entries.append((unchecked.segment, step, order, unchecked.describe()))
+    for order, result in enumerate(comparison.segments):
+        if result.skipping is not None and not result.steps:
+            continue  # said with the steps not checked
         verdict = ('identical' if not result.differing_steps
                    else f'{result.differing_steps} steps differ')
         edits = f', {result.edits} edits' if result.edits else ''
         if result.closing is not None:
             edits += (f'; after the last step {result.closing[0]} impulses and '
                       f'{result.closing[1]} edits')
-        lines.append(f'segment {result.index}: {result.steps} steps compared (last step '
-                     f'{result.last_step}), {result.impulses} impulses{edits}: {verdict}')
+        picked = ''
+        if result.resumed:
+            picked = (f' (picked up at step {result.first_step} from the state a split file '
+                      'resumes from)')
+        entries.append((result.index, result.first_step or 0, order,
+                        f'segment {result.index}: {result.steps} steps compared (last step '
+                        f'{result.last_step}), {result.impulses} impulses{edits}: '
+                        f'{verdict}{picked}'))
+    lines = [line for _, _, _, line in sorted(entries, key=lambda entry: entry[:3])]
     total = sum(result.steps for result in comparison.segments)
-    if comparison.identical:
+    if comparison.identical and not comparison.unchecked:
         lines.append(f'all {total} recorded steps re-simulate bit-identically (largest '
                      'difference 0)')
+    elif comparison.identical:
+        lines.append(f'the {total} steps checked re-simulate bit-identically (largest '
+                     'difference 0), but NOT ALL STEPS COULD BE CHECKED (see above)')
     else:
         lines.append(f'first difference: {comparison.first.describe()}')
         lines.append(f'largest difference: {comparison.largest.size:.3g} at '
@@ -482,7 +576,9 @@ def main(argv=None):
         prog=PROG,
         description='Re-simulate a recording from its parameters, impulses and world edits '
                     'and check that every recorded pose and state row is bit-identical. Exit '
-                    '0 if so, 1 if not, 2 if the recording cannot be read or rebuilt.')
+                    '0 if so, 1 if not, 2 if the recording cannot be read or rebuilt, 3 if '
+                    'every step checked is identical but some could not be checked (a gap: '
+                    'a split file missing or cut short; the report says which steps).')
     parser.add_argument('file', help='the .mcap recording, or a bag directory of split files')
     args = parser.parse_args(argv)
     progress = None
@@ -491,8 +587,10 @@ def main(argv=None):
         balls = recording.topics.get(recording.topic_of('balls'))
         progress = Progress(balls.message_count if balls else 0, 'steps', PROG)
         comparison = resimulate(recording, progress)
-        if not comparison.segments:
-            raise RecordingError('no recorded steps to compare')
+        if not any(result.steps for result in comparison.segments):
+            raise RecordingError('no recorded steps to compare'
+                                 + ''.join(f'; {unchecked.describe()}'
+                                           for unchecked in comparison.unchecked))
     except RecordingError as error:
         _abandon(progress)
         print(f'{PROG}: {args.file}: {error}', file=sys.stderr)
@@ -503,7 +601,9 @@ def main(argv=None):
         return 2
     progress.finish()
     print_report('\n'.join(describe(comparison)))
-    return 0 if comparison.identical else 1
+    if not comparison.identical:
+        return 1
+    return UNCHECKED if comparison.unchecked else 0
 
 
 def _abandon(progress):
