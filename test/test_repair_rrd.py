@@ -13,8 +13,14 @@ from ball_world_testing.harness import (Children, DEADLINE, rrd_ball_steps, run_
                                         run_tool)
 import pytest
 
+from ball_world.recording.rerun_process import GATHER_SECONDS
+
 #: Enough bytes that several 1 s flushes (several batches of steps) are in the file.
 KILL_AFTER_BYTES = 60_000
+#: And enough time that the writer has sent the balls' gathered columns (one chunk per entity
+#: every GATHER_SECONDS of its wall time) at least twice: a torn last message then cannot be
+#: the only chunk holding them, however fast other entities filled the bytes above.
+KILL_AFTER_SECONDS = 2.5 * GATHER_SECONDS
 
 
 @pytest.fixture(scope='module')
@@ -38,9 +44,15 @@ def killed_run(path, with_writer):
         node = children.start_node('record.rerun:=' + str(path), 'rate_hz:=200.0',
                                    'markers.rate_hz:=0.0')
         deadline = time.monotonic() + DEADLINE
-        while not path.exists() or path.stat().st_size < KILL_AFTER_BYTES:
+        appeared = None  # when the writer created the file
+        while True:
             assert node.poll() is None, node.communicate()
             assert time.monotonic() < deadline, 'the node wrote too little to its .rrd'
+            if path.exists():
+                appeared = appeared or time.monotonic()
+                if (path.stat().st_size >= KILL_AFTER_BYTES
+                        and time.monotonic() - appeared >= KILL_AFTER_SECONDS):
+                    break
             time.sleep(0.1)
         writers = child_pids(node.pid)
         assert len(writers) == 1, writers
