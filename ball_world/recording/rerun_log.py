@@ -730,7 +730,6 @@ class _Feed:
             self._rtf.clear()
         self._start = (world, info)
         self._log_segment(world, info)
-        self._emit('log', IMPULSES, rr.Arrows2D.cleared(), rr.Points2D.cleared())
 
     def _log_segment(self, world, info):
         """The segment's walls and scale, at its start (logged again in each new part)."""
