@@ -1,7 +1,8 @@
-"""One table of parameters (core.parameters) behind the node, the file, the README and --help.
+"""One table of parameters (core.parameters) behind the node, the file, the reference page and
+--help.
 
-A default, range or description changed in the table and not in config/ball_world.yaml or the
-README fails here; so does a parameter added in one place and forgotten in another.
+A default, range or description changed in the table and not in config/ball_world.yaml or
+docs/reference.md fails here; so does a parameter added in one place and forgotten in another.
 """
 from pathlib import Path
 
@@ -22,11 +23,11 @@ def test_config_file_holds_every_parameter_at_its_default():
         assert parameter.check(values[parameter.name]) == parameter.default, parameter.name
 
 
-def test_readme_table_is_the_table():
-    readme = (ROOT / 'README.md').read_text()
-    start = readme.index('\n', readme.index('<!-- parameters:')) + 1
-    end = readme.index('<!-- /parameters -->')
-    assert readme[start:end].rstrip('\n') == table.markdown_table()
+def test_reference_table_is_the_table():
+    reference = (ROOT / 'docs' / 'reference.md').read_text()
+    start = reference.index('\n', reference.index('<!-- parameters:')) + 1
+    end = reference.index('<!-- /parameters -->')
+    assert reference[start:end].rstrip('\n') == table.markdown_table()
 
 
 def test_defaults_check_and_build_the_default_world():

@@ -2,8 +2,9 @@
 
 Why one table: the node's ROS descriptors, the scenario's defaults, the checks a value must
 pass (at start, on `ros2 param set`, and when a recording is read back), the shipped
-config/ball_world.yaml and the README's table must never disagree. They are all derived
-from, or tested against, PARAMETERS. No ROS here: the offline tools use the same checks.
+config/ball_world.yaml and the parameter table of docs/reference.md must never disagree. They
+are all derived from, or tested against, PARAMETERS. No ROS here: the offline tools use the
+same checks.
 
 A parameter's range is the range the node really runs: `check` refuses anything outside it
 with a ParameterError naming the parameter, and every value inside it gives a world that
@@ -106,7 +107,7 @@ class Parameter:
         return self.applies == AT_START
 
     def range_text(self):
-        """The range as the README and the descriptors state it."""
+        """The range as docs/reference.md and the descriptors state it."""
         if self.choices:
             return ', '.join(self.choices)
         parts = []
@@ -449,7 +450,7 @@ def _default_text(parameter):
 
 
 def markdown_table():
-    """The README's parameter table, made from PARAMETERS (a test keeps the README equal)."""
+    """docs/reference.md's parameter table, made from PARAMETERS (a test keeps them equal)."""
     lines = ['| name | type | default | range | takes effect | meaning |',
              '|---|---|---|---|---|---|']
     for parameter in PARAMETERS:
