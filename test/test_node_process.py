@@ -1,6 +1,7 @@
 """The node as users run it: the installed executable in a process of its own, over DDS."""
 from pathlib import Path
 import signal
+import time
 
 from ball_world_testing.harness import finish, node_command, RECEIVE_QOS, run_tool
 from geometry_msgs.msg import PoseArray, Vector3Stamped
@@ -71,6 +72,22 @@ def test_signals_shut_down_cleanly(sig, probe, processes):
     code, out, err = finish(process)
     assert code == 0, err
     assert 'Traceback' not in err + out
+
+
+def test_ctrl_c_after_falling_behind_says_so_once_without_an_rcl_error(probe, processes):
+    """The last word on dropped steps comes after Ctrl-C has taken the context down: it is
+    said on the console, not through the node's /rosout publisher, which would make rcl
+    print 'Failed to publish log message to rosout' instead of ending quietly."""
+    process = processes.start(node_command(
+        'rate_hz:=100000.0', 'random.count:=3000', 'arena:=[0.0, 0.0, 200.0, 200.0]'))
+    balls = probe.listen(PoseArray, 'balls', qos=10)
+    probe.spin_until(lambda: len(balls) >= 20, 'twenty steps')
+    time.sleep(1.5)  # over 0.5 s behind the schedule at any speed: steps are dropped
+    process.send_signal(signal.SIGINT)
+    code, out, err = finish(process)
+    assert code == 0, err
+    assert err.count('steps of wall time were dropped behind the 100000 Hz schedule') == 1, err
+    assert 'rosout' not in err + out and 'Traceback' not in err + out
 
 
 def run_node(*ros_args):

@@ -778,20 +778,28 @@ class BallWorld(Node):
 
     def close(self):
         """Finish the recordings (called on every way out); say in all how far behind its
-        schedule the node fell, if it did (the warnings while it ran are throttled)."""
+        schedule the node fell, if it did (the warnings while it ran are throttled).
+
+        Returns that last word when it cannot be said here: after Ctrl-C the context is
+        gone, and a line logged through the node's logger, whose /rosout publisher cannot
+        publish any more, makes rcl print an error of its own; the caller says it."""
         waited = sum(getattr(sink, 'waited', 0.0) for sink in self._sinks)
         self.simulation.close()
         self.agent_topics.destroy()
         dropped = getattr(self, '_dropped_steps', 0)
-        if dropped:
-            # The rate may have changed since (rate_hz is set at run time; 0: no schedule).
-            schedule = (f'the {1.0 / self._step_period:g} Hz schedule' if self._step_period
-                        else 'its schedule')
-            self.get_logger().warning(
-                f'in all, {dropped} steps of wall time were dropped behind {schedule} (the '
-                'world kept every step it took, and the recordings hold them all)'
-                + (f'; the recordings held stepping back for {waited:.1f} s: their writer '
-                   'could not keep up' if waited >= 0.1 else ''))
+        if not dropped:
+            return None
+        # The rate may have changed since (rate_hz is set at run time; 0: no schedule).
+        schedule = (f'the {1.0 / self._step_period:g} Hz schedule' if self._step_period
+                    else 'its schedule')
+        summary = (f'in all, {dropped} steps of wall time were dropped behind {schedule} (the '
+                   'world kept every step it took, and the recordings hold them all)'
+                   + (f'; the recordings held stepping back for {waited:.1f} s: their writer '
+                      'could not keep up' if waited >= 0.1 else ''))
+        if not self.context.ok():
+            return summary
+        self.get_logger().warning(summary)
+        return None
 
 
 def usage():
@@ -848,8 +856,10 @@ def run(args=None):
     finally:
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
         if node is not None:
-            node.close()
+            unsaid = node.close()
             node.destroy_node()
+            if unsaid:  # a logger of another name, which has no /rosout publisher to fail
+                rclpy.logging.get_logger(f'{node.get_logger().name}.exit').warning(unsaid)
         rclpy.try_shutdown()
     return code
 
