@@ -87,7 +87,7 @@ def instructions(args, world):
   {DRIVEN} is yours; ball_world_tracker follows the balls its lidar sees (the green rings).
   Drive {DRIVEN} from a second terminal:
     {env}{shown(tool('ball_world_teleop'))} --ros-args -p ball:={DRIVEN}    (arrow keys)
-    {env}{shown(tool('ball_world_cli'))} drive {DRIVEN} 0.5 0.8 --for 5      (0.5 m/s, turning)
+    {env}{shown(tool('ball_world_cli'))} drive {DRIVEN} 0.2 0.8 --for 5      (0.2 m/s, turning)
 
   Ctrl-C stops everything. Logs: {args.log_dir}/
 """
