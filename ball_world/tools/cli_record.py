@@ -41,6 +41,8 @@ def record(client, args):
         except (Failure, KeyboardInterrupt):
             bag.discard()
             raise
+        until = 'Ctrl-C' if args.seconds is None else f'--for {args.seconds:g} s or Ctrl-C'
+        print_report(f"recording {', '.join(resolved)} to {bag.file_path} until {until}")
         count = _record(client, bag, args.seconds)
     except McapRecordingError as error:
         raise Failure(f'record: {one_line(error)}') from None
