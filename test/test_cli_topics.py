@@ -4,8 +4,8 @@ that rosbags, mcap and ball_world_info read) and status; each command a process 
 checked by what the world and a probe then see."""
 import signal
 
-from ball_world_testing.harness import (Children, finish, read_mcap_ros2, read_rosbags,
-                                        run_tool, start, executable)
+from ball_world_testing.harness import (Children, executable, finish, read_mcap_ros2,
+                                        read_rosbags, run_tool, start)
 from geometry_msgs.msg import Twist, TwistStamped
 import pytest
 from std_msgs.msg import Float64MultiArray
@@ -89,7 +89,7 @@ def test_drive_sends_the_type_the_agent_takes_and_a_zero_command_last(
     lines = ok('drive', 'ball_0', '0.5', '1.25', '--vy', '-0.25', '--rate', '20', '--for',
                '1', namespace=namespace)
     assert len(lines) == 1 and lines[0].startswith(
-        f'drove ball_0: ') and f'{message_type.__name__} commands' in lines[0], lines
+        'drove ball_0: ') and f'{message_type.__name__} commands' in lines[0], lines
     sent = int(lines[0].split()[2])
     probe.spin_until(lambda: len(heard) == sent + 1, 'every command and the stop')
     twists = [m.twist if message_type is TwistStamped else m for m in heard]
