@@ -41,11 +41,12 @@ def refused(*args):
 
 def ball_state(name):
     """(time in s, x, y, vx, vy) of a ball, as the world answers GetEntityState."""
-    stamp, line = ok('state', name)
+    stamp, header, line = ok('state', name)
     time = float(stamp.split()[2])
     words = line.split()
-    assert words[0] == name and words[1::2] == ['x', 'y', 'vx', 'vy'], line
-    return (time, *map(float, words[2::2]))
+    assert header.split()[1::2] == ['x', 'y', 'vx', 'vy', 'radius', 'mass'], header
+    assert words[0] == name and len(words) == 7, line
+    return (time, *map(float, words[1:5]))
 
 
 def world_state(probe, name):
@@ -74,10 +75,12 @@ def world(shared_world):
 
 
 def test_push_step_and_the_simulation_state(world, probe):
-    assert ok('status') == ['stopped (paused at step 0)']
+    assert ok('status')[:2] == ['state: stopped (paused at step 0)', 'step: 0']
     t0, *_ = ball_state('ball_1')
+    # The impulse topic has no answer: the line says what is known (delivered) and what not.
     assert ok('push', 'ball_1', '0.5', '-0.25') == [
-        f'pushed ball_1 by (0.5, -0.25) N s on {NAMESPACE}/impulse']
+        f'pushed ball_1 by (0.5, -0.25) N s on {NAMESPACE}/impulse: delivered; applied before '
+        'the next step unless the world refuses it then as too fast (its log says so)']
     assert ok('step') == ['stepped 1']
     t1, _, _, vx, vy = world_state(probe, 'ball_1')
     # v = J / m exactly, one step of 1/50 s later than before (whatever step it was at).
@@ -87,7 +90,7 @@ def test_push_step_and_the_simulation_state(world, probe):
     assert 'RESULT_INCORRECT_STATE' in refused('step', '3')
     assert ok('pause') == ['paused']
     assert ok('reset') == ['reset to step 0']
-    assert ok('status') == ['stopped (paused at step 0)']
+    assert ok('status')[0] == 'state: stopped (paused at step 0)'
     assert world_state(probe, 'ball_1') == (0.0, 5.0, 5.0, 0.0, 0.0)
 
 
@@ -96,13 +99,14 @@ def test_spawn_set_state_and_delete_through_simulation_interfaces(world, probe):
         'spawned red at (5, 8)']
     assert ok('info', 'red') == ['red: ball, radius 0.25 m, mass 2 kg']
     assert 'NAME_NOT_UNIQUE' in refused('spawn', 'red', '2', '8')
-    assert ok('set-state', 'red', '2', '8') == ['set red: x 2.0  y 8.0  vx 1.0  vy 0.0']
+    assert ok('set-state', 'red', '2', '8') == ['set red: x 2  y 8  vx 1  vy 0']
     assert world_state(probe, 'red')[1:] == (2.0, 8.0, 1.0, 0.0)  # the velocity kept
     ok('set-state', 'red', '2', '8', '0', '-1')
     assert world_state(probe, 'red')[1:] == (2.0, 8.0, 0.0, -1.0)
     assert 'INVALID_POSE' in refused('set-state', 'red', '5', '5')  # on ball_1
     lines = ok('state')
-    assert [line.split()[0] for line in lines[1:]] == ['ball_0', 'ball_1', 'ball_2', 'red']
+    assert [line.split()[0] for line in lines[2:]] == ['ball_0', 'ball_1', 'ball_2', 'red']
+    assert lines[-1].split()[-2:] == ['0.25', '2']  # red's radius and mass
     assert ok('delete', 'red') == ['deleted red']
     assert refused('state', 'red') == (
         "ball_world_cli: state: refused (RESULT_NOT_FOUND): no entity named 'red'")
@@ -113,7 +117,7 @@ def test_spawn_set_state_and_delete_through_simulation_interfaces(world, probe):
 def test_the_namespace_can_come_from_ros_arguments(world):
     code, out, err = run_tool('ball_world_cli', *TIMEOUT, 'status', '--ros-args', '-r',
                               f'__ns:={NAMESPACE}')
-    assert (code, out) == (0, 'stopped (paused at step 0)\n'), err
+    assert (code, out.splitlines()[0]) == (0, 'state: stopped (paused at step 0)'), err
 
 
 def test_no_world_is_one_line_and_exit_1():
@@ -126,9 +130,9 @@ def test_no_world_is_one_line_and_exit_1():
 
 @pytest.mark.parametrize('args, problem', [
     (('step', '0'), 'steps must be at least 1'),
-    (('push', 'ball_0', 'east', '0'), "invalid float value: 'east'"),
+    (('push', 'ball_0', 'east', '0'), "not a number: 'east'"),
     (('set-state', 'ball_0', '1', '1', '2'), 'set-state takes NAME X Y, or NAME X Y VX VY'),
-    (('--timeout', '0', 'status'), '--timeout must be a positive number'),
+    (('--timeout', '0', 'status'), "--timeout: must be more than 0 and at most 3600 s, got '0'"),
     (('--ns', 'bad ns!', 'status'), 'namespace'),
     (('fly',), 'invalid choice'),
     (('status', '--ros-args', '-r'), 'bad ROS arguments'),

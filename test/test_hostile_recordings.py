@@ -397,8 +397,15 @@ def test_files_that_are_not_ball_world_recordings(source, tmp_path):
     text = tmp_path / 'text.mcap'
     text.write_text('not an mcap at all')
     for name in TOOLS:
-        assert refused(name, chatter, tmp_path).endswith(
-            "no 'ball_world' metadata record: not a ball_world recording")
+        if name == 'info':
+            # ball_world_info tells what any ROS 2 MCAP holds, as ros2 bag info does (a
+            # recording of topics: ball_world_cli record, tools.info_topics)
+            code, out, err = run_tool(name, chatter, tmp_path)
+            assert code == 0 and err == '', (out, err)
+            assert 'not a ball_world run' in out and '/chatter  std_msgs/msg/String  1' in out
+        else:
+            assert refused(name, chatter, tmp_path).endswith(
+                "no 'ball_world' metadata record: not a ball_world recording")
         assert 'not an MCAP file (bad magic)' in refused(name, empty, tmp_path)
         assert 'not an MCAP file (bad magic)' in refused(name, text, tmp_path)
     fifo = tmp_path / 'fifo.mcap'

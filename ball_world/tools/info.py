@@ -291,6 +291,28 @@ def _agent_lines(recording):
             f'{commands} commands']
 
 
+def info_topics_refused(error):
+    """Whether _topics_or_none has said why it could not read the recording either."""
+    from ball_world.tools import info_topics
+    return info_topics.NOT_A_RUN in str(error)
+
+
+def _topics_or_none(path, error):
+    """What a recording of topics holds (ball_world_cli record, ros2 bag record), when the
+    error says it is no world run; None when it is something else (the error stands)."""
+    from ball_world.tools import info_topics
+    if info_topics.NOT_A_RUN not in str(error):
+        return None
+    try:
+        return info_topics.describe(path)
+    except RecordingError as refusal:
+        print(f'ball_world_info: {path}: {refusal}', file=sys.stderr)
+        return None
+    except OSError as refusal:
+        print(f'ball_world_info: {path}: {refusal.strerror or refusal}', file=sys.stderr)
+        return None
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(
         prog='ball_world_info', description='Summarise a ball_world recording: MCAP, a bag '
@@ -306,8 +328,12 @@ def main(argv=None):
         else:
             lines = describe(open_recording(args.file))
     except RecordingError as error:
-        print(f'ball_world_info: {args.file}: {error}', file=sys.stderr)
-        return 2
+        lines = _topics_or_none(args.file, error)
+        if lines is None:
+            if info_topics_refused(error):
+                return 2
+            print(f'ball_world_info: {args.file}: {error}', file=sys.stderr)
+            return 2
     except ValueError as error:  # an undecodable message
         print(f'ball_world_info: {args.file}: {error}', file=sys.stderr)
         return 2
