@@ -26,6 +26,8 @@ HZ_PERIOD = 1.0
 #: The types an agent's cmd_vel takes (agent.cmd_vel_stamped chooses).
 TWIST = 'geometry_msgs/msg/Twist'
 TWIST_STAMPED = 'geometry_msgs/msg/TwistStamped'
+#: Seconds drive waits, after the agent matched, for the other subscribers of its cmd_vel.
+MATCH_OTHERS_SECONDS = 2.0
 
 
 def _run_until(client, seconds, done=lambda: False):
@@ -204,6 +206,12 @@ def drive(client, args):
     client.wait(lambda: publisher.get_subscription_count() > 0,
                 f'{resolved}: the agent did not match this publisher within '
                 f'{client.timeout:g} s')
+    # The others the graph showed (a recorder, a plot, RViz) match within moments: give them
+    # up to MATCH_OTHERS_SECONDS, so they hear the first command as the agent does (one of
+    # incompatible QoS never matches: it is not waited for longer).
+    deadline = time.monotonic() + min(MATCH_OTHERS_SECONDS, client.timeout)
+    while publisher.get_subscription_count() < len(found) and time.monotonic() < deadline:
+        client.spin(0.05)
     period = 1.0 / args.rate
     started = time.monotonic()
     end = None if args.seconds is None else started + args.seconds
