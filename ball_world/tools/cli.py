@@ -33,8 +33,9 @@ import time
 
 from ball_world.tools import print_report, usage_exit
 from ball_world.tools.cli_client import (Client, DEFAULT_TIMEOUT, duration, Failure, finite,
-                                         fits, integer, MAX_TIMEOUT, name, one_line, PROG,
-                                         rate, shown, timeout, topic, UsageError, WORLD_NODE)
+                                         fits, integer, interrupt_on_signals, MAX_TIMEOUT,
+                                         name, one_line, PROG, rate, shown, timeout, topic,
+                                         UsageError, WORLD_NODE)
 
 #: Most balls whose masses `state` asks for (one GetEntityInfo each); past it, `info NAME`.
 MASSES_UP_TO = 500
@@ -690,17 +691,6 @@ def _check(args):
                          f'{shown(args.window)}')
 
 
-def _sigterm_as_interrupt():
-    """SIGTERM ends a command as Ctrl-C does (drive's zero command, record's complete file):
-    a service manager or `timeout` stops it that way."""
-    import signal
-
-    def interrupt(signum, frame):
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, interrupt)
-
-
 def run(argv):
     """Parse, connect, do one command; return the exit code (0 done, 1 failed, 2 usage)."""
     started = time.monotonic()
@@ -717,7 +707,7 @@ def run(argv):
     client = None
     try:
         _check(args)
-        _sigterm_as_interrupt()
+        interrupt_on_signals()
         client = Client(args, argv)
         if args.command in ('drive', 'echo', 'hz', 'record'):
             return _commands()[args.command](client, args)

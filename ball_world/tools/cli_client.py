@@ -18,7 +18,9 @@ answer without loading rclpy, and each command loads only its own message types.
 import argparse
 import math
 import os
+import signal
 import sys
+import threading
 import time
 
 PROG = 'ball_world_cli'
@@ -156,6 +158,34 @@ def check_ros_name(validate, value, option):
         raise UsageError(f'{option} {shown(value)}: {one_line(reason)}') from None
 
 
+# Signals ------------------------------------------------------------------------------------
+
+#: Set by Ctrl-C or SIGTERM; Client.spin turns it into KeyboardInterrupt.
+_INTERRUPTED = threading.Event()
+
+
+def interrupt_on_signals():
+    """Ctrl-C and SIGTERM (a service manager, `timeout`) end a command in the same orderly
+    way: drive's last zero command, record's complete file, simulate's cancelled goal.
+
+    The handler only notes the signal, and the next spin raises KeyboardInterrupt where each
+    command expects it. Raised from the handler itself, it landed wherever the main thread
+    was, inside rclpy's executor too, which could lose it: `echo` of a busy topic went on
+    printing after Ctrl-C. A spin lasts at most 0.1 s, so a signal ends a command at once.
+    """
+    def note(signum, frame):
+        _INTERRUPTED.set()
+
+    signal.signal(signal.SIGINT, note)
+    signal.signal(signal.SIGTERM, note)
+
+
+def _raise_if_interrupted():
+    if _INTERRUPTED.is_set():
+        _INTERRUPTED.clear()  # one KeyboardInterrupt per signal: a cancel may spin after it
+        raise KeyboardInterrupt
+
+
 # The client ---------------------------------------------------------------------------------
 
 class Client:
@@ -168,8 +198,8 @@ class Client:
         self.timeout = args.timeout
         self.context = rclpy.Context()
         # rcl reads only the --ros-args parts of the command line. No signal handlers of
-        # rclpy's: Ctrl-C is Python's KeyboardInterrupt, which each command turns into its
-        # own orderly end (drive's last zero command, record's complete file).
+        # rclpy's: Ctrl-C is the CLI's own (interrupt_on_signals), which each command turns
+        # into its own orderly end (drive's last zero command, record's complete file).
         rclpy.init(args=[PROG, *argv], context=self.context,
                    signal_handler_options=SignalHandlerOptions.NO)
         options = {} if args.ns is None else {'namespace': args.ns}
@@ -187,7 +217,9 @@ class Client:
         rclpy.try_shutdown(context=self.context)
 
     def spin(self, seconds):
+        _raise_if_interrupted()
         self.executor.spin_once(timeout_sec=seconds)
+        _raise_if_interrupted()
 
     def wait(self, predicate, what, timeout=None, progress=None):
         """Spin until predicate() holds; Failure(what) after `timeout` s (default --timeout)
