@@ -189,3 +189,19 @@ def test_the_recording_with_drive_topics_resimulates_and_a_forged_drive_is_one_l
     with pytest.raises(RecordingError, match=r"step 1: the drive impulses of 'ball_0', "
                                              r"'ball_1' are not the step's impulses 0 to 1"):
         feed_sinks(forged, [])
+
+
+def test_info_counts_the_drives_apart_and_lists_the_pushes(run, capsys):
+    from ball_world.tools import info
+    _, mcap, records = run
+    assert info.main([str(mcap)]) == 0
+    out = capsys.readouterr().out
+    drives = sum(impulse.drive for record in records for impulse in record.impulses)
+    total = sum(len(record.impulses) for record in records)
+    assert drives > 50 and total == drives + 4
+    assert f"impulses:    {total} (4 pushes, {drives} by the agents' drives)" in out
+    listed = [line.split(': ')[0].split(' (')[0].strip() + ' ' + line.split(': ')[1].split()[0]
+              for line in out.splitlines() if line.startswith('  segment 0 step')
+              and ' J = ' in line]
+    assert listed == ['segment 0 step 20 ball_0', 'segment 0 step 30 ball_1',
+                      'segment 0 step 30 ball_2', 'segment 0 step 40 ball_3']
