@@ -8,6 +8,7 @@ that ignores the map or takes /tf for the truth fails here, not only one that cr
 """
 import json
 
+from ball_world_testing.harness import open_rrd
 from mcap.reader import make_reader
 from mcap.writer import Writer
 from mcap_ros2.writer import Writer as Ros2Writer
@@ -19,6 +20,7 @@ from ball_world.core.parameters import checked
 from ball_world.msgs.definitions import message_definition
 from ball_world.recording.mcap_reader import Recording
 from ball_world.recording.mcap_writer import McapSink
+from ball_world.recording.rerun_map import MAP_CELLS
 from ball_world.scans import fan_from, scan_grid
 from ball_world.simulation import Simulation
 from ball_world.tools import score, score_bench
@@ -132,7 +134,7 @@ def test_a_track_on_the_hidden_ball_is_dont_care(map_run, tmp_path, capsys):
     path, segment = map_run
     oracle_tracks(tmp_path / 'tracks.mcap', segment.scans)
     code = score.main([str(path), '--tracks', str(tmp_path / 'tracks.mcap'), '/my/tracks',
-                       '--json'])
+                       '--json', '--rerun', str(tmp_path / 'scored.rrd')])
     out, err = capsys.readouterr()
     assert code == 0, err
     report = json.loads(out)
@@ -144,6 +146,24 @@ def test_a_track_on_the_hidden_ball_is_dont_care(map_run, tmp_path, capsys):
     figures = report['figures']
     assert figures['CLR_TP'] == 2 * scans and figures['CLR_FP'] == 0
     assert figures['MOTA'] == 1.0 and figures['HOTA'] == pytest.approx(1.0)
+    # the scored view draws the map that hid ball_1, and no drift (no odometry noise)
+    content = rrd_content(tmp_path / 'scored.rrd')
+    assert any(entity == f'/{MAP_CELLS}' for entity, _ in content)
+    assert not any(content[('/arena/agent/odom', 'Arrows2D:vectors')])
+
+
+def rrd_content(path):
+    """{(entity path, component): [number of instances, per row logged]} of a scored .rrd."""
+    reader = open_rrd(path)
+    (store,) = reader.recordings()
+    content = {}
+    for chunk in reader.stream(store=store):
+        batch = chunk.to_record_batch()
+        for index, field in enumerate(batch.schema):
+            if (field.metadata or {}).get(b'rerun:kind') == b'data':
+                content.setdefault((chunk.entity_path, field.name), []).extend(
+                    len(value or ()) for value in batch.column(index).to_pylist())
+    return content
 
 
 NOISY = {'random.count': 12, 'random.seed': 3, 'agents': ['ball_0'], 'rate_hz': 60.0,
@@ -174,6 +194,19 @@ def test_with_noisy_odometry_the_truth_is_the_true_pose_not_tf(noisy_run):
         drift.append(abs(np.angle(np.exp(1j * (scan.pose[2] - yaw)))))
         assert set(np.flatnonzero(scan.visible).tolist()) == seen_by_the_scan(scan)
     assert max(drift) > 0.05  # /tf (the tracker's input) really drifted from the truth
+
+
+def test_the_scored_view_draws_the_true_pose_and_where_tf_drifted(noisy_run, tmp_path,
+                                                                  capsys):
+    path, _, segment = noisy_run
+    assert score.main([str(path), '--rerun', str(tmp_path / 'scored.rrd')]) == 0, \
+        capsys.readouterr().err
+    content = rrd_content(tmp_path / 'scored.rrd')
+    drifted = [scan.pose != scan.truth_pose for scan in segment.scans]
+    assert content[('/arena/agent/odom', 'Arrows2D:vectors')] == [int(d) for d in drifted]
+    assert any(drifted) and not drifted[0]  # the odometry starts at the truth
+    # the agent's own ball found at its true pose at every scan
+    assert content[('/arena/agent', 'Points2D:positions')] == [1] * len(segment.scans)
 
 
 def test_visibility_from_the_drifting_tf_would_be_wrong(noisy_run):

@@ -222,8 +222,10 @@ def true_pose(data, base_frame, stamp_ns):
     if truth.child_frame_id != base_frame or truth.stamp_ns != stamp_ns:
         raise ValueError(f'the ground truth of {truth.child_frame_id!r} at {truth.stamp_ns} ns '
                          f'is not that of {base_frame!r} at {stamp_ns} ns')
-    yaw = float(quaternion_to_yaw(np.asarray(truth.pose[3:7], dtype=np.float64)))
-    return float(truth.pose[0]), float(truth.pose[1]), yaw
+    quaternion_to_yaw(truth.pose[3:7])  # ValueError unless a rotation about z
+    # the yaw as /tf's is read (planar_tf), so that an odometry without noise gives /tf a
+    # pose equal to this one, bit for bit
+    return float(truth.pose[0]), float(truth.pose[1]), yaw_of(*truth.pose[3:7])
 
 
 def scan_at(step, message, pose, truth_pose, names, positions, radii, geometry, index,
