@@ -216,8 +216,17 @@ def test_replay_republishes_the_map_latched(recorded, processes):
 
 
 def test_rerun_draws_the_map_where_it_is(recorded):
+    # record.rerun splits with the MCAP (run_<i>.rrd): each part opens on its own, the map
+    # in it
+    parts = sorted(recorded.glob('run_*.rrd'))
+    assert [part.name for part in parts] == ['run_0.rrd', 'run_1.rrd', 'run_2.rrd']
+    for part in parts:
+        map_in_rrd(part)
+
+
+def map_in_rrd(path):
     expected = expected_grid('tb3_sandbox')
-    reader = open_rrd(str(recorded / 'run.rrd'))
+    reader = open_rrd(str(path))
     found = {}
     for store in reader.recordings():
         for chunk in reader.stream(store=store):
