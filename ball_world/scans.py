@@ -20,6 +20,7 @@ import numpy as np
 
 from ball_world.core import lidar
 from ball_world.core.parameters import ParameterError
+from ball_world.core.static_geometry import ScanGrid
 from ball_world.msgs.agent_cdr import encode_laser_scan
 
 #: range_min beyond the agent's radius when agent.scan.range_min is 0.
@@ -53,6 +54,23 @@ def fan_from(parameters, radius):
         raise ParameterError('agent.scan.range_min', f'{range_min:g} m is beyond '
                                                      f'agent.scan.range_max {range_max:g} m')
     return fan
+
+
+def scan_grid(parameters, occupancy_map):
+    """The map's cells as the agents' scans walk them in a world of these parameters and
+    this map (the World's `static.scan_grid`, equal cell for cell), without building the
+    world; lidar.NO_MAP without a map.
+
+    Why: whoever re-computes what a scan could see from a recording (ball_world_score) must
+    let the map's cells hide balls exactly as the live scan did; building the whole world
+    again (its random balls placed among the cells) only to reach its grid would double the
+    cost of reading a map world's recording.
+    """
+    if not parameters['map']:
+        return lidar.NO_MAP
+    if occupancy_map is None:
+        raise ValueError(f"map names {parameters['map']!r}, but no map was given")
+    return ScanGrid(occupancy_map.solid_cells(parameters['map.unknown_solid']).checked())
 
 
 def check(parameters):

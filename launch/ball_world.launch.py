@@ -22,7 +22,8 @@ import yaml
 
 #: Topics the RViz configuration names in the root namespace. RViz is started in the world's
 #: namespace and these are remapped to relative names, so namespace:=sim2 shows /sim2's balls.
-RVIZ_TOPICS = ('/map', '/markers', '/balls', '/ball_0/odom', '/ball_0/scan')
+RVIZ_TOPICS = ('/map', '/markers', '/balls', '/ball_0/odom', '/ball_0/scan',
+               '/ball_0/ground_truth', '/ball_1/ground_truth', '/bumper_markers')
 
 
 def world_file(world, share):

@@ -113,7 +113,13 @@ def test_other_readers_see_cmd_vel_odom_and_tf_with_their_types(tmp_path):
         # The truth beside the odometry (Stage's base_pose_ground_truth).
         '/ball_0/ground_truth': 'nav_msgs/msg/Odometry',
         '/ball_3/ground_truth': 'nav_msgs/msg/Odometry',
-        '/rover/ground_truth': 'nav_msgs/msg/Odometry'}
+        '/rover/ground_truth': 'nav_msgs/msg/Odometry',
+        # Each drive's impulse again (it is on `impulse` too), so readers tell it from a push.
+        '/ball_0/drive': 'geometry_msgs/msg/Vector3Stamped',
+        '/ball_3/drive': 'geometry_msgs/msg/Vector3Stamped',
+        '/rover/drive': 'geometry_msgs/msg/Vector3Stamped'}
+    drive = decoded['/ball_0/drive'][1][0]
+    assert drive[1].header.frame_id == 'ball_0' and drive[0].log_time == 20_000_000
     truth = decoded['/ball_3/ground_truth'][1][-1][1]
     assert (truth.header.frame_id, truth.child_frame_id) == ('world', 'ball_3/base_link')
     first_command = decoded['/ball_0/cmd_vel'][1][0]

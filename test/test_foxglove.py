@@ -160,14 +160,15 @@ def test_layout_is_valid_json_naming_recorded_topics_and_stats_by_index(recorded
     topics = Recording(path).topics
     scene = config['3D!world']
     assert scene['followTf'] == 'world'
-    # /ball_0/odom and /ball_0/scan are there when ball_0 is an agent (test_agent_views and
+    # The robots' topics are there when ball_0 and ball_1 are agents (test_agent_views and
     # test_scans check them), /map with a map (test_map_views).
-    assert set(scene['topics']) - {'/ball_0/odom', '/ball_0/scan', '/map'} \
-        == {'/markers', '/balls'} <= set(topics)
+    robots = {'/ball_0/odom', '/ball_0/scan', '/ball_0/ground_truth', '/ball_1/ground_truth',
+              '/bumper_markers'}
+    assert set(scene['topics']) - robots - {'/map'} == {'/markers', '/balls'} <= set(topics)
     assert all(settings['visible'] for settings in scene['topics'].values())
     plotted = []
     for panel_id, panel in config.items():
-        if not panel_id.startswith('Plot!'):
+        if not panel_id.startswith('Plot!') or panel_id == 'Plot!bumpers':  # test_agent_views
             continue
         for series in panel['paths']:
             topic, _, field = series['value'].partition('.data[')

@@ -7,26 +7,38 @@ files are what they were before agents existed.
 Per step, with `<ns>` the node's namespace (that of `balls`):
 - before the step's `balls`: every command an agent took, as received, on
   `<ns>/<name>/cmd_vel` (Twist, or TwistStamped with agent.cmd_vel_stamped), at the log time
-  of the first step it acted on;
+  of the first step it acted on; and the impulse the agent's own drive applied before the
+  step (AppliedImpulse.drive), on `<ns>/<name>/drive` (Vector3Stamped, the very bytes of
+  its entry on `impulse`, which holds every applied impulse as before). Why a topic of its
+  own: on `impulse` a drive and a push on the agent are the same message (frame_id the
+  ball's name), and a viewer fed from the recording must draw and count pushes only. The
+  node does not publish it: a recording keeps it for the tools (`ros2 bag play` plays it
+  to no subscriber). A recording made before it existed has none: its drives read as
+  pushes, as they always did;
 - after it: `<ns>/<name>/odom` and `<ns>/<name>/ground_truth` of every agent, `/tf`, and
   `/tf_static` when the set of agents changed (a segment's first step included; never with
   agent.odom.tf_static false), as the node publishes them; `<ns>/<name>/bumper` of every
   agent hit in the step; at a scan step, `<ns>/<name>/scan` of every agent with a scanner
   (ball_world.scans).
 
-The reader's step roles (agent_role) are cmd_vel, odom and /tf; scans, ground truth and
-bumpers are read as topics of their own (AGENT_MESSAGE_KINDS), beside the steps.
+The reader's step roles (agent_role) are cmd_vel, drive, odom and /tf; scans, ground
+truth and bumpers are read as topics of their own (AGENT_MESSAGE_KINDS), beside the steps,
+and handed to the sinks fed from a recording (recorded_frame) when they draw them.
 """
 import re
+from typing import NamedTuple
 
 import numpy as np
 
+from ball_world.core.lidar import Fan
 from ball_world.core.orientation import quaternion_to_yaw
-from ball_world.msgs.agent_cdr import decode_odometry
+from ball_world.msgs.agent_cdr import decode_laser_scan, decode_odometry
+from ball_world.msgs.cdr import decode_vector3_stamped
 from ball_world.msgs.twist_cdr import decode_twist, decode_twist_stamped
-from ball_world.step_record import AgentFrame
+from ball_world.step_record import AgentFrame, Bumper
 
 COMMAND = 'cmd_vel'
+DRIVE = 'drive'
 ODOM = 'odom'
 TF = 'tf'
 TF_STATIC = 'tf_static'
@@ -40,11 +52,21 @@ TF_STATIC_TOPIC = '/tf_static'
 TYPES = {COMMAND: 'geometry_msgs/msg/Twist', ODOM: 'nav_msgs/msg/Odometry',
          TF: 'tf2_msgs/msg/TFMessage', TF_STATIC: 'tf2_msgs/msg/TFMessage',
          SCAN: 'sensor_msgs/msg/LaserScan', GROUND_TRUTH: 'nav_msgs/msg/Odometry',
-         BUMPER: 'geometry_msgs/msg/Vector3Stamped'}
+         BUMPER: 'geometry_msgs/msg/Vector3Stamped', DRIVE: 'geometry_msgs/msg/Vector3Stamped'}
 STAMPED_COMMAND = 'geometry_msgs/msg/TwistStamped'
 _NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
 _AGENT_TOPIC = re.compile(r'(?P<namespace>.*)/(?P<name>[A-Za-z][A-Za-z0-9_]*)/'
-                          r'(?P<kind>cmd_vel|odom)')
+                          r'(?P<kind>cmd_vel|drive|odom)')
+
+
+class RecordedScan(NamedTuple):
+    """A recorded scan as the views take one (the fields of scans.AgentScan they read)."""
+
+    name: str
+    frame_id: str
+    ranges: np.ndarray  # float64 (the message's float32, widened exactly)
+    fan: Fan
+    cdr: bytes
 
 
 def namespace_of(topics):
@@ -57,10 +79,13 @@ def command_type(parameters):
 
 
 def before_step(record, namespace, parameters):
-    """(topic, type, role, bytes) of the commands taken before this step, in order."""
+    """(topic, type, role, bytes) of the commands taken before this step, in order, then of
+    the drives' impulses applied before it."""
     kind = command_type(parameters)
     return [(f'{namespace}/{command.name}/{COMMAND}', kind, COMMAND, command.cdr)
-            for command in record.commands]
+            for command in record.commands] + [
+        (f'{namespace}/{impulse.frame_id}/{DRIVE}', TYPES[DRIVE], DRIVE, impulse.cdr)
+        for impulse in record.impulses if impulse.drive]
 
 
 def after_step(record, namespace):
@@ -111,23 +136,62 @@ def decode_command(data, type_name):
     return values[0], values[1], values[5]
 
 
-def recorded_frame(odom, names):
-    """The AgentFrame a recorded step's odom gives ({agent: bytes} in recorded order), or None.
+def recorded_frame(odom, names, messages=None):
+    """The AgentFrame a recorded step gives the sinks fed from a recording, or None.
 
-    For the sinks fed from a recording (ball_world_to_rrd draws the headings): each agent's
-    row is found by name among the step's balls `names`; ValueError for odom that does not
-    decode or whose orientation is not a rotation about z (an untrusted file).
+    odom: {agent: bytes} in recorded order; names: the step's balls; messages: the step's
+    scans, ground truth and bumpers {(kind, agent): bytes} (mcap_reader's
+    RecordedStep.agent_messages), or None. ball_world_to_rrd draws what the live view draws
+    from the same run: each agent at its true heading (its ground truth: with
+    agent.odom.noise the odometry drifts; a recording without ground truth had no noise,
+    so its odom is the truth), its bumper hits and its scans. Each agent's row is found by
+    name among `names`; ValueError for a message that does not decode or an orientation
+    that is not a rotation about z (an untrusted file).
     """
     if not odom:
         return None
+    messages = messages or {}
     row_of = {name: row for row, name in enumerate(names)}
     agents = [name for name in odom if name in row_of]
     decoded = [decode_odometry(odom[name]) for name in agents]
-    yaws = quaternion_to_yaw(np.array([d.pose[3:7] for d in decoded]).reshape(-1, 4))
-    twists = np.array([(d.twist[0], d.twist[1], d.twist[5]) for d in decoded]).reshape(-1, 3)
+    truth = [messages.get((GROUND_TRUTH, name)) for name in agents]
+    poses = [decode_odometry(data) if data is not None else odometry
+             for data, odometry in zip(truth, decoded)]
+    yaws = quaternion_to_yaw(np.array([d.pose[3:7] for d in poses]).reshape(-1, 4))
+    twists = np.array([(d.twist[0], d.twist[1], d.twist[5]) for d in poses]).reshape(-1, 3)
     return AgentFrame(names=tuple(agents),
                       indices=np.array([row_of[name] for name in agents], dtype=np.int64),
                       yaws=np.asarray(yaws, dtype=np.float64).reshape(-1), twists=twists,
                       odom_frames=tuple(d.frame_id for d in decoded),
                       base_frames=tuple(d.child_frame_id for d in decoded),
-                      odom_cdr=tuple(odom[name] for name in agents), tf_cdr=b'')
+                      odom_cdr=tuple(odom[name] for name in agents), tf_cdr=b'',
+                      scans=_recorded_scans(agents, messages),
+                      ground_truth_cdr=tuple(truth) if all(t is not None for t in truth)
+                      else (),
+                      bumpers=_recorded_bumpers(agents, messages))
+
+
+def _recorded_bumpers(agents, messages):
+    """step_record.Bumper of each recorded `<name>/bumper` of the step, agent order."""
+    bumpers = []
+    for name in agents:
+        data = messages.get((BUMPER, name))
+        if data is not None:
+            _, frame_id, x, y, _ = decode_vector3_stamped(data)
+            bumpers.append(Bumper(name, frame_id, x, y, data))
+    return tuple(bumpers)
+
+
+def _recorded_scans(agents, messages):
+    """scans.AgentScan-like rows (name, frame_id, ranges, fan, cdr) of each recorded
+    `<name>/scan` of the step, agent order: what a view draws of a scan."""
+    scans = []
+    for name in agents:
+        data = messages.get((SCAN, name))
+        if data is not None:
+            scan = decode_laser_scan(data)
+            fan = Fan(scan.angle_min, scan.angle_increment, len(scan.ranges), scan.range_min,
+                      scan.range_max)
+            scans.append(RecordedScan(name, scan.frame_id,
+                                      np.asarray(scan.ranges, dtype=np.float64), fan, data))
+    return tuple(scans)

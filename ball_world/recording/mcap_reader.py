@@ -748,6 +748,9 @@ class RecordedImpulse:
     y: float
     z: float
     cdr: bytes
+    # An agent's own drive, not a push (its bytes are also on <name>/drive: agent_topics);
+    # False in a recording made before drives were recorded apart.
+    drive: bool = False
 
 
 @dataclass(frozen=True)
@@ -775,6 +778,9 @@ class RecordedStep:
     commands: tuple = ()
     odom: Optional[dict] = None
     tf_cdr: Optional[bytes] = None
+    # Read with Recording.steps(agent_messages=True) only: {(kind, agent name): bytes} of the
+    # step's scans, ground truth and bumpers (agent_topics.AGENT_MESSAGE_KINDS).
+    agent_messages: Optional[dict] = None
 
     @property
     def complete(self):
@@ -867,10 +873,14 @@ class Recording:
         namespaces = {agent_topics.namespace_of(segment.topics) for segment in self.segments
                       if 'balls' in segment.topics}
         self.agent_roles = {}
+        self.agent_message_roles = {}  # scans, ground truth, bumpers: (kind, agent name)
         for topic, info in self.topics.items():
             role = agent_topics.agent_role(topic, namespaces)
             if role is not None:
                 self.agent_roles[topic] = (*role, info.type)
+            found = agent_topics.agent_message(topic)
+            if found is not None and topic.rpartition('/')[0].rpartition('/')[0] in namespaces:
+                self.agent_message_roles[topic] = found
 
     def _read_indexed(self, stream, summary):
         self.header = _read_record(stream, len(MAGIC), self.size, Opcode.HEADER)[0]
@@ -1074,18 +1084,26 @@ class Recording:
         if builder is not None:
             yield from builder.edits()
 
-    def steps(self):
-        """RecordedSteps in order: every log time of the ball_world topics, decoded."""
+    def steps(self, agent_messages=False):
+        """RecordedSteps in order: every log time of the ball_world topics, decoded.
+
+        agent_messages: also the agents' scans, ground truth and bumpers of each step
+        (RecordedStep.agent_messages), for the sinks that draw them.
+        """
         builder = None
         agents = self.agent_roles
-        for message in self.messages({**self.roles, **agents}):
+        extra = self.agent_message_roles if agent_messages else {}
+        for message in self.messages({**self.roles, **agents, **extra}):
             if builder is None or message.log_time_ns != builder.log_time_ns:
                 if builder is not None:
                     yield builder.build()
                 position = self.segment_at(message.log_time_ns)
-                builder = _StepBuilder(position, self.segments[position], message.log_time_ns)
+                builder = _StepBuilder(position, self.segments[position], message.log_time_ns,
+                                       agent_messages)
             if message.topic in agents:
                 builder.add_agent(agents[message.topic], message.data)
+            elif message.topic in extra:
+                builder.agent_messages[extra[message.topic]] = message.data
             else:
                 builder.add(self.roles[message.topic], message.data)
         if builder is not None:
@@ -1093,21 +1111,25 @@ class Recording:
 
 
 class _StepBuilder:
-    def __init__(self, position, segment, log_time_ns):
+    def __init__(self, position, segment, log_time_ns, agent_messages=False):
         self.position = position
         self.segment = segment
         self.log_time_ns = log_time_ns
         self.data = {}
         self.events = {role: [] for role in EVENT_ROLES}
         self.commands = []
+        self.drives = {}  # agent name -> the bytes of its drive's impulse
         self.odom = None
         self.tf = None
+        self.agent_messages = {} if agent_messages else None
 
     def add_agent(self, role, data):
         """A message of an agent topic: role is (kind, agent name, type name)."""
         kind, name, type_name = role
         if kind == agent_topics.COMMAND:
             self.commands.append((name, type_name, data))
+        elif kind == agent_topics.DRIVE:
+            self.drives[name] = data
         elif kind == agent_topics.ODOM:
             self.odom = self.odom or {}
             self.odom[name] = data
@@ -1159,13 +1181,36 @@ class _StepBuilder:
         if positions is not None and state is not None and len(positions) != len(state):
             raise RecordingError(f'at log time {self.log_time_ns} ns balls has '
                                  f'{len(positions)} poses but state {len(state)} rows')
+        edits = self._edits(len(impulses))
+        if self.drives:
+            impulses = self._drives_marked(impulses, edits)
         return RecordedStep(
             segment=self.position, step=self.step, stamp_ns=stamp_ns,
             log_time_ns=self.log_time_ns, positions=positions, state=state, stats=stats,
             impulses=impulses, balls_cdr=self.data.get('balls'),
             state_cdr=self.data.get('state'), stats_cdr=self.data.get('stats'),
-            balls_stamp_ns=balls_stamp, edits=self._edits(len(impulses)), commands=commands,
-            odom=self.odom, tf_cdr=self.tf)
+            balls_stamp_ns=balls_stamp, edits=edits, commands=commands,
+            odom=self.odom, tf_cdr=self.tf, agent_messages=self.agent_messages)
+
+    def _drives_marked(self, impulses, edits):
+        """The impulses with the drives' marked (RecordedImpulse.drive).
+
+        The node applies a step's drive impulses together, right after the impulses its
+        edits applied (the last edit's impulses_before) and before the pushes queued since:
+        that block must be exactly the impulses recorded on the agents' drive topics, one
+        per agent, byte for byte, or the file was not written by the node.
+        """
+        first = edits[-1].impulses_before if edits else 0
+        block = impulses[first:first + len(self.drives)]
+        if len(block) != len(self.drives) or any(
+                self.drives.get(impulse.frame_id) != impulse.cdr for impulse in block):
+            raise RecordingError(
+                f'segment {self.segment.index} step {self.step}: the drive impulses of '
+                f"{', '.join(sorted(map(_text, self.drives)))} are not the step's impulses "
+                f'{first} to {first + len(self.drives) - 1} as applied')
+        return (impulses[:first]
+                + tuple(dataclasses.replace(impulse, drive=True) for impulse in block)
+                + impulses[first + len(block):])
 
 
 # Feeding sinks -------------------------------------------------------------------------
@@ -1253,7 +1298,8 @@ class BallRoster:
                 raise RecordingError(f'{where}: a recorded impulse is for '
                                      f'{_text(impulse.frame_id)}, which is no ball then')
             impulses.append(AppliedImpulse(ball=ball, jx=impulse.x, jy=impulse.y,
-                                           frame_id=impulse.frame_id, cdr=impulse.cdr))
+                                           frame_id=impulse.frame_id, cdr=impulse.cdr,
+                                           drive=impulse.drive))
         for edit in edits[done:]:
             self._apply(edit, where)
         if self._lists is not None:
@@ -1319,9 +1365,10 @@ def step_record(step, impulses, roster):
     """
     rtf = step.stat('real_time_factor')
     try:
-        agents = agent_topics.recorded_frame(step.odom, roster.names)
+        agents = agent_topics.recorded_frame(step.odom, roster.names, step.agent_messages)
     except ValueError as error:
-        raise RecordingError(f'step {step.step}: undecodable odom: {error}') from None
+        raise RecordingError(f'step {step.step}: an agent message does not decode: '
+                             f'{error}') from None
     return StepRecord(
         step=step.step, stamp_ns=step.stamp_ns, log_time_ns=step.log_time_ns,
         positions=step.positions.copy(), velocities=step.state[:, 2:4].copy(),
@@ -1357,7 +1404,7 @@ def feed_sinks(path, sinks, close=True, passed_over=None):
     roster = snapshot = info = None
     fed = 0
     last = skipping = None  # the last step followed; the steps being passed over
-    for step in recording.steps():
+    for step in recording.steps(agent_messages=True):
         if step.segment != current:
             segment = recording.segments[step.segment]
             snapshot, info = snapshot_and_info(segment, step)

@@ -153,6 +153,8 @@ ROLE_QOS = {
     agent_topics.SCAN: offered_qos_profiles(10),
     agent_topics.GROUND_TRUTH: offered_qos_profiles(10),
     agent_topics.BUMPER: offered_qos_profiles(10),
+    # Recorded only (the node publishes no drive topic): the step publishers' profile.
+    agent_topics.DRIVE: offered_qos_profiles(10),
 }
 
 _SEQUENCE_MODULO = 2 ** 32  # MCAP message sequence numbers are uint32

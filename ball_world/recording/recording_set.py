@@ -168,11 +168,14 @@ class RecordingSet:
             for f in files for segment in f.segments if segment.resume is not None}
         self.roles = {}
         self.agent_roles = {}  # the agents' topics (Recording.agent_roles) of every file
+        self.agent_message_roles = {}  # and their scans, ground truth and bumpers
         for f in files:
             for topic, role in f.roles.items():
                 self.roles.setdefault(topic, role)
             for topic, role in f.agent_roles.items():
                 self.agent_roles.setdefault(topic, role)
+            for topic, role in f.agent_message_roles.items():
+                self.agent_message_roles.setdefault(topic, role)
 
     def _merge_segments(self):
         """segments: every file's segments in log-time order, a segment that goes on from the

@@ -231,20 +231,50 @@ def _energy_lines(recording):
 
 
 def _impulse_lines(recording, shown=10):
+    """How many impulses were applied, how many of them the agents' drives (recorded again
+    on <name>/drive: agent_topics), and the first few pushes."""
     topic = recording.topic_of('impulse')
     count = recording.topics[topic].message_count if topic in recording.topics else 0
-    lines = [f'impulses:    {count}']
-    if count:
-        for position, message in enumerate(recording.messages([topic])):
-            if position == shown:
-                lines.append(f'  ... and {count - shown} more')
-                break
-            stamp_ns, frame_id, x, y, _ = decode_vector3_stamped(message.data)
-            segment = recording.segments[recording.segment_at(message.log_time_ns)]
-            lines.append(f'  segment {segment.index} step {stamp_ns // segment.dt_ns} '
-                         f'({_seconds(stamp_ns)}): {_shown(frame_id)} J = ({x:.6g}, {y:.6g}) '
-                         'N s')
+    drive_topics = [name for name, (kind, _, _) in recording.agent_roles.items()
+                    if kind == agent_topics.DRIVE]
+    drives = sum(recording.topics[name].message_count for name in drive_topics)
+    split = f" ({count - drives} pushes, {drives} by the agents' drives)" if drives else ''
+    lines = [f'impulses:    {count}{split}']
+    listed = 0
+    for message in _pushes(recording, topic, drive_topics) if count > drives else ():
+        if listed == shown:
+            lines.append(f'  ... and {count - drives - shown} more')
+            break
+        stamp_ns, frame_id, x, y, _ = decode_vector3_stamped(message.data)
+        segment = recording.segments[recording.segment_at(message.log_time_ns)]
+        lines.append(f'  segment {segment.index} step {stamp_ns // segment.dt_ns} '
+                     f'({_seconds(stamp_ns)}): {_shown(frame_id)} J = ({x:.6g}, {y:.6g}) '
+                     'N s')
+        listed += 1
     return lines
+
+
+def _pushes(recording, topic, drive_topics):
+    """The impulse messages that are not an agent's drive, in order: at each log time, the
+    impulses whose bytes a drive message of that log time does not claim."""
+    group, time = [], None
+
+    def pushes_of(messages):
+        claimed = [m.data for m in messages if m.topic != topic]
+        for message in messages:
+            if message.topic != topic:
+                continue
+            if message.data in claimed:
+                claimed.remove(message.data)
+            else:
+                yield message
+
+    for message in recording.messages([topic, *drive_topics]):
+        if message.log_time_ns != time:
+            yield from pushes_of(group)
+            group, time = [], message.log_time_ns
+        group.append(message)
+    yield from pushes_of(group)
 
 
 def _edit_lines(recording, shown=10):

@@ -6,7 +6,8 @@ circle: 0.5 m/s forward turning at 0.4 rad/s), simulated headless without ROS (t
 Simulation class the node wraps) as fast as the machine goes, for `--duration` simulated
 seconds. At each scan the tracker is given what a ROS tracker gets, the LaserScan (from
 its message bytes) and the scanner's pose from /tf, and its tracks are scored against
-the balls that scan could see, exactly as a recording of that scene would be scored
+the balls that scan could see from the agent's true pose (past walls and a map's cells: /tf
+drifts with agent.odom.noise), exactly as a recording of that scene would be scored
 (tools.score_recording and tools.score_frames do both). A tracker is the example one or any
 class `update(scan, pose) -> rows (id, x, y, ...)` (tools.tracker.ScanTracker), made anew
 for each scene with no arguments.
@@ -261,7 +262,7 @@ def simulated_scans(scene):
     from ball_world.msgs.agent_cdr import decode_laser_scan
     from ball_world.scoring.planar_tf import PlanarTransforms
     from ball_world.simulation import Simulation
-    from ball_world.tools.score_recording import add_transforms, scan_at
+    from ball_world.tools.score_recording import add_transforms, scan_at, true_pose
     from ball_world.core.agents import frames as agent_frames
 
     simulation = Simulation(scene.parameters)
@@ -285,8 +286,13 @@ def simulated_scans(scene):
             message = decode_laser_scan(scan.cdr)
             pose = transforms.lookup(world_frame, scan_frame, message.stamp_ns)
             index = simulation.index_of[scene.agent]
-            scans.append(scan_at(step, message, pose, record.names, record.positions,
-                                 record.radii, simulation.world.walls, index,
+            # Ground truth from the true pose, as a recording of the scene has it (its
+            # ground_truth bytes), never from /tf, which drifts with agent.odom.noise.
+            truth = true_pose(agents.ground_truth_cdr[agents.names.index(scene.agent)],
+                              scan_frame, message.stamp_ns)
+            world = simulation.world
+            scans.append(scan_at(step, message, pose, truth, record.names, record.positions,
+                                 record.radii, (world.walls, world.static.scan_grid), index,
                                  scene.parameters))
     return scans
 

@@ -3,12 +3,23 @@ was taken from, and the ground truth at it.
 
 For every recorded scan of `<ns>/<agent>/scan`: the balls of that step (`balls`, with the
 names and radii of its segment as the recorded edits left them), which of them the scan
-could see (core.lidar.seen_balls: at least one beam, without noise, meets the ball first
-within range, from the agent's centre along its heading), and the scanner's pose in the
-world frame, looked up in the recorded /tf and /tf_static for exactly the frame the scan
-names, `<frame_prefix><agent>/base_link` (never a frame that merely ends like it: an agent
-named `xball_0` has its own). Each segment (a run between resets) is a sequence of its own,
-with its own transforms: stamps start again at 0 after a reset.
+could see, and two poses of the scanner:
+
+- `truth_pose`, where the scan was really taken: the agent's recorded
+  `<ns>/<agent>/ground_truth` at the scan's step. What the scan could see is computed from
+  it (core.lidar.seen_balls: at least one beam, without noise, meets the ball first within
+  range, from the agent's centre along its true heading), with the walls and the map's
+  cells (scans.scan_grid of the map the recording keeps), exactly as the live scan was.
+  With `agent.odom.noise` the odometry, and so /tf, drifts from the truth: ground truth
+  never comes from /tf. A recording made before ground truth was recorded had no noisy
+  odometry, so its /tf pose is the true one.
+- `pose`, what a tracker on the robot is given: the scanner's frame in the world frame,
+  looked up in the recorded /tf and /tf_static for exactly the frame the scan names,
+  `<frame_prefix><agent>/base_link` (never a frame that merely ends like it: an agent
+  named `xball_0` has its own). With noisy odometry it drifts, as a real robot's does.
+
+Each segment (a run between resets) is a sequence of its own, with its own transforms:
+stamps start again at 0 after a reset.
 
 The recording is read with the project's bounded reader (recording.mcap_reader): a file
 that is not a ball_world recording, cut off or corrupt is a RecordingError with one line.
@@ -19,7 +30,8 @@ import numpy as np
 
 from ball_world.core import lidar
 from ball_world.core.agents import frames as agent_frames
-from ball_world.msgs.agent_cdr import decode_laser_scan, decode_tf_message
+from ball_world.core.orientation import quaternion_to_yaw
+from ball_world.msgs.agent_cdr import decode_laser_scan, decode_odometry, decode_tf_message
 from ball_world.msgs.cdr import decode_pose_array, decode_vector3_stamped
 from ball_world.recording import agent_topics
 from ball_world.recording.mcap_reader import (BallRoster, parse_edits, RecordedImpulse,
@@ -27,7 +39,7 @@ from ball_world.recording.mcap_reader import (BallRoster, parse_edits, RecordedI
                                               snapshot_and_info)
 from ball_world.recording.mcap_writer import EVENT_ROLES
 from ball_world.recording.recording_set import open_recording
-from ball_world.scans import fan_from
+from ball_world.scans import fan_from, scan_grid
 from ball_world.scoring.planar_tf import PlanarTransforms, TransformError, yaw_of
 
 
@@ -38,11 +50,14 @@ class RecordedScan:
     step: int
     stamp_ns: int
     message: object  # agent_cdr.DecodedScan
-    pose: tuple  # (x, y, yaw) of the scanner's frame in the world frame
+    pose: tuple  # (x, y, yaw) of the scanner's frame in the world frame, as /tf has it
     names: tuple  # the balls of the step
     positions: np.ndarray  # (N, 2)
     radii: np.ndarray  # (N,)
     visible: np.ndarray  # (N,) bool
+    # (x, y, yaw) where the scan was really taken (ground truth): `pose` drifts from it with
+    # agent.odom.noise
+    truth_pose: tuple = None
 
 
 @dataclass
@@ -54,6 +69,7 @@ class RecordedSegment:
     scan_frame: str  # <frame_prefix><agent>/base_link
     transforms: PlanarTransforms
     walls: np.ndarray = None  # (M, 4) wall segments, for drawing
+    occupancy_map: object = None  # the recorded map (core.occupancy_map), for drawing
     scans: list = field(default_factory=list)
 
 
@@ -91,6 +107,9 @@ def read_run(path, agent):
     roles = {topic: role for topic, role in recording.roles.items()
              if role == 'balls' or role in EVENT_ROLES}
     roles.update({topic: 'scan' for topic in scan_topics})
+    roles.update({topic.rpartition('/')[0] + '/' + agent_topics.GROUND_TRUTH: 'truth'
+                  for topic in scan_topics if topic.rpartition('/')[0] + '/'
+                  + agent_topics.GROUND_TRUTH in recording.topics})
     roles.update({agent_topics.TF_TOPIC: 'tf', agent_topics.TF_STATIC_TOPIC: 'tf_static'})
     reader = _Reader(recording, segments, agent)
     for message in recording.messages(list(roles)):
@@ -111,7 +130,7 @@ class _Reader:
         self.segments = segments
         self.agent = agent
         self.log_time_ns = None
-        self.current = self.roster = self.walls = None
+        self.current = self.roster = self.walls = self.grid = None
         self.group = {}
 
     def add(self, role, message):
@@ -141,6 +160,8 @@ class _Reader:
             snapshot, _ = snapshot_and_info(described)
             self.roster = BallRoster(snapshot, described.index)
             self.walls = segment.walls = snapshot.walls
+            segment.occupancy_map = snapshot.occupancy_map
+            self.grid = scan_grid(described.parameters, snapshot.occupancy_map)
         stamp = log_time - described.log_offset_ns
         step = stamp // described.dt_ns
         impulses = tuple(RecordedImpulse(*decode_vector3_stamped(data), cdr=data)
@@ -162,12 +183,13 @@ class _Reader:
             add_transforms(segment.transforms, data)
         if 'scan' in group and 'balls' in group:
             positions = decode_pose_array(group['balls'][-1])[2]
+            truth = group.get('truth', (None,))[-1]
             segment.scans.append(_scan_of(step, positions, decode_laser_scan(group['scan'][-1]),
-                                          self.roster, self.walls, segment, self.agent,
-                                          described.parameters))
+                                          truth, self.roster, (self.walls, self.grid), segment,
+                                          self.agent, described.parameters))
 
 
-def _scan_of(step, positions, message, roster, walls, segment, agent, parameters):
+def _scan_of(step, positions, message, truth, roster, geometry, segment, agent, parameters):
     if len(positions) != len(roster):
         raise RecordingError(f'step {step} has {len(positions)} balls, not {len(roster)}')
     if message.frame_id != segment.scan_frame:
@@ -182,18 +204,42 @@ def _scan_of(step, positions, message, roster, walls, segment, agent, parameters
                                          message.stamp_ns)
     except TransformError as error:
         raise RecordingError(f'no pose of the scan of step {step}: {error}') from None
-    return scan_at(step, message, pose, roster.names, positions, roster.radii, walls, index,
-                   parameters)
+    if truth is not None:
+        truth_pose = true_pose(truth, segment.scan_frame, message.stamp_ns)
+    elif any(parameters['agent.odom.noise']):
+        raise RecordingError(f'no {agent}/{agent_topics.GROUND_TRUTH} at the scan of step '
+                             f'{step}: with agent.odom.noise /tf is not the true pose')
+    else:  # recorded before ground truth was: odometry then was the truth
+        truth_pose = pose
+    return scan_at(step, message, pose, truth_pose, roster.names, positions, roster.radii,
+                   geometry, index, parameters)
 
 
-def scan_at(step, message, pose, names, positions, radii, walls, index, parameters):
-    """The RecordedScan of agent `index`'s scan `message` taken from `pose` among these
-    balls: which of them it could see (the same computation for a recording and for the
-    benchmark's simulated scenes, so the two score alike)."""
+def true_pose(data, base_frame, stamp_ns):
+    """(x, y, yaw) of a recorded `<name>/ground_truth` (nav_msgs/Odometry bytes) of frame
+    `base_frame` at `stamp_ns`; ValueError when it is not that."""
+    truth = decode_odometry(data)
+    if truth.child_frame_id != base_frame or truth.stamp_ns != stamp_ns:
+        raise ValueError(f'the ground truth of {truth.child_frame_id!r} at {truth.stamp_ns} ns '
+                         f'is not that of {base_frame!r} at {stamp_ns} ns')
+    quaternion_to_yaw(truth.pose[3:7])  # ValueError unless a rotation about z
+    # the yaw as /tf's is read (planar_tf), so that an odometry without noise gives /tf a
+    # pose equal to this one, bit for bit
+    return float(truth.pose[0]), float(truth.pose[1]), yaw_of(*truth.pose[3:7])
+
+
+def scan_at(step, message, pose, truth_pose, names, positions, radii, geometry, index,
+            parameters):
+    """The RecordedScan of agent `index`'s scan `message`, taken from `truth_pose` (given to
+    a tracker as `pose`) among these balls: which of them it could see past the walls and
+    the map's cells, geometry = (walls, scans.scan_grid) (the same computation for a
+    recording and for the benchmark's simulated scenes, so the two score alike)."""
+    walls, grid = geometry
     fan = fan_from(parameters, float(radii[index]))
-    seen = lidar.seen_balls(positions, radii, walls, positions[index], pose[2], fan, index)
+    seen = lidar.seen_balls(positions, radii, walls, positions[index], truth_pose[2], fan,
+                            index, grid)
     visible = np.zeros(len(positions), dtype=bool)
     visible[seen] = True
     return RecordedScan(step=step, stamp_ns=message.stamp_ns, message=message, pose=pose,
                         names=tuple(names), positions=positions, radii=radii,
-                        visible=visible)
+                        visible=visible, truth_pose=truth_pose)

@@ -5,8 +5,10 @@
 
 - `arena/balls/visible` and `arena/balls/hidden`: the balls the scan could see (green, their
   names under them in `arena/balls/names`) and those it could not (grey: don't-care);
-- `arena/agent`: the scanning agent (orange) and its heading, `arena/scan` the end points of
-  its beams;
+- `arena/agent`: the scanning agent (orange) and its true heading, `arena/scan` the end
+  points of its beams from where it truly was; `arena/agent/odom` (grey) its pose as /tf had
+  it, what a tracker was given, when it drifted from the truth (agent.odom.noise);
+- `arena/map`: the recorded map's cells, when the world had a map (they hide balls too);
 - `arena/tracks`: the tracks with their ids, blue when matched, magenta when a false
   positive, grey when don't-care (on a hidden ball); `arena/matches` a line from each
   matched ball to its track;
@@ -95,6 +97,10 @@ def log_run(stream, segments, scores):
             if k == 0 and segment.walls is not None:
                 stream.log(f'{ARENA}/walls', rr.LineStrips2D(
                     segment.walls.reshape(-1, 2, 2), colors=(120, 120, 120)))
+            if k == 0 and segment.occupancy_map is not None:
+                from ball_world.recording.rerun_map import map_entities
+                for path, archetype in map_entities(segment.occupancy_map, (120, 120, 120)):
+                    stream.log(path, archetype)
             counts = _log_scan(stream, rr, recorded, frame, score, k, sequence, last_track)
             totals += counts
             truth_total += int(np.sum(frame.visible))
@@ -109,7 +115,7 @@ def _log_scan(stream, rr, recorded, frame, score, k, sequence, last_track):
     """Log one scan; returns (misses, false positives, id switches) there."""
     positions, radii, visible = frame.truth_xy, recorded.radii, frame.visible
     names = np.array(frame.truth_ids, dtype=object)
-    x, y, yaw = recorded.pose
+    x, y, yaw = recorded.truth_pose
     agent = np.all(positions == (x, y), axis=1)  # the scanner's own ball
     hidden = ~visible & ~agent
     stream.log(f'{ARENA}/balls/visible', rr.Points2D(
@@ -126,6 +132,13 @@ def _log_scan(stream, rr, recorded, frame, score, k, sequence, last_track):
                                              colors=ORANGE))
     stream.log(f'{ARENA}/agent/heading', rr.Arrows2D(origins=[(x, y)], vectors=[
         (0.6 * math.cos(yaw), 0.6 * math.sin(yaw))], colors=ORANGE))
+    # Where /tf put the scanner (what a tracker was given): drawn only where it drifted.
+    ox, oy, oyaw = recorded.pose
+    drifted = (ox, oy, oyaw) != (x, y, yaw)
+    stream.log(f'{ARENA}/agent/odom', rr.Arrows2D(
+        origins=np.array([(ox, oy)] if drifted else [], dtype=np.float64).reshape(-1, 2),
+        vectors=np.array([(0.6 * math.cos(oyaw), 0.6 * math.sin(oyaw))] if drifted else [],
+                         dtype=np.float64).reshape(-1, 2), colors=GREY))
     message = recorded.message
     ranges = np.asarray(message.ranges, dtype=np.float64)
     angles = yaw + message.angle_min + np.arange(len(ranges)) * message.angle_increment

@@ -1,0 +1,207 @@
+"""ball_world_to_rrd draws a run with robots as the live view drew it: the same entities and
+components, an agent's own drive never drawn (nor counted) as a push, its bumper hits, its
+scans, and its true heading while its odometry drifts.
+
+One run is logged live (RerunSink) and recorded (McapSink) at once, with what tells the two
+apart on `impulse`: drives of two robots, pushes on a robot and on a ball, a push applied
+before a spawn (so the drives do not start the step's impulses), and a robot driven into a
+wall (a bumper hit). The recording's impulses must carry the live run's drive flags, and the
+converted .rrd must hold what the live one holds.
+"""
+from mcap.reader import make_reader
+from mcap.writer import Writer
+import numpy as np
+import pytest
+from test_rerun import read
+
+from ball_world.core.edits import Ball
+from ball_world.recording.mcap_reader import feed_sinks, Recording, RecordingError
+from ball_world.recording.mcap_writer import McapSink
+from ball_world.recording.rerun_agents import AGENTS, BUMPERS
+from ball_world.recording.rerun_log import IMPULSES, RerunSink
+from ball_world.simulation import Simulation, SpawnRequest
+from ball_world.tools import resim, to_rrd
+
+PARAMETERS = {'rate_hz': 60.0, 'random.count': 6, 'random.seed': 3,
+              'balls.x': [9.0, 2.0], 'balls.y': [5.0, 2.0], 'balls.vx': [0.0, 0.0],
+              'balls.vy': [0.0, 0.0], 'balls.radius': [0.2, 0.2], 'balls.mass': [1.0, 1.0],
+              'agents': ['ball_0', 'ball_1'], 'agent.cmd_timeout': 0.0,
+              'agent.odom.noise': [0.5, 0.5, 0.5, 0.5], 'agent.scan.samples': 36,
+              'physics.backend': 'numpy'}
+STEPS = 90
+#: Steps before which something other than a drive is applied.
+PUSH_AGENT, PUSH_BALL, SPAWN = 20, 40, 30
+
+
+@pytest.fixture(scope='module')
+def run(tmp_path_factory):
+    folder = tmp_path_factory.mktemp('recorded_agents')
+    live, mcap = folder / 'live.rrd', folder / 'run.mcap'
+    simulation = Simulation(PARAMETERS, sinks=[RerunSink(live), McapSink(mcap)])
+    simulation.command('ball_0', 1.5, 0.0, 0.0)  # into the wall at x = 10
+    simulation.command('ball_1', 0.8, 0.0, 1.2)
+    records = [simulation.last_record]
+    for step in range(1, STEPS + 1):
+        if step == PUSH_AGENT:
+            simulation.queue_impulse('ball_0', 0.0, 0.4)
+        if step == PUSH_BALL:
+            simulation.queue_impulse('ball_3', 0.2, -0.1)
+        if step == SPAWN:
+            simulation.queue_impulse('ball_1', -0.3, 0.0)  # applied by the spawn, first
+            results, _ = simulation.spawn([SpawnRequest('extra', False,
+                                                        Ball(5.0, 8.5, 0.0, 0.0, 0.1, 0.1))])
+            assert results == ['extra']
+            simulation.queue_impulse('ball_2', 0.0, 0.1)  # after the drives
+        records.append(simulation.step()[0])
+    simulation.close()
+    return live, mcap, records
+
+
+def flags(impulses):
+    return [(impulse.frame_id, impulse.drive) for impulse in impulses]
+
+
+def test_the_recording_tells_each_drive_from_a_push(run):
+    _, mcap, records = run
+    live = {record.step: record for record in records}
+    steps = [step for step in Recording(mcap).steps() if step.complete]
+    assert [step.step for step in steps] == list(range(STEPS + 1))
+    for step in steps:
+        assert flags(step.impulses) == flags(live[step.step].impulses), step.step
+    everything = [flag for step in steps for flag in flags(step.impulses)]
+    # a push on a robot reads as a push, its drive as a drive, in one file
+    assert ('ball_0', True) in everything and ('ball_0', False) in everything
+    # the push the spawn applied, ball_1's drive (ball_0 is then at its commanded speed),
+    # the push queued after the spawn
+    assert flags(live[SPAWN].impulses) == [('ball_1', False), ('ball_1', True),
+                                           ('ball_2', False)]
+
+
+def test_to_rrd_draws_what_the_live_view_drew(run, tmp_path):
+    live, mcap, records = run
+    converted = tmp_path / 'converted.rrd'
+    assert to_rrd.main([str(mcap), '-o', str(converted)]) == 0
+    _, logged, _, _ = read(live)
+    _, made, _, _ = read(converted)
+    assert set(made) == set(logged)
+    # the pushes only, as live: the drives (on every step a robot accelerates) are not there
+    pushes = logged[(f'/{IMPULSES}', 'Arrows2D:vectors')]
+    assert made[(f'/{IMPULSES}', 'Arrows2D:vectors')] == pushes
+    # on screen for 30 steps (IMPULSE_SECONDS): one push at 20, two more at 30, one at 40
+    assert {step: len(value or ()) for step, value in pushes.items()} == {
+        0: 0, PUSH_AGENT: 1, SPAWN: 3, PUSH_BALL: 4, 50: 3, 60: 1, 70: 0}
+    # bumper hits (ball_0 against the wall) at the same steps, along the same impulse
+    bumpers = logged[(f'/{BUMPERS}', 'Arrows2D:vectors')]
+    assert any(bumpers.values())
+    assert made[(f'/{BUMPERS}', 'Arrows2D:vectors')].keys() == bumpers.keys()
+    for step, vectors in bumpers.items():
+        assert np.allclose(made[(f'/{BUMPERS}', 'Arrows2D:vectors')][step], vectors,
+                           atol=1e-6) if vectors else not made[
+            (f'/{BUMPERS}', 'Arrows2D:vectors')][step]
+    # the true heading, not the drifting odometry's
+    headings = made[(f'/{AGENTS}', 'Arrows2D:vectors')]
+    for step, vectors in logged[(f'/{AGENTS}', 'Arrows2D:vectors')].items():
+        assert np.allclose(headings[step], vectors, atol=1e-6), step
+    # every value of every other entity as logged live (scans to float32's ranges)
+    for key, column in logged.items():
+        assert made[key].keys() == column.keys(), key
+        for step, value in column.items():
+            other = made[key][step]
+            if key[0].startswith('/arena/scans/') and value:
+                assert np.allclose(np.asarray(other, dtype=np.float64),
+                                   np.asarray(value, dtype=np.float64), atol=1e-5), key
+            elif key[0] not in (f'/{AGENTS}', f'/{BUMPERS}'):
+                assert other == value, (key, step)
+
+
+def test_the_odometry_really_drifted_from_the_heading_drawn(run):
+    _, mcap, records = run
+    from ball_world.msgs.agent_cdr import decode_odometry
+    from ball_world.scoring.planar_tf import yaw_of
+    last = records[-1].agents
+    odom_yaw = yaw_of(*decode_odometry(last.odom_cdr[1]).pose[3:7])
+    assert abs(np.angle(np.exp(1j * (odom_yaw - last.yaws[1])))) > 0.01
+
+
+def without_drives(source, target):
+    """A copy of a recording without its drive topics: as recordings were before them."""
+    with open(source, 'rb') as stream, open(target, 'wb') as out:
+        reader = make_reader(stream)
+        writer = Writer(out)
+        writer.start(profile='ros2', library='test')
+        schemas, channels = {}, {}
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            if channel.topic.endswith('/drive'):
+                continue
+            if schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding,
+                                                            schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.id],
+                    channel.metadata)
+            writer.add_message(channels[channel.id], message.log_time, message.data,
+                               message.publish_time, message.sequence)
+        for record in reader.iter_metadata():
+            writer.add_metadata(record.name, record.metadata)
+        writer.finish()
+
+
+def test_an_older_recording_without_drive_topics_reads_as_before(run, tmp_path):
+    _, mcap, records = run
+    old = tmp_path / 'old.mcap'
+    without_drives(mcap, old)
+    steps = [step for step in Recording(old).steps() if step.complete]
+    assert all(not impulse.drive for step in steps for impulse in step.impulses)
+    assert [len(step.impulses) for step in steps] == [len(r.impulses) for r in records]
+    assert to_rrd.main([str(old), '-o', str(tmp_path / 'old.rrd')]) == 0
+
+
+def test_the_recording_with_drive_topics_resimulates_and_a_forged_drive_is_one_line(
+        run, tmp_path, capsys):
+    _, mcap, _ = run
+    assert resim.main([str(mcap)]) == 0, capsys.readouterr()
+    # a drive message whose bytes are not those of the step's drive impulse
+    forged = tmp_path / 'forged.mcap'
+    with open(mcap, 'rb') as stream, open(forged, 'wb') as out:
+        reader = make_reader(stream)
+        writer = Writer(out)
+        writer.start(profile='ros2', library='test')
+        schemas, channels = {}, {}
+        done = False
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            data = message.data
+            if channel.topic == '/ball_1/drive' and not done:
+                data = data[:-24] + np.float64(0.125).tobytes() + data[-16:]
+                done = True
+            if schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding,
+                                                            schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.id],
+                    channel.metadata)
+            writer.add_message(channels[channel.id], message.log_time, data,
+                               message.publish_time, message.sequence)
+        for record in reader.iter_metadata():
+            writer.add_metadata(record.name, record.metadata)
+        writer.finish()
+    with pytest.raises(RecordingError, match=r"step 1: the drive impulses of 'ball_0', "
+                                             r"'ball_1' are not the step's impulses 0 to 1"):
+        feed_sinks(forged, [])
+
+
+def test_info_counts_the_drives_apart_and_lists_the_pushes(run, capsys):
+    from ball_world.tools import info
+    _, mcap, records = run
+    assert info.main([str(mcap)]) == 0
+    out = capsys.readouterr().out
+    drives = sum(impulse.drive for record in records for impulse in record.impulses)
+    total = sum(len(record.impulses) for record in records)
+    assert drives > 50 and total == drives + 4
+    assert f"impulses:    {total} (4 pushes, {drives} by the agents' drives)" in out
+    listed = [line.split(': ')[0].split(' (')[0].strip() + ' ' + line.split(': ')[1].split()[0]
+              for line in out.splitlines() if line.startswith('  segment 0 step')
+              and ' J = ' in line]
+    assert listed == ['segment 0 step 20 ball_0', 'segment 0 step 30 ball_1',
+                      'segment 0 step 30 ball_2', 'segment 0 step 40 ball_3']
