@@ -13,7 +13,8 @@ bytes raw); `--record` adds the MCAP sink's write.
 
 The real-time factor the node can keep is at most 10 ms over the mean step (the node's
 timer catches up on a late step within pacing.MAX_LAG, so a scan step's burst is absorbed
-when the mean fits). Wall time on a shared machine: the load average goes in the report.
+when the mean fits). Times are the thread's CPU time (time.thread_time): on a shared machine
+wall time measures the other processes; the load average goes in the report all the same.
 Never a timed assertion.
 """
 import argparse
@@ -49,7 +50,7 @@ def command_all(simulation):
 
 
 class _TimedScans:
-    """AgentScans.take with the wall time it took, summed in `seconds`."""
+    """AgentScans.take with the CPU time it took, summed in `seconds`."""
 
     def __init__(self, scans):
         self.scans = scans
@@ -67,7 +68,7 @@ class _TimedScans:
 
 
 def run(yaml_path, args, sinks=()):
-    """Per-step wall seconds, whether each step scanned, and the scans' share of each."""
+    """Per-step CPU seconds, whether each step scanned, and the scans' share of each."""
     simulation = Simulation(parameters(yaml_path, args.balls, args.agents, args.seed,
                                        args.scan_rate), sinks=sinks)
     timed = _TimedScans(simulation._scans)
