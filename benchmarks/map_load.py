@@ -3,9 +3,13 @@
     .venv/bin/python -m benchmarks.map_load [--repeat 5]
 
 The maps: the two real ones shipped in maps/ (TurtleBot3 sandbox, 147,456 cells; depot,
-185,428 cells) and a warehouse at 3 cm made here, 2048 x 1024 = 2,097,152 cells (a PGM of
-walls, shelves and unknown border, like a SLAM map). The loader's time is read_map_files +
-load_map (decode, cells) and the world's CellQueries, the median of --repeat runs; the
+185,428 cells), a warehouse at 3 cm made here, 2048 x 1024 = 2,097,152 cells (a PGM of
+walls, shelves and unknown border, like a SLAM map), and issue 27's warehouse
+(benchmarks.warehouse, 1500 x 1200 at 3 cm, the one benchmarks.map_speed measures), last also
+with the real-time case of benchmarks.map_agents (1,000 balls, 100 diff-drive agents scanning
+360 beams: its first step scans, so it includes the lidar's free squares). The loader's time
+is read_map_files + load_map (decode, cells) and the world's CellQueries, the median of
+--repeat runs; the
 node's is the wall time of `ball_world -p max_steps:=1` (process start to its first step and
 exit) with the map and without, so their difference is what the map costs a start (on a
 loaded machine that difference drowns in the start's noise); the world's build in this process
@@ -21,6 +25,7 @@ import sys
 import tempfile
 import time
 
+from benchmarks import warehouse as generated
 import numpy as np
 
 from ball_world.core.parameters import DEFAULTS
@@ -91,7 +96,7 @@ def main(argv=None):
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     with tempfile.TemporaryDirectory() as folder:
         maps = [ROOT / 'maps' / 'tb3_sandbox.yaml', ROOT / 'maps' / 'depot.yaml',
-                warehouse(Path(folder))]
+                warehouse(Path(folder)), generated.write(Path(folder) / 'generated')]
         baseline = node_seconds(args.repeat, 'random.count:=20')
         built = build_seconds(args.repeat)
         print(f'without a map: world built in {built * 1e3:.0f} ms; node start to first step '
@@ -105,6 +110,11 @@ def main(argv=None):
                   f'{occupancy.width * occupancy.height:,} cells; loader {seconds * 1e3:.0f} ms;'
                   f' world built in {built * 1e3:.0f} ms; node start to first step '
                   f'{started:.2f} s ({started - baseline:+.2f} s)')
+        robots = ['random.count:=1000', 'random.radius:=[0.1, 0.2]', 'agent.drive:=diff',
+                  'agents:=[' + ', '.join(f'ball_{i}' for i in range(100)) + ']']
+        started = node_seconds(args.repeat, f'map:={maps[-1]}', 'arena:=[]', *robots)
+        print(f'{maps[-1].name} with 1,000 balls and 100 agents scanning: node start to first '
+              f'step {started:.2f} s ({started - baseline:+.2f} s)')
 
 
 if __name__ == '__main__':

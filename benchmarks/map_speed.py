@@ -108,13 +108,20 @@ def alternate(calls, repeats, inner):
     return {name: (statistics.median(values), min(values)) for name, values in times.items()}
 
 
+#: Steps per timed round of a step: seed mode rebuilds its candidate lists every 3-4 steps
+#: at 1 m/s, so a round of 5 was one rebuild more or less, and its least round compared a
+#: map round with rebuilds to a box round without (ratios of 1.4 and 2.2 in one run); 20
+#: steps hold several rebuilds of each world.
+STEP_ROUND = 20
+
+
 def steps(in_map, in_box, repeats, warm_up=20):
     """(median, least) CPU seconds per step in the warehouse and in the box."""
     for world in (in_map, in_box):
         for _ in range(warm_up):
             world.step(DT)
     medians = alternate({'map': lambda: in_map.step(DT), 'box': lambda: in_box.step(DT)},
-                        repeats, 5)
+                        repeats, STEP_ROUND)
     return medians['map'], medians['box']
 
 

@@ -7,7 +7,7 @@ case with positive figures.
 """
 import argparse
 
-from benchmarks import map_speed, warehouse
+from benchmarks import map_agents, map_speed, warehouse
 import numpy as np
 
 from ball_world.core.static_geometry import boundary_runs
@@ -45,3 +45,21 @@ def test_the_report_gives_a_row_per_case(tmp_path):
         numbers = [float(cell.split(' ')[0]) for cell in cells
                    if cell.replace('.', '', 1).split(' ')[0].isdigit()]
         assert numbers and all(value > 0.0 for value in numbers)
+
+
+def test_the_robots_case_scans_every_tenth_step_and_reports_each_figure(tmp_path):
+    """benchmarks.map_agents: its agents scan at 10 Hz of the 100 Hz steps (one step in ten,
+    all agents at once, 360 beams each), and the report gives every figure against the
+    10 ms step."""
+    yaml_path = warehouse.write(tmp_path)
+    args = argparse.Namespace(balls=40, agents=4, scan_rate=10.0, steps=30, warm_up=5, seed=1)
+    took, scanned, in_scans = map_agents.run(yaml_path, args)
+    assert len(took) == len(scanned) == len(in_scans) == 30
+    # Timed steps 6 to 35 (after 5 warm-up steps): scans at steps 10, 20 and 30.
+    assert [k for k, scan in enumerate(scanned) if scan] == [4, 14, 24]
+    assert all(seconds > 0.0 for seconds, scan in zip(in_scans, scanned) if scan)
+    assert all(part <= whole for part, whole in zip(in_scans, took))  # scans within a step
+    text = map_agents.report(took, scanned, in_scans, args, '1.0 1.0 1.0')
+    rows = [line for line in text.splitlines() if line.startswith('| ') and '---' not in line]
+    assert len(rows) == 5  # the header and four figures
+    assert 'real-time factor the step allows' in text

@@ -288,16 +288,18 @@ def _blocked(skips, quadrant, i, j):
 
 
 @_compile
-def _catch_up(t_end, c, line, t_line, step, reach, origin, resolution, p, d, inverse):
+def _catch_up(t_end, c, line, t_line, step, reach, origin, resolution, per_cell, p, d,
+              inverse):
     """Along one axis, the beam's cell just before t_end, from cell c whose next line `line`
     it crosses at t_line: every line crossed before t_end (at most `reach`) taken, as the
-    cell by cell walk takes them. Returns (cell, next line, its crossing)."""
+    cell by cell walk takes them (`per_cell`: 1 / resolution, for the guess only). Returns
+    (cell, next line, its crossing)."""
     if step == 0 or not t_line < t_end:
         return c, line, t_line
     start = c
     # A guess from the position at t_end, kept within the reach, then mended with the very
     # crossings the cell by cell walk compares.
-    guess = np.int64(math.floor((p + t_end * d - origin) / resolution))
+    guess = np.int64(math.floor((p + t_end * d - origin) * per_cell))
     if step > 0:
         guess = min(max(guess, start + 1), start + reach)
     else:
@@ -342,6 +344,7 @@ def first_solid(px, py, dx, dy, bound, skips, origin_x, origin_y, resolution):
         return 0.0
     ix = 1.0 / dx if sx != 0 else 0.0
     iy = 1.0 / dy if sy != 0 else 0.0
+    per_cell = 1.0 / resolution
     nx = ci + 1 if sx > 0 else ci
     ny = cj + 1 if sy > 0 else cj
     tx = crossing(origin_x, nx, resolution, px, ix) if sx != 0 else np.inf
@@ -367,11 +370,11 @@ def first_solid(px, py, dx, dy, bound, skips, origin_x, origin_y, resolution):
                 ny = ey
                 ty = tey
             if tex < tey:
-                cj, ny, ty = _catch_up(tex, cj, ny, ty, sy, reach, origin_y, resolution, py, dy,
-                                       iy)
+                cj, ny, ty = _catch_up(tex, cj, ny, ty, sy, reach, origin_y, resolution,
+                                       per_cell, py, dy, iy)
             elif tey < tex:
-                ci, nx, tx = _catch_up(tey, ci, nx, tx, sx, reach, origin_x, resolution, px, dx,
-                                       ix)
+                ci, nx, tx = _catch_up(tey, ci, nx, tx, sx, reach, origin_x, resolution,
+                                       per_cell, px, dx, ix)
         # One cell on.
         if tx < ty:
             if not tx <= bound:
