@@ -283,8 +283,10 @@ def test_warming_for_a_run_leaves_a_default_run_nothing_to_compile(tmp_path):
     first run would stall ~15 s compiling it. Every compile writes to numba's cache, so an
     unchanged cache after the steps means nothing was compiled."""
     environment = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+    # Compiling from nothing takes ~30 s of CPU, many minutes on a loaded machine: the time-out
+    # only stops a hang.
     done = subprocess.run([sys.executable, '-m', 'ball_world.core.warm', '--kernels', 'run'],
-                          capture_output=True, text=True, timeout=600, env=environment)
+                          capture_output=True, text=True, timeout=1800, env=environment)
     assert done.returncode == 0, done.stderr
     assert 'numba kernels (seed mode and the lidar) ready' in done.stdout
 
@@ -299,6 +301,6 @@ def test_warming_for_a_run_leaves_a_default_run_nothing_to_compile(tmp_path):
               '    world.step(1 / 60)\n'
               'print(len(world))')
     stepped = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True,
-                             timeout=600, env=environment)
+                             timeout=1800, env=environment)
     assert stepped.returncode == 0 and stepped.stdout.strip() == '20', stepped.stderr
     assert cache() == warmed
