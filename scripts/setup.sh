@@ -142,8 +142,10 @@ fi
 kernels_current() {
   [ "$(cat "$kernels" 2>/dev/null)" = "$wanted_package" ] && has_kernels . && has_kernels "$site"
 }
-# Compiles the kernels a default run does not use, once per package stamp; one at a time
-# (flock), so a foreground set-up waits for a background one instead of doing its work again.
+# Compiles the kernels a default run does not use, once per package stamp: the installed copy's
+# and the source tree's at once, or one after the other with --serial (in the background, so
+# that a run keeps a core). One warm_rest at a time (flock), so a foreground set-up waits for a
+# background one instead of doing its work again.
 warm_rest() {
   if command -v flock >/dev/null 2>&1; then
     exec 9> "$venv/.ball_world-kernels.lock"
@@ -154,9 +156,14 @@ warm_rest() {
   fi
   kernels_current && return 0
   rm -f "$kernels"
-  warm "$site" exact & local installed=$!
-  warm . all
-  wait $installed
+  if [ "${1:-}" = --serial ]; then
+    warm "$site" exact
+    warm . all
+  else
+    warm "$site" exact & local installed=$!
+    warm . all
+    wait $installed
+  fi
   echo "$wanted_package" > "$kernels"
 }
 
@@ -202,11 +209,11 @@ done
 [ $((SECONDS - began)) -lt 3 ] || echo "setup: done in $((SECONDS - began)) s"
 
 # A run waits for none of it: exact mode's kernels and the source tree's are compiled in the
-# background (niced; it ignores Ctrl-C, as bash's background jobs do, and finishes after the run
-# if need be), for the next exact-mode run or `make test`.
+# background on one core (it ignores Ctrl-C, as bash's background jobs do, and finishes after
+# the run if need be), for the next exact-mode run or `make test`. Not niced: a `make test`
+# that waits for it would wait as long as the machine's other work starves it.
 if [ -n "$for_run" ] && ! kernels_current; then
-  echo "setup: compiling the other numba kernels (exact mode, the tests') in the background:" \
-       "about 2 min of one core, log $venv/warm.log"
-  ( renice -n 10 -p "$BASHPID" >/dev/null 2>&1 || true
-    warm_rest ) >> "$venv/warm.log" 2>&1 < /dev/null &
+  echo "setup: compiling the other numba kernels (exact mode, the tests') in the background" \
+       "on one core (about 1-2 min; log: $venv/warm.log)"
+  warm_rest --serial >> "$venv/warm.log" 2>&1 < /dev/null &
 fi
