@@ -132,7 +132,8 @@ sys.exit(not os.path.exists(os.path.join(sysconfig.get_path("include"), "Python.
   }
 
   local began=$SECONDS
-  echo "setup: building $name into $venv (once; log: $log)"
+  echo "setup: building $name into $venv (once; simulation_interfaces is the longest step of" \
+       "set-up, about 150 s of CPU; log: $log)"
   rm -rf "$build"
   mkdir -p "$build"
   : > "$log"

@@ -90,12 +90,14 @@ wanted=$(echo "$mode" | cat - "${requirements[@]}" "$no_deps" | sha256sum | cut 
 if [ "$(cat "$stamp" 2>/dev/null)" != "$wanted" ]; then
   if [ "$mode" = wheels ]; then
     echo 'setup: first set-up (or new requirements): installing Python 3.12 packages and ROS 2' \
-         "Jazzy into $venv, then building two ROS interface packages beside compiling" \
-         "ball_world's numba kernels; about 2 min on an idle 2-core machine with a fast network," \
-         'up to 5-10 min on a busy one. Later runs skip every step whose inputs did not change.'
+         "Jazzy into $venv (1-2 min), then building two ROS interface packages (about 150 s of" \
+         "CPU) beside compiling ball_world's numba kernels (about 30 s): about 3-4 min on an" \
+         'idle 2-core machine, 15-20 min on a heavily loaded one (docs/performance.md, Set-up).' \
+         'Later runs skip every step whose inputs did not change.'
   else
     echo "setup: first set-up (or new requirements): installing Python packages into $venv and" \
-         "compiling ball_world's numba kernels (about 1 min on an idle 2-core machine)."
+         "compiling ball_world's numba kernels (a few minutes; later runs skip what did not" \
+         'change).'
   fi
 fi
 
@@ -107,7 +109,7 @@ fi
 
 if [ "$(cat "$stamp" 2>/dev/null)" != "$wanted" ]; then
   step=$SECONDS
-  echo "setup: downloading and installing the dependencies (about 40 s with a fast network;" \
+  echo 'setup: downloading and installing the dependencies (1-2 min with a fast network;' \
        'numba, scipy, rerun and the ROS 2 wheels are most of it)'
   # --no-compile: Python compiles a module when it is first imported, so only what runs pays.
   "$venv/bin/python" -m pip install --quiet --no-compile $(printf -- '-r %s ' "${requirements[@]}")
@@ -186,7 +188,7 @@ if [ "$mode" = wheels ]; then
 fi
 if [ -n "$install_package" ]; then
   echo "setup: installing ball_world into $venv and compiling the numba kernels of a default" \
-       'run (sources changed; about 40 s of compiling, 10 s when numba finds them cached)'
+       'run (sources changed; about 30 s of CPU, seconds when numba finds them cached)'
   ( rm -f "$package" "$kernels"
     "$venv/bin/python" -m pip install --quiet --no-compile --no-deps --no-build-isolation .
     warm "$site" run
