@@ -10,9 +10,15 @@
 # package lands in VENV's site-packages, the libraries in VENV/lib, which the wheels' start-up
 # hook (ros_wheels_bootstrapper) puts on LD_LIBRARY_PATH of every VENV/bin/python process.
 #
+# Only what rclpy loads is generated (scripts/rclpy_typesupports_only.cmake: C and Python, no
+# C++), without optimisation (the generated code converts and copies a few service messages; -O3
+# cost compile time that no run gets back). The packages are built at the same time, beside
+# whatever the caller does meanwhile (scripts/setup.sh installs ball_world and compiles numba's
+# kernels): on 2 cores the build of simulation_interfaces alone is about a minute of work.
+#
 # Each package is built once and reused: its own stamp in VENV (.ball_world-<package, with
 # dashes>) holds a hash of everything its build reads (its definition files, this script, the
-# CMake helper, the requirements), and nothing is done while it matches, so changing one
+# CMake helpers, the requirements), and nothing is done while it matches, so changing one
 # package's files rebuilds that package only. A change rebuilds the package from scratch (rosidl
 # regenerates every file when one definition changes, so an old build tree saves nothing); the
 # tree is deleted after a successful install, the log kept in VENV/build. A failure prints one
@@ -20,10 +26,13 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# This script built simulation_interfaces alone until the stamps became per package: the sha256
-# of that version (commit bc60fd1). Its build steps are the ones below, so a stamp it wrote for
-# unchanged inputs is taken as valid (and rewritten in the current form) instead of rebuilding.
-previous_script_sha256=bf048eacb53e2c5db0a9429a8095d4f18723f7b023d0c1da566e25bdd08ff371
+# Earlier versions of this script, by sha256: bc60fd1's built simulation_interfaces alone (before
+# the stamps became per package), 1d7d111's built C++ as well (a superset of today's build), and
+# neither read scripts/rclpy_typesupports_only.cmake. What they installed serves rclpy as
+# today's build does, so a stamp one of them wrote for otherwise unchanged inputs is taken as
+# valid (and rewritten in the current form) instead of rebuilding.
+previous_script_sha256s=(bf048eacb53e2c5db0a9429a8095d4f18723f7b023d0c1da566e25bdd08ff371
+                         18eb1bee2a91f413ebcc9ad4cc38d0c31db04903195f2e8b0867e59beaaab100)
 
 [ $# -ge 1 ] || { echo 'usage: scripts/build_interfaces.sh VENV [PACKAGE...]' >&2; exit 2; }
 if [ ! -x "$1/bin/python" ]; then
@@ -72,20 +81,24 @@ build_package() {
   }
 
   [ -f "$package/package.xml" ] || fail "$package/package.xml does not exist"
-  local inputs sums wanted previous
+  local inputs sums wanted previous previous_sha256
   inputs=$( (find "$package" -type f; echo scripts/build_interfaces.sh;
-             echo scripts/wheels_python_paths.cmake; echo requirements/ros-build-wheels.txt;
-             echo requirements/ros-wheels.txt) | LC_ALL=C sort)
+             echo scripts/wheels_python_paths.cmake; echo scripts/rclpy_typesupports_only.cmake;
+             echo requirements/ros-build-wheels.txt; echo requirements/ros-wheels.txt) |
+           LC_ALL=C sort)
   # shellcheck disable=SC2086  # the paths hold no spaces
   sums=$(sha256sum $inputs)
   wanted=$(sha256sum <<< "$sums" | cut -d' ' -f1)
   [ "$(cat "$stamp" 2>/dev/null)" = "$wanted" ] && return 0
-  previous=$(sed "s|^[0-9a-f]*\(  scripts/build_interfaces.sh\)\$|$previous_script_sha256\1|" \
-             <<< "$sums" | sha256sum | cut -d' ' -f1)
-  if [ "$(cat "$stamp" 2>/dev/null)" = "$previous" ]; then
-    echo "$wanted" > "$stamp"
-    return 0
-  fi
+  for previous_sha256 in "${previous_script_sha256s[@]}"; do
+    previous=$(grep -v '  scripts/rclpy_typesupports_only.cmake$' <<< "$sums" |
+               sed "s|^[0-9a-f]*\(  scripts/build_interfaces.sh\)\$|$previous_sha256\1|" |
+               sha256sum | cut -d' ' -f1)
+    if [ "$(cat "$stamp" 2>/dev/null)" = "$previous" ]; then
+      echo "$wanted" > "$stamp"
+      return 0
+    fi
+  done
 
   for tool in cmake make cc c++; do
     command -v "$tool" >/dev/null 2>&1 || fail "'$tool' not found (install cmake, make, gcc and g++)"
@@ -118,12 +131,15 @@ sys.exit(not os.path.exists(os.path.join(sysconfig.get_path("include"), "Python.
     fail "$1 failed: $(grep -m1 -E 'CMake Error|[Ee]rror[: ]' "$log" || echo 'see the log'); log: $log"
   }
 
-  echo "setup: building $name into $venv (a few minutes on 2 cores, once)"
+  local began=$SECONDS
+  echo "setup: building $name into $venv (once; simulation_interfaces is the longest step of" \
+       "set-up, about 150 s of CPU; log: $log)"
   rm -rf "$build"
   mkdir -p "$build"
   : > "$log"
-  cmake -S "$package" -B "$build" -DCMAKE_BUILD_TYPE=Release -DBUILD_TESTING=OFF \
+  cmake -S "$package" -B "$build" -DCMAKE_BUILD_TYPE=None -DBUILD_TESTING=OFF \
     -DCMAKE_INSTALL_PREFIX="$venv" -DCMAKE_PREFIX_PATH="$venv" -DPython3_EXECUTABLE="$python" \
+    -DCMAKE_PROJECT_INCLUDE_BEFORE="$PWD/scripts/rclpy_typesupports_only.cmake" \
     -DCMAKE_PROJECT_INCLUDE="$PWD/scripts/wheels_python_paths.cmake" >> "$log" 2>&1 ||
     explain_failure configure
   cmake --build "$build" --parallel "$(nproc)" >> "$log" 2>&1 || explain_failure build
@@ -133,10 +149,20 @@ sys.exit(not os.path.exists(os.path.join(sysconfig.get_path("include"), "Python.
     fail "the installed types do not load in $python; log: $log"
   rm -rf "$build"
   echo "$wanted" > "$stamp"
+  echo "setup: built $name in $((SECONDS - began)) s"
 }
 
 # rosidl looks up the available typesupports in the ament index of these prefixes.
 export AMENT_PREFIX_PATH="$venv${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
+# Every package at once (each is its own subshell, so a failure's exit ends only that one); the
+# script fails when any of them did, after all have finished.
+builds=()
 for name in "$@"; do
-  build_package "$name"
+  build_package "$name" &
+  builds+=($!)
 done
+status=0
+for build in "${builds[@]}"; do
+  wait "$build" || status=1
+done
+exit $status

