@@ -159,8 +159,8 @@ def report(args):
               f'| warehouse {columns} x {rows} at {warehouse.RESOLUTION} m | {rows * columns:,} | '
               f'{float(cells.solid.mean()):.1%} | {static.run_count:,} | '
               f'{static.index.columns * static.index.rows:,} ({static.index.size:.2f} m) | '
-              + ' | '.join(f'{value:.3f}' for value in seconds)
-              + f' | {sum(seconds):.3f} |', '']
+              + ' | '.join(f'{value:.3g}' for value in seconds)
+              + f' | {sum(seconds):.3g} |', '']
     print('\n'.join(lines), flush=True)
     table = ['| balls | mode | warehouse, ms per step | open box, ms per step | ratio | '
              'ratio of the least |', '|---:|---|---:|---:|---:|---:|']

@@ -207,6 +207,7 @@ class BallWorld(Node):
 
     def __init__(self, **kwargs):
         self._sinks = []
+        self._node_made = False
         try:
             self._start(**kwargs)
         except BaseException:
@@ -216,16 +217,25 @@ class BallWorld(Node):
     def _abandon(self):
         """A start cut short (a signal, an error) leaves no stub behind: a recording that has
         its first segment is closed complete, one that has nothing yet is removed (as a bad
-        path's is), so the next run is not refused for a file this one never wrote."""
+        path's is), so the next run is not refused for a file this one never wrote.
+
+        The node is destroyed here too. Left to the garbage collector, it would be destroyed
+        whenever a collection runs, on whatever thread holds the GIL then, and the last
+        node of a context takes its DDS participant with it: Fast DDS then waits for the
+        participant's listener, whose thread may be waiting for the GIL (a test process
+        hung so)."""
         simulation = getattr(self, 'simulation', None)
         if simulation is not None:
             simulation.close()
         else:
             for sink in self._sinks:
                 sink.close()
+        if self._node_made:
+            self.destroy_node()
 
     def _start(self, **kwargs):
         super().__init__('ball_world', **kwargs)
+        self._node_made = True
         try:
             # rclpy keeps the command line's and files' values here; they are converted and
             # checked against the parameter table before anything is declared.
