@@ -453,6 +453,23 @@ def rewrite_recording(source, target, metadata=None, data=None, edit=None):
     return target
 
 
+def without_messages(source, target, dropped):
+    """A copy of an MCAP (rewrite_recording) without the messages of every topic for which
+    dropped(topic) holds; their channels stay, as in a recording that published nothing there
+    (an older one, or a filtered copy). Returns target."""
+    topics = {}
+
+    def edit(item):
+        kind = type(item).__name__
+        if kind == 'Channel':
+            topics[item.id] = item.topic
+        elif kind == 'Message' and dropped(topics[item.channel_id]):
+            return None
+        return item
+
+    return rewrite_recording(source, target, edit=edit)
+
+
 def _write_record(writer, item):
     kind = type(item).__name__
     if kind == 'Header':

@@ -8,8 +8,7 @@ before a spawn (so the drives do not start the step's impulses), and a robot dri
 wall (a bumper hit). The recording's impulses must carry the live run's drive flags, and the
 converted .rrd must hold what the live one holds.
 """
-from mcap.reader import make_reader
-from mcap.writer import Writer
+from ball_world_testing.harness import rewrite_recording, without_messages
 import numpy as np
 import pytest
 from test_rerun import read
@@ -125,26 +124,7 @@ def test_the_odometry_really_drifted_from_the_heading_drawn(run):
 
 def without_drives(source, target):
     """A copy of a recording without its drive topics: as recordings were before them."""
-    with open(source, 'rb') as stream, open(target, 'wb') as out:
-        reader = make_reader(stream)
-        writer = Writer(out)
-        writer.start(profile='ros2', library='test')
-        schemas, channels = {}, {}
-        for schema, channel, message in reader.iter_messages(log_time_order=False):
-            if channel.topic.endswith('/drive'):
-                continue
-            if schema.id not in schemas:
-                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding,
-                                                            schema.data)
-            if channel.id not in channels:
-                channels[channel.id] = writer.register_channel(
-                    channel.topic, channel.message_encoding, schemas[schema.id],
-                    channel.metadata)
-            writer.add_message(channels[channel.id], message.log_time, message.data,
-                               message.publish_time, message.sequence)
-        for record in reader.iter_metadata():
-            writer.add_metadata(record.name, record.metadata)
-        writer.finish()
+    return without_messages(source, target, lambda topic: topic.endswith('/drive'))
 
 
 def test_an_older_recording_without_drive_topics_reads_as_before(run, tmp_path):
@@ -163,29 +143,16 @@ def test_the_recording_with_drive_topics_resimulates_and_a_forged_drive_is_one_l
     assert resim.main([str(mcap)]) == 0, capsys.readouterr()
     # a drive message whose bytes are not those of the step's drive impulse
     forged = tmp_path / 'forged.mcap'
-    with open(mcap, 'rb') as stream, open(forged, 'wb') as out:
-        reader = make_reader(stream)
-        writer = Writer(out)
-        writer.start(profile='ros2', library='test')
-        schemas, channels = {}, {}
-        done = False
-        for schema, channel, message in reader.iter_messages(log_time_order=False):
-            data = message.data
-            if channel.topic == '/ball_1/drive' and not done:
-                data = data[:-24] + np.float64(0.125).tobytes() + data[-16:]
-                done = True
-            if schema.id not in schemas:
-                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding,
-                                                            schema.data)
-            if channel.id not in channels:
-                channels[channel.id] = writer.register_channel(
-                    channel.topic, channel.message_encoding, schemas[schema.id],
-                    channel.metadata)
-            writer.add_message(channels[channel.id], message.log_time, data,
-                               message.publish_time, message.sequence)
-        for record in reader.iter_metadata():
-            writer.add_metadata(record.name, record.metadata)
-        writer.finish()
+    forged_at = []
+
+    def forge(topic, log_time, data):
+        """ball_1's first drive impulse, its x changed."""
+        if topic != '/ball_1/drive' or forged_at:
+            return data
+        forged_at.append(log_time)
+        return data[:-24] + np.float64(0.125).tobytes() + data[-16:]
+
+    rewrite_recording(mcap, forged, data=forge)
     with pytest.raises(RecordingError, match=r"step 1: the drive impulses of 'ball_0', "
                                              r"'ball_1' are not the step's impulses 0 to 1"):
         feed_sinks(forged, [])
