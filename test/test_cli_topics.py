@@ -86,8 +86,9 @@ def test_state_prints_readable_numbers_and_masses(world):
 def test_drive_sends_the_type_the_agent_takes_and_a_zero_command_last(
         world, probe, namespace, message_type):
     heard = probe.listen(message_type, f'{namespace}/ball_0/cmd_vel')
+    # -w 2: the world and this probe (discovery under load can show the probe late).
     lines = ok('drive', 'ball_0', '0.5', '1.25', '--vy', '-0.25', '--rate', '20', '--for',
-               '1', namespace=namespace)
+               '1', '-w', '2', namespace=namespace)
     assert len(lines) == 1 and lines[0].startswith(
         'drove ball_0: ') and f'{message_type.__name__} commands' in lines[0], lines
     sent = int(lines[0].split()[2])
@@ -97,6 +98,17 @@ def test_drive_sends_the_type_the_agent_takes_and_a_zero_command_last(
                for t in twists[:-1]) and sent >= 2
     last = twists[-1]
     assert (last.linear.x, last.linear.y, last.angular.z) == (0.0, 0.0, 0.0)
+
+
+def test_drive_waiting_for_more_subscriptions_than_come_says_so_and_sends_nothing(
+        world, probe):
+    heard = probe.listen(Twist, f'{NAMESPACE}/ball_0/cmd_vel')
+    code, out, err = run_tool('ball_world_cli', '--ns', NAMESPACE, '--timeout', '3', 'drive',
+                              'ball_0', '1', '0', '-w', '3')
+    assert (code, out) == (1, '') and err == (
+        f'ball_world_cli: {NAMESPACE}/ball_0/cmd_vel: fewer than the 3 subscriptions asked '
+        'for (-w) matched within 3 s\n'), err
+    assert heard == []
 
 
 def test_drive_ended_by_ctrl_c_still_sends_the_zero_command(world, probe):

@@ -32,7 +32,7 @@ import sys
 import time
 
 from ball_world.tools import print_report, usage_exit
-from ball_world.tools.cli_client import (Client, DEFAULT_TIMEOUT, duration, Failure, finite,
+from ball_world.tools.cli_client import (Client, count, DEFAULT_TIMEOUT, duration, Failure, finite,
                                          fits, integer, interrupt_on_signals, MAX_TIMEOUT,
                                          name, one_line, PROG, rate, shown, timeout, topic,
                                          UsageError, WORLD_NODE)
@@ -154,6 +154,10 @@ def _parser():
     drive.add_argument('--rate', type=rate, default=10.0, help='commands per second (10)')
     drive.add_argument('--for', dest='seconds', type=duration, metavar='S',
                        help='stop after S seconds (default: at Ctrl-C)')
+    drive.add_argument('-w', '--wait-matching-subscriptions', dest='matching', type=count,
+                       metavar='N', help='send the first command only once N subscriptions '
+                       'match, within --timeout (ros2 topic pub -w; default: the agent, then '
+                       'up to 2 s for the others on the graph)')
 
     echo = command('echo', help='print the messages of a topic (ros2 topic echo)')
     echo.add_argument('topic', type=topic)

@@ -35,6 +35,8 @@ MAX_TIMEOUT = 3600.0
 MAX_DURATION = 1e6
 #: Highest --rate, Hz: faster than any controller sends cmd_vel; more only floods the world.
 MAX_RATE = 1000.0
+#: Most subscriptions `drive -w` waits for: more than any graph of one agent has.
+MAX_MATCHING = 1000
 #: Longest name (ball, agent, parameter) taken: the world's own limit (core.limits).
 MAX_NAME = 256
 #: Longest topic name taken (rcl's own limit is about 255 characters per name token).
@@ -105,6 +107,14 @@ def integer(text):
         return int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f'not an integer: {shown(text)}') from None
+
+
+def count(text):
+    """A count of subscriptions to wait for: 1 to MAX_MATCHING."""
+    value = integer(text)
+    if not 1 <= value <= MAX_MATCHING:
+        raise argparse.ArgumentTypeError(f'{value} is not a count from 1 to {MAX_MATCHING}')
+    return value
 
 
 def name(text):

@@ -174,6 +174,23 @@ def _command(cls, node, args, zero=False):
     return message
 
 
+def _match_the_others(client, publisher, resolved):
+    """Wait for the agent, then up to MATCH_OTHERS_SECONDS for the rest of the graph.
+
+    The others (a recorder, a plot, RViz) match within moments, so they hear the first command
+    as the agent does; the graph is read again meanwhile, as discovery may show more of them
+    late. One of incompatible QoS never matches: it is not waited for longer.
+    """
+    client.wait(lambda: publisher.get_subscription_count() > 0,
+                f'{resolved}: the agent did not match this publisher within '
+                f'{client.timeout:g} s')
+    node = client.node
+    deadline = time.monotonic() + min(MATCH_OTHERS_SECONDS, client.timeout)
+    while (publisher.get_subscription_count() < node.count_subscribers(resolved)
+           and time.monotonic() < deadline):
+        client.spin(0.05)
+
+
 def drive(client, args):
     """cmd_vel to an agent at --rate until --for or Ctrl-C, then one zero command.
 
@@ -203,15 +220,12 @@ def drive(client, args):
     cls = message_class(types[0])
     publisher = node.create_publisher(
         cls, resolved, QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
-    client.wait(lambda: publisher.get_subscription_count() > 0,
-                f'{resolved}: the agent did not match this publisher within '
-                f'{client.timeout:g} s')
-    # The others the graph showed (a recorder, a plot, RViz) match within moments: give them
-    # up to MATCH_OTHERS_SECONDS, so they hear the first command as the agent does (one of
-    # incompatible QoS never matches: it is not waited for longer).
-    deadline = time.monotonic() + min(MATCH_OTHERS_SECONDS, client.timeout)
-    while publisher.get_subscription_count() < len(found) and time.monotonic() < deadline:
-        client.spin(0.05)
+    if args.matching is not None:
+        client.wait(lambda: publisher.get_subscription_count() >= args.matching,
+                    f'{resolved}: fewer than the {args.matching} subscriptions asked for '
+                    f'(-w) matched within {client.timeout:g} s')
+    else:
+        _match_the_others(client, publisher, resolved)
     period = 1.0 / args.rate
     started = time.monotonic()
     end = None if args.seconds is None else started + args.seconds
