@@ -167,6 +167,7 @@ def recorded(tmp_path_factory):
     arguments = [part for name, value in values.items() for part in ('-p', f'{name}:={value}')]
     code, _, err = run_tool('ball_world', '--ros-args', *arguments)
     assert code == 0, err
+    (folder / 'stderr.txt').write_text(err)  # what a test failing on the files shows
     shutil.move(maps, folder / 'moved_away')
     return folder
 
@@ -219,7 +220,8 @@ def test_rerun_draws_the_map_where_it_is(recorded):
     # record.rerun splits with the MCAP (run_<i>.rrd): each part opens on its own, the map
     # in it
     parts = sorted(recorded.glob('run_*.rrd'))
-    assert [part.name for part in parts] == ['run_0.rrd', 'run_1.rrd', 'run_2.rrd']
+    assert [part.name for part in parts] == ['run_0.rrd', 'run_1.rrd', 'run_2.rrd'], \
+        (recorded / 'stderr.txt').read_text()
     for part in parts:
         map_in_rrd(part)
 
