@@ -299,6 +299,39 @@ def _settle(t, c, far, step, origin, resolution, p, inverse):
 
 
 @_compile
+def _plane(ix, iy, planes):
+    """Where the plane of free_squares a beam reads starts, from the inverses of its
+    direction's components (0 along an axis): quadrant 2 (y grows) + 1 (x grows); a beam
+    along an axis uses the quadrant of x (or y) growing, whose square holds its column or
+    row all the same."""
+    return (2 * np.int64(iy > 0.0) + np.int64(ix >= 0.0)) * planes
+
+
+@_compile
+def _rare(flags, t, c, r, side, i, j, ix, iy, flat, plane, tiles, px, py, origin_x, origin_y,
+          resolution, reached):
+    """walk_beams' rare cases for a beam that left the square of `side` at cell (c, r) at
+    t into cell (i, j), whose value was `reached`: a guess the comparisons rejected (flag 4)
+    settled line by line, and a step through a vertex (flag 2), which stops at the two
+    cells beside it too. Returns (the value of the cell entered, 0 for a stop; the cell)."""
+    sx = np.int64(ix > 0.0) - np.int64(ix < 0.0)
+    sy = np.int64(iy > 0.0) - np.int64(iy < 0.0)
+    if flags & 4:
+        i, next_x = _settle(t, c, c + sx * (side - 1), sx, origin_x, resolution, px, ix)
+        j, next_y = _settle(t, r, r + sy * (side - 1), sy, origin_y, resolution, py, iy)
+        step_x = sx != 0 and next_x == t
+        step_y = sy != 0 and next_y == t
+        flags = 2 if step_x and step_y else 0
+        i += sx if step_x else 0
+        j += sy if step_y else 0
+        reached = flat[_address(plane, tiles, i, j)]
+    if flags & 2 and (flat[_address(plane, tiles, i - sx, j)] == 0
+                      or flat[_address(plane, tiles, i, j - sy)] == 0):
+        reached = 0
+    return reached, i, j
+
+
+@_compile
 def walk_beams(px, py, ux, uy, reach, out, skips, rows, columns, frame):
     """out[k] = the smaller of out[k] and the distance along beam k (from p along the unit
     vector (ux[k], uy[k])) to where it first enters a solid cell of the map (or leaves the
@@ -341,18 +374,17 @@ def walk_beams(px, py, ux, uy, reach, out, skips, rows, columns, frame):
     start_x = (px - origin_x) * per_cell
     start_y = (py - origin_y) * per_cell
     # The live beams' state, packed at the front (slot a holds beam `beam[a]`).
-    ints = np.empty((8, samples), dtype=np.int64)
+    ints = np.empty((7, samples), dtype=np.int64)
     floats = np.empty((6, samples))
     beam = ints[0]
     ci = ints[1]
     cj = ints[2]
     side = ints[3]
-    plane = ints[4]
-    ni = ints[5]
-    nj = ints[6]
-    at = ints[7]
-    dxs = floats[0]
-    dys = floats[1]
+    ni = ints[4]
+    nj = ints[5]
+    at = ints[6]
+    rate_x = floats[0]  # cells per metre along the beam
+    rate_y = floats[1]
     ixs = floats[2]
     iys = floats[3]
     bound = floats[4]
@@ -362,17 +394,15 @@ def walk_beams(px, py, ux, uy, reach, out, skips, rows, columns, frame):
         dy = uy[k]
         # A beam along an axis uses the quadrant of x (or y) growing: the square holds its
         # column or row all the same.
-        quadrant = (2 if dy > 0.0 else 0) + (0 if dx < 0.0 else 1)
         beam[k] = k
-        plane[k] = quadrant * planes
-        dxs[k] = dx
-        dys[k] = dy
+        rate_x[k] = dx * per_cell
+        rate_y[k] = dy * per_cell
         ixs[k] = 1.0 / dx if dx != 0.0 else 0.0
         iys[k] = 1.0 / dy if dy != 0.0 else 0.0
         bound[k] = min(out[k], reach)
         ci[k] = ci0
         cj[k] = cj0
-        side[k] = flat[_address(plane[k], tiles, ci0, cj0)]
+        side[k] = flat[_address(_plane(ixs[k], iys[k], planes), tiles, ci0, cj0)]
     live = samples
     while live > 0:
         # Every live beam across its square and one cell on: the cell it enters (ni, nj)
@@ -387,16 +417,19 @@ def walk_beams(px, py, ux, uy, reach, out, skips, rows, columns, frame):
             ahead_y = np.int64(iy > 0.0)
             c = ci[a]
             r = cj[a]
-            far_x = c + sx * (side[a] - 1)
-            far_y = r + sy * (side[a] - 1)
+            # (selects, not products with sx and sy: a vector multiply of 64-bit integers
+            # is slow)
+            span = side[a] - 1
+            far_x = c + span if ix > 0.0 else (c - span if ix < 0.0 else c)
+            far_y = r + span if iy > 0.0 else (r - span if iy < 0.0 else r)
             # Where the beam leaves the square: the first of its far lines it crosses.
             t_x = crossing(origin_x, far_x + ahead_x, resolution, px, ix) if sx != 0 else np.inf
             t_y = crossing(origin_y, far_y + ahead_y, resolution, py, iy) if sy != 0 else np.inf
             t = min(t_x, t_y)
             # The cell it is in just before t along each axis: the far one along the axis
             # it leaves by, else a guess from its position, kept in the square.
-            gx = np.int64(math.floor(start_x + t * (dxs[a] * per_cell)))
-            gy = np.int64(math.floor(start_y + t * (dys[a] * per_cell)))
+            gx = np.int64(math.floor(start_x + t * rate_x[a]))
+            gy = np.int64(math.floor(start_y + t * rate_y[a]))
             gx = far_x if t_x <= t_y else min(max(gx, min(c, far_x)), max(c, far_x))
             gy = far_y if t_y <= t_x else min(max(gy, min(r, far_y)), max(r, far_y))
             # Right when its next line is crossed at t or later and the line into it (if
@@ -416,7 +449,7 @@ def walk_beams(px, py, ux, uy, reach, out, skips, rows, columns, frame):
             ts[a] = t
             flags = (np.int64(not t <= bound[a]) | (np.int64(step_x & step_y) << 1)
                      | (np.int64(wrong) << 2))
-            at[a] = (_address(plane[a], tiles, i, j) << 3) | flags
+            at[a] = (_address(_plane(ix, iy, planes), tiles, i, j) << 3) | flags
         # The cells reached: a beam stops in a solid one (or one beyond its bound).
         kept = 0
         for a in range(live):
@@ -426,26 +459,14 @@ def walk_beams(px, py, ux, uy, reach, out, skips, rows, columns, frame):
             t = ts[a]
             ix = ixs[a]
             iy = iys[a]
-            sx = np.int64(ix > 0.0) - np.int64(ix < 0.0)
-            sy = np.int64(iy > 0.0) - np.int64(iy < 0.0)
             i = ni[a]
             j = nj[a]
-            address = at[a] >> 3
-            if flags & 4:
-                i, next_x = _settle(t, ci[a], ci[a] + sx * (side[a] - 1), sx, origin_x,
-                                    resolution, px, ix)
-                j, next_y = _settle(t, cj[a], cj[a] + sy * (side[a] - 1), sy, origin_y,
-                                    resolution, py, iy)
-                step_x = sx != 0 and next_x == t
-                step_y = sy != 0 and next_y == t
-                flags = 2 if step_x and step_y else 0
-                i += sx if step_x else 0
-                j += sy if step_y else 0
-                address = _address(plane[a], tiles, i, j)
-            reached = flat[address]
-            if flags & 2 and (flat[_address(plane[a], tiles, i - sx, j)] == 0
-                              or flat[_address(plane[a], tiles, i, j - sy)] == 0):
-                reached = 0
+            reached = flat[at[a] >> 3]
+            if flags & 6:
+                # Rare: through a vertex, or a guess to settle.
+                reached, i, j = _rare(flags, t, ci[a], cj[a], side[a], i, j, ix, iy, flat,
+                                      _plane(ix, iy, planes), tiles, px, py, origin_x,
+                                      origin_y, resolution, reached)
             if reached == 0:
                 k = beam[a]
                 out[k] = min(out[k], t)
@@ -454,9 +475,8 @@ def walk_beams(px, py, ux, uy, reach, out, skips, rows, columns, frame):
             ci[kept] = i
             cj[kept] = j
             side[kept] = reached
-            plane[kept] = plane[a]
-            dxs[kept] = dxs[a]
-            dys[kept] = dys[a]
+            rate_x[kept] = rate_x[a]
+            rate_y[kept] = rate_y[a]
             ixs[kept] = ix
             iys[kept] = iy
             bound[kept] = bound[a]
