@@ -207,8 +207,9 @@ def test_a_scan_without_a_map_is_unchanged_by_the_empty_grid():
 def lattice_beams(rng, count):
     """Unit directions that make the walk's rare cases common: along the axes (a component
     exactly 0), equal components (every step through a vertex), rational slopes (vertices
-    now and then) in every quadrant, and random ones."""
-    directions = [(1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)]
+    now and then) in every quadrant, and random ones; and no direction at all (meets
+    nothing)."""
+    directions = [(1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0), (0.0, 0.0)]
     half = math.sqrt(0.5)
     directions += [(sx * half, sy * half) for sx in (1, -1) for sy in (1, -1)]
     for a, b in ((1, 2), (2, 1), (1, 3), (3, 1), (2, 3), (3, 2), (1, 5), (4, 1)):

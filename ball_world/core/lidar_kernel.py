@@ -389,21 +389,22 @@ def walk_beams(px, py, ux, uy, reach, out, skips, rows, columns, frame):
     iys = floats[3]
     bound = floats[4]
     ts = floats[5]
+    live = 0
     for k in range(samples):
         dx = ux[k]
         dy = uy[k]
-        # A beam along an axis uses the quadrant of x (or y) growing: the square holds its
-        # column or row all the same.
-        beam[k] = k
-        rate_x[k] = dx * per_cell
-        rate_y[k] = dy * per_cell
-        ixs[k] = 1.0 / dx if dx != 0.0 else 0.0
-        iys[k] = 1.0 / dy if dy != 0.0 else 0.0
-        bound[k] = min(out[k], reach)
-        ci[k] = ci0
-        cj[k] = cj0
-        side[k] = flat[_address(_plane(ixs[k], iys[k], planes), tiles, ci0, cj0)]
-    live = samples
+        if dx == 0.0 and dy == 0.0:
+            continue  # no direction: crosses no line, meets no cell (as the reference)
+        beam[live] = k
+        rate_x[live] = dx * per_cell
+        rate_y[live] = dy * per_cell
+        ixs[live] = 1.0 / dx if dx != 0.0 else 0.0
+        iys[live] = 1.0 / dy if dy != 0.0 else 0.0
+        bound[live] = min(out[k], reach)
+        ci[live] = ci0
+        cj[live] = cj0
+        side[live] = flat[_address(_plane(ixs[live], iys[live], planes), tiles, ci0, cj0)]
+        live += 1
     while live > 0:
         # Every live beam across its square and one cell on: the cell it enters (ni, nj)
         # at ts, and in `at` its address, with flags (1: beyond the bound, 2: through a
