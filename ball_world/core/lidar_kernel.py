@@ -350,7 +350,7 @@ def walk_beams(px, py, ux, uy, reach, out, skips, rows, columns, frame):
     branches unpredictably (which side it leaves a square by, when it stops). Here each
     round takes every live beam one square on in a loop without branches that the compiler
     vectorises (the beams are independent), then reads the cells they reach in another and
-    drops the beams that stopped: a scan of the 1.8 M-cell warehouse costs less than half
+    drops the beams that stopped: on the 1.8 M-cell warehouse a scan's walk costs a third
     of the walk one beam at a time (docs/performance.md). Where a beam leaves a square, the
     cell it reached along the other axis is guessed from its position and confirmed by the
     very comparisons of crossings the cell by cell walk makes; the rare guess they reject
@@ -433,8 +433,9 @@ def walk_beams(px, py, ux, uy, reach, out, skips, rows, columns, frame):
             gy = np.int64(math.floor(start_y + t * rate_y[a]))
             gx = far_x if t_x <= t_y else min(max(gx, min(c, far_x)), max(c, far_x))
             gy = far_y if t_y <= t_x else min(max(gy, min(r, far_y)), max(r, far_y))
-            # Right when its next line is crossed at t or later and the line into it (if
-            # it is not where the beam was) before t: the walk's own comparisons.
+            # A cell is the right one when its next line is crossed at t or later and the
+            # line into it (unless it is where the beam was) before t: the walk's own
+            # comparisons.
             next_x = crossing(origin_x, gx + ahead_x, resolution, px, ix) if sx != 0 else np.inf
             next_y = crossing(origin_y, gy + ahead_y, resolution, py, iy) if sy != 0 else np.inf
             into_x = crossing(origin_x, gx + ahead_x - sx, resolution, px, ix)
