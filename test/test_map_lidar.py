@@ -202,3 +202,66 @@ def test_a_scan_without_a_map_is_unchanged_by_the_empty_grid():
         gridded = lidar.distances(positions, radii, walls, positions[0], 0.4, fan, 0, backend,
                                   world.static.scan_grid)
         np.testing.assert_array_equal(plain, gridded)
+
+
+def lattice_beams(rng, count):
+    """Unit directions that make the walk's rare cases common: along the axes (a component
+    exactly 0), equal components (every step through a vertex), rational slopes (vertices
+    now and then) in every quadrant, and random ones; and no direction at all (meets
+    nothing)."""
+    directions = [(1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0), (0.0, 0.0)]
+    half = math.sqrt(0.5)
+    directions += [(sx * half, sy * half) for sx in (1, -1) for sy in (1, -1)]
+    for a, b in ((1, 2), (2, 1), (1, 3), (3, 1), (2, 3), (3, 2), (1, 5), (4, 1)):
+        norm = math.hypot(a, b)
+        directions += [(sx * a / norm, sy * b / norm) for sx in (1, -1) for sy in (1, -1)]
+    angles = rng.uniform(-math.pi, math.pi, count - len(directions))
+    directions += list(zip(np.cos(angles), np.sin(angles)))
+    return np.array(directions)
+
+
+@pytest.mark.parametrize('seed', range(8))
+def test_the_compiled_walk_equals_the_cell_by_cell_walk_to_the_bit(seed):
+    """lidar_kernel.walk_beams (rounds of beams, a free square crossed at once, the cell
+    reached along the other axis guessed, then confirmed or walked line by line) against
+    core.lidar.first_solid, the numpy walk of one cell a round: random grids, scanners on
+    cell corners, on cell edges, inside cells, in solid cells and outside the grid, beams
+    through vertices and along the axes, random bounds (the nearer hit a beam already has)
+    and reach."""
+    if not lidar.lidar_kernel.available():
+        pytest.skip('numba is not installed')
+    rng = np.random.default_rng(seed)
+    rows, columns = rng.integers(3, 70, 2)
+    mask = rng.random((rows, columns)) < rng.uniform(0.0, 0.25)
+    # Rectangles of free cells (large squares to cross) with solid rims, as in a building.
+    for _ in range(3):
+        r0, c0 = rng.integers(0, rows), rng.integers(0, columns)
+        mask[r0:r0 + rng.integers(2, 30), c0:c0 + rng.integers(2, 30)] = False
+    resolution = float(rng.choice([0.03, 0.05, 0.1, 0.25, 1.0]))
+    cells = SolidCells(float(rng.uniform(-3, 3)), float(rng.uniform(-3, 3)), resolution,
+                       mask).checked()
+    grid = ScanGrid(cells)
+    skips = lidar.lidar_kernel.free_squares(grid.solid)
+    directions = lattice_beams(rng, 120)
+    starts = 0
+    for _ in range(30):
+        # On a cell corner (through vertices on the diagonals), an edge, or anywhere; now
+        # and then outside the grid.
+        column = rng.integers(-2, columns + 2)
+        row = rng.integers(-2, rows + 2)
+        fx, fy = rng.choice([0.0, 0.5, rng.uniform()], 2)
+        px = cells.origin_x + (column + fx) * resolution
+        py = cells.origin_y + (row + fy) * resolution
+        reach = float(rng.choice([rng.uniform(0, 1.5), 1.5]) * max(rows, columns) * resolution)
+        nearer = np.where(rng.random(len(directions)) < 0.3,
+                          rng.uniform(0, reach, len(directions)), np.inf)
+        dx = np.ascontiguousarray(directions[:, 0])
+        dy = np.ascontiguousarray(directions[:, 1])
+        out = nearer.copy()
+        lidar.lidar_kernel.walk_beams(px, py, dx, dy, reach, out, skips, rows, columns,
+                                      grid.frame)
+        walked = lidar.first_solid(px, py, dx, dy, np.minimum(nearer, reach), grid)
+        expected = np.minimum(nearer, walked)
+        np.testing.assert_array_equal(out, expected, err_msg=f'scanner at {px}, {py}')
+        starts += np.isfinite(walked).sum() > 0
+    assert starts > 0

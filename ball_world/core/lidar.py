@@ -142,8 +142,8 @@ def first_solid(px, py, dx, dy, bound, grid):
     Amanatides and Woo's walk, every beam one cell per round, vectorised over the beams:
     each crossing is the closed form of its grid line (`lidar_kernel.crossing`), and a
     beam through a vertex (crossings of both axes equal) is stopped if any of the three
-    cells it touches there is solid. `lidar_kernel.first_solid` computes the same distances,
-    skipping empty squares.
+    cells it touches there is solid. `lidar_kernel.walk_beams` computes the same distances,
+    crossing free squares at once.
     """
     solid = grid.solid
     origin_x, origin_y, resolution = (float(value) for value in grid.frame)

@@ -57,10 +57,10 @@ WALL_DEGENERATE = 1e-6
 MIN_INCREMENT = 1e-12
 #: A ball or wall further than range_max times (1 + this) cannot be hit within range_max.
 REACH_SLACK = 1e-6
-#: Largest square (cells a side) free_squares keeps: a beam crosses at most 255 cells in one
-#: step (7.6 m at 3 cm).
 #: Side (cells) of free_squares' tiles: 8 x 8 bytes, one cache line.
 TILE = 8
+#: Largest square (cells a side) free_squares keeps: a beam crosses at most 255 cells in one
+#: step (7.6 m at 3 cm).
 SKIP_CAP = 255
 
 
@@ -237,21 +237,22 @@ def free_squares(solid):
 
     A beam in cell (i, j) going into quadrant q stays inside that square until it crosses
     its far side along x or y (it only moves away from the cell's other two sides), so it
-    crosses the square in one step (first_solid). The largest-square recurrence, run from
+    crosses the square in one step (walk_beams). The largest-square recurrence, run from
     the quadrant's far corner: side = 1 + min(of the three neighbours ahead), outside = 0.
 
     Laid out for the walk's memory reads: one plane per quadrant (a beam reads only its
-    own), each in tiles of TILE x TILE cells (out[q, j // TILE, i // TILE, j % TILE,
-    i % TILE]), so the beams of a scan, a few cells apart where they pass, share cache
-    lines; cells of the last tiles beyond the grid are 0 (outside is solid). Row-major and
-    interleaved layouts made a scan of a large map about twice as slow (a beam's jumps
-    land far apart: the reads are cache misses; measured).
+    own), each in tiles of TILE x TILE cells, so the beams of a scan, a few cells apart
+    where they pass, share cache lines (row-major and interleaved layouts made a scan of a
+    large map about twice as slow, measured). Cell (i, j) is stored at (i + 1, j + 1)
+    (`_address`) behind a border of solid cells, one wide: a walk never goes more than one
+    cell outside the grid (it stops at the first solid cell), so it reads without bounds
+    tests; cells of the last tiles beyond the grid are 0 too (outside is solid).
     """
     rows = solid.shape[0]
     columns = solid.shape[1]
     sides = np.zeros((rows, columns), dtype=np.uint8)
-    out = np.zeros((4, (rows + TILE - 1) // TILE, (columns + TILE - 1) // TILE, TILE, TILE),
-                   dtype=np.uint8)
+    out = np.zeros((4, (rows + 2 + TILE - 1) // TILE, (columns + 2 + TILE - 1) // TILE, TILE,
+                    TILE), dtype=np.uint8)
     for q in range(4):
         sx = 1 if q & 1 else -1
         sy = 1 if q & 2 else -1
@@ -268,143 +269,221 @@ def free_squares(solid):
                 sides[j, i] = min(side + 1, SKIP_CAP)
         for j in range(rows):
             for i in range(columns):
-                out[q, j // TILE, i // TILE, j % TILE, i % TILE] = sides[j, i]
+                out[q, (j + 1) // TILE, (i + 1) // TILE, (j + 1) % TILE, (i + 1) % TILE] = (
+                    sides[j, i])
     return out
 
 
 @_compile
-def _square(skips, quadrant, i, j):
-    """free_squares' side at cell (column i, row j) for the quadrant; 0 outside the grid."""
-    if i < 0 or j < 0 or j >= skips.shape[1] * TILE or i >= skips.shape[2] * TILE:
-        return 0
-    return np.int64(skips[quadrant, j // TILE, i // TILE, j % TILE, i % TILE])
+def _address(plane, tiles, i, j):
+    """Where free_squares' side at cell (column i, row j >= -1) lies in its flat array: the
+    quadrant's plane starts at `plane`; `tiles` tiles a row of tiles."""
+    column = i + 1
+    row = j + 1
+    return plane + ((((row // TILE) * tiles + column // TILE) * TILE + row % TILE) * TILE
+                    + column % TILE)
 
 
 @_compile
-def _blocked(skips, quadrant, i, j):
-    """Whether cell (column i, row j) is solid (free_squares: no square at it, in any
-    quadrant's plane); everything outside the grid is."""
-    return _square(skips, quadrant, i, j) == 0
+def _settle(t, c, far, step, origin, resolution, p, inverse):
+    """Along one axis, the beam's cell just before t, between cell c and cell `far` (every
+    line crossed before t taken, one by one, as the cell by cell walk takes them), and the
+    crossing of its next line: walk_beams' rare exact path."""
+    ahead = 1 if step > 0 else 0
+    cell = c
+    t_next = crossing(origin, cell + ahead, resolution, p, inverse)
+    while t_next < t and cell != far:
+        cell += step
+        t_next = crossing(origin, cell + ahead, resolution, p, inverse)
+    return cell, t_next
 
 
 @_compile
-def _catch_up(t_end, c, line, t_line, step, reach, origin, resolution, per_cell, p, d,
-              inverse):
-    """Along one axis, the beam's cell just before t_end, from cell c whose next line `line`
-    it crosses at t_line: every line crossed before t_end (at most `reach`) taken, as the
-    cell by cell walk takes them (`per_cell`: 1 / resolution, for the guess only). Returns
-    (cell, next line, its crossing)."""
-    if step == 0 or not t_line < t_end:
-        return c, line, t_line
-    start = c
-    # A guess from the position at t_end, kept within the reach, then mended with the very
-    # crossings the cell by cell walk compares.
-    guess = np.int64(math.floor((p + t_end * d - origin) * per_cell))
-    if step > 0:
-        guess = min(max(guess, start + 1), start + reach)
-    else:
-        guess = max(min(guess, start - 1), start - reach)
-    c = guess
-    line = c + 1 if step > 0 else c
-    t_line = crossing(origin, line, resolution, p, inverse)
-    while t_line < t_end:
-        c += step
-        line += step
-        t_line = crossing(origin, line, resolution, p, inverse)
-    while c != start and not crossing(origin, line - step, resolution, p, inverse) < t_end:
-        c -= step
-        line -= step
-        t_line = crossing(origin, line, resolution, p, inverse)
-    return c, line, t_line
+def _plane(ix, iy, planes):
+    """Where the plane of free_squares a beam reads starts, from the inverses of its
+    direction's components (0 along an axis): quadrant 2 (y grows) + 1 (x grows); a beam
+    along an axis uses the quadrant of x (or y) growing, whose square holds its column or
+    row all the same."""
+    return (2 * np.int64(iy > 0.0) + np.int64(ix >= 0.0)) * planes
 
 
 @_compile
-def first_solid(px, py, dx, dy, bound, skips, origin_x, origin_y, resolution):
-    """Distance along the beam from p along the unit vector d to where it first enters a
-    solid cell of the map (or leaves the grid: outside is solid), if that is at most
-    `bound`; +inf otherwise. 0 when p itself is in a solid cell.
+def _rare(flags, t, c, r, side, i, j, ix, iy, flat, plane, tiles, px, py, origin_x, origin_y,
+          resolution, reached):
+    """walk_beams' rare cases for a beam that left the square of `side` at cell (c, r) at
+    t into cell (i, j), whose value was `reached`: a guess the comparisons rejected (flag 4)
+    settled line by line, and a step through a vertex (flag 2), which stops at the two
+    cells beside it too. Returns (the value of the cell entered, 0 for a stop; the cell)."""
+    sx = np.int64(ix > 0.0) - np.int64(ix < 0.0)
+    sy = np.int64(iy > 0.0) - np.int64(iy < 0.0)
+    if flags & 4:
+        i, next_x = _settle(t, c, c + sx * (side - 1), sx, origin_x, resolution, px, ix)
+        j, next_y = _settle(t, r, r + sy * (side - 1), sy, origin_y, resolution, py, iy)
+        step_x = sx != 0 and next_x == t
+        step_y = sy != 0 and next_y == t
+        flags = 2 if step_x and step_y else 0
+        i += sx if step_x else 0
+        j += sy if step_y else 0
+        reached = flat[_address(plane, tiles, i, j)]
+    if flags & 2 and (flat[_address(plane, tiles, i - sx, j)] == 0
+                      or flat[_address(plane, tiles, i, j - sy)] == 0):
+        reached = 0
+    return reached, i, j
 
-    The cell by cell walk (Amanatides and Woo) with each crossing computed afresh from its
-    line (`crossing`), never accumulated, so the distance returned is the closed form of the
-    entered cell's edge, the same bits as the numpy reference's walk (core.lidar). Where
-    the beam crosses a line of each axis at the same parameter it passes through a vertex,
-    touching three cells there: it is stopped if any of them is solid. `skips`
-    (free_squares) lets it cross a square of free cells ahead in one step: the cell and
-    next lines it reaches are those the cell by cell walk would (_catch_up), so the result
-    is the same. (A beam along an axis uses the quadrant of x growing: the square holds its
-    column or row all the same.) Whether a cell is solid is read from `skips` too (0 on
-    solid cells), in the bytes the next step reads anyway.
+
+@_compile
+def walk_beams(px, py, ux, uy, reach, out, skips, rows, columns, frame):
+    """out[k] = the smaller of out[k] and the distance along beam k (from p along the unit
+    vector (ux[k], uy[k])) to where it first enters a solid cell of the map (or leaves the
+    grid: outside is solid), if that is at most min(out[k], reach); 0 for every beam when p
+    itself is in a solid cell.
+
+    The result is the cell by cell walk's (Amanatides and Woo, core.lidar.first_solid):
+    each crossing computed afresh from its line (`crossing`), never accumulated, so a
+    distance is the closed form of the entered cell's edge; where a beam crosses a line of
+    each axis at the same parameter it passes through a vertex, touching three cells, and
+    is stopped if any of them is solid. `skips` (free_squares) lets a beam cross the square
+    of free cells ahead of its cell in one round, then step one cell on.
+
+    Why rounds over all the beams, not one beam at a time: a beam's steps form a chain, each
+    waiting for the last (its memory read, then its crossings), and a beam walked alone
+    branches unpredictably (which side it leaves a square by, when it stops). Here each
+    round takes every live beam one square on in a loop without branches that the compiler
+    vectorises (the beams are independent), then reads the cells they reach in another and
+    drops the beams that stopped: on the 1.8 M-cell warehouse a scan's walk costs a third
+    of the walk one beam at a time (docs/performance.md). Where a beam leaves a square, the
+    cell it reached along the other axis is guessed from its position and confirmed by the
+    very comparisons of crossings the cell by cell walk makes; the rare guess they reject
+    is settled line by line (_settle), so every result is the walk's, bit for bit.
     """
-    sx = 1 if dx > 0.0 else (-1 if dx < 0.0 else 0)
-    sy = 1 if dy > 0.0 else (-1 if dy < 0.0 else 0)
-    quadrant = (2 if sy > 0 else 0) + (1 if sx >= 0 else 0)
-    ci = np.int64(start_cell(px, origin_x, resolution))
-    cj = np.int64(start_cell(py, origin_y, resolution))
-    if _blocked(skips, quadrant, ci, cj):
-        return 0.0
-    ix = 1.0 / dx if sx != 0 else 0.0
-    iy = 1.0 / dy if sy != 0 else 0.0
+    samples = ux.shape[0]
+    origin_x = frame[0]
+    origin_y = frame[1]
+    resolution = frame[2]
+    ci0 = np.int64(start_cell(px, origin_x, resolution))
+    cj0 = np.int64(start_cell(py, origin_y, resolution))
+    flat = skips.reshape(-1)
+    tiles = np.int64(skips.shape[2])
+    planes = np.int64(skips.shape[1]) * tiles * TILE * TILE
+    if (ci0 < 0 or cj0 < 0 or ci0 >= columns or cj0 >= rows
+            or flat[_address(0, tiles, ci0, cj0)] == 0):
+        for k in range(samples):
+            out[k] = min(out[k], 0.0)
+        return
     per_cell = 1.0 / resolution
-    nx = ci + 1 if sx > 0 else ci
-    ny = cj + 1 if sy > 0 else cj
-    tx = crossing(origin_x, nx, resolution, px, ix) if sx != 0 else np.inf
-    ty = crossing(origin_y, ny, resolution, py, iy) if sy != 0 else np.inf
-    while True:
-        reach = _square(skips, quadrant, ci, cj) - 1
-        if reach > 0:
-            # The square of free cells ahead of (ci, cj), `reach` more along each axis:
-            # where the beam leaves it.
-            ex = ci + reach + 1 if sx > 0 else ci - reach
-            ey = cj + reach + 1 if sy > 0 else cj - reach
-            tex = crossing(origin_x, ex, resolution, px, ix) if sx != 0 else np.inf
-            tey = crossing(origin_y, ey, resolution, py, iy) if sy != 0 else np.inf
-            leave = min(tex, tey)
-            if not leave <= bound:
-                return np.inf
-            if tex <= tey:
-                ci = ex - 1 if sx > 0 else ex
-                nx = ex
-                tx = tex
-            if tey <= tex:
-                cj = ey - 1 if sy > 0 else ey
-                ny = ey
-                ty = tey
-            if tex < tey:
-                cj, ny, ty = _catch_up(tex, cj, ny, ty, sy, reach, origin_y, resolution,
-                                       per_cell, py, dy, iy)
-            elif tey < tex:
-                ci, nx, tx = _catch_up(tey, ci, nx, tx, sx, reach, origin_x, resolution,
-                                       per_cell, px, dx, ix)
-        # One cell on.
-        if tx < ty:
-            if not tx <= bound:
-                return np.inf
-            ci += sx
-            nx += sx
-            if _blocked(skips, quadrant, ci, cj):
-                return tx
-            tx = crossing(origin_x, nx, resolution, px, ix)
-        elif ty < tx:
-            if not ty <= bound:
-                return np.inf
-            cj += sy
-            ny += sy
-            if _blocked(skips, quadrant, ci, cj):
-                return ty
-            ty = crossing(origin_y, ny, resolution, py, iy)
-        else:
-            if not tx <= bound:
-                return np.inf
-            if (_blocked(skips, quadrant, ci + sx, cj)
-                    or _blocked(skips, quadrant, ci, cj + sy)
-                    or _blocked(skips, quadrant, ci + sx, cj + sy)):
-                return tx
-            ci += sx
-            nx += sx
-            cj += sy
-            ny += sy
-            tx = crossing(origin_x, nx, resolution, px, ix)
-            ty = crossing(origin_y, ny, resolution, py, iy)
+    start_x = (px - origin_x) * per_cell
+    start_y = (py - origin_y) * per_cell
+    # The live beams' state, packed at the front (slot a holds beam `beam[a]`).
+    ints = np.empty((7, samples), dtype=np.int64)
+    floats = np.empty((6, samples))
+    beam = ints[0]
+    ci = ints[1]
+    cj = ints[2]
+    side = ints[3]
+    ni = ints[4]
+    nj = ints[5]
+    at = ints[6]
+    rate_x = floats[0]  # cells per metre along the beam
+    rate_y = floats[1]
+    ixs = floats[2]
+    iys = floats[3]
+    bound = floats[4]
+    ts = floats[5]
+    live = 0
+    for k in range(samples):
+        dx = ux[k]
+        dy = uy[k]
+        if dx == 0.0 and dy == 0.0:
+            continue  # no direction: crosses no line, meets no cell (as the reference)
+        beam[live] = k
+        rate_x[live] = dx * per_cell
+        rate_y[live] = dy * per_cell
+        ixs[live] = 1.0 / dx if dx != 0.0 else 0.0
+        iys[live] = 1.0 / dy if dy != 0.0 else 0.0
+        bound[live] = min(out[k], reach)
+        ci[live] = ci0
+        cj[live] = cj0
+        side[live] = flat[_address(_plane(ixs[live], iys[live], planes), tiles, ci0, cj0)]
+        live += 1
+    while live > 0:
+        # Every live beam across its square and one cell on: the cell it enters (ni, nj)
+        # at ts, and in `at` its address, with flags (1: beyond the bound, 2: through a
+        # vertex, 4: the guess rejected) in the bits above.
+        for a in range(live):
+            ix = ixs[a]
+            iy = iys[a]
+            sx = np.int64(ix > 0.0) - np.int64(ix < 0.0)
+            sy = np.int64(iy > 0.0) - np.int64(iy < 0.0)
+            ahead_x = np.int64(ix > 0.0)
+            ahead_y = np.int64(iy > 0.0)
+            c = ci[a]
+            r = cj[a]
+            # (selects, not products with sx and sy: a vector multiply of 64-bit integers
+            # is slow)
+            span = side[a] - 1
+            far_x = c + span if ix > 0.0 else (c - span if ix < 0.0 else c)
+            far_y = r + span if iy > 0.0 else (r - span if iy < 0.0 else r)
+            # Where the beam leaves the square: the first of its far lines it crosses.
+            t_x = crossing(origin_x, far_x + ahead_x, resolution, px, ix) if sx != 0 else np.inf
+            t_y = crossing(origin_y, far_y + ahead_y, resolution, py, iy) if sy != 0 else np.inf
+            t = min(t_x, t_y)
+            # The cell it is in just before t along each axis: the far one along the axis
+            # it leaves by, else a guess from its position, kept in the square.
+            gx = np.int64(math.floor(start_x + t * rate_x[a]))
+            gy = np.int64(math.floor(start_y + t * rate_y[a]))
+            gx = far_x if t_x <= t_y else min(max(gx, min(c, far_x)), max(c, far_x))
+            gy = far_y if t_y <= t_x else min(max(gy, min(r, far_y)), max(r, far_y))
+            # A cell is the right one when its next line is crossed at t or later and the
+            # line into it (unless it is where the beam was) before t: the walk's own
+            # comparisons.
+            next_x = crossing(origin_x, gx + ahead_x, resolution, px, ix) if sx != 0 else np.inf
+            next_y = crossing(origin_y, gy + ahead_y, resolution, py, iy) if sy != 0 else np.inf
+            into_x = crossing(origin_x, gx + ahead_x - sx, resolution, px, ix)
+            into_y = crossing(origin_y, gy + ahead_y - sy, resolution, py, iy)
+            wrong = (((sx != 0) & ((next_x < t) | ((gx != c) & (not into_x < t))))
+                     | ((sy != 0) & ((next_y < t) | ((gy != r) & (not into_y < t)))))
+            step_x = next_x == t
+            step_y = next_y == t
+            i = gx + (sx if step_x else 0)
+            j = gy + (sy if step_y else 0)
+            ni[a] = i
+            nj[a] = j
+            ts[a] = t
+            flags = (np.int64(not t <= bound[a]) | (np.int64(step_x & step_y) << 1)
+                     | (np.int64(wrong) << 2))
+            at[a] = (_address(_plane(ix, iy, planes), tiles, i, j) << 3) | flags
+        # The cells reached: a beam stops in a solid one (or one beyond its bound).
+        kept = 0
+        for a in range(live):
+            flags = at[a] & 7
+            if flags & 1:
+                continue
+            t = ts[a]
+            ix = ixs[a]
+            iy = iys[a]
+            i = ni[a]
+            j = nj[a]
+            reached = flat[at[a] >> 3]
+            if flags & 6:
+                # Rare: through a vertex, or a guess to settle.
+                reached, i, j = _rare(flags, t, ci[a], cj[a], side[a], i, j, ix, iy, flat,
+                                      _plane(ix, iy, planes), tiles, px, py, origin_x,
+                                      origin_y, resolution, reached)
+            if reached == 0:
+                k = beam[a]
+                out[k] = min(out[k], t)
+                continue
+            beam[kept] = beam[a]
+            ci[kept] = i
+            cj[kept] = j
+            side[kept] = reached
+            rate_x[kept] = rate_x[a]
+            rate_y[kept] = rate_y[a]
+            ixs[kept] = ix
+            iys[kept] = iy
+            bound[kept] = bound[a]
+            kept += 1
+        live = kept
 
 
 @_compile
@@ -447,7 +526,7 @@ def scan_sectors(positions, radii, walls, solid, skips, frame, px, py, cos_yaw, 
 
     The map: `solid` (one byte a cell, OccupancyGrid's layout; empty without a map), its
     `skips` (free_squares) and `frame` (origin x, origin y, resolution); each beam
-    walks it up to its nearest ball or wall hit (first_solid).
+    walks it up to its nearest ball or wall hit (walk_beams).
 
     Beam k's direction is the body direction (bx[k], by[k]), at angle_min + k * increment,
     turned by the heading whose cos and sin are given (`rotate`). Ball `exclude` (the
@@ -514,9 +593,7 @@ def scan_sectors(positions, radii, walls, solid, skips, frame, px, py, cos_yaw, 
             wall_beams(px, py, ux, uy, ax, ay, bx_, by_, first, last, out)
             shift += turn
     if solid.shape[0] > 0:
-        for k in range(samples):
-            out[k] = min(out[k], first_solid(px, py, ux[k], uy[k], min(out[k], reach), skips,
-                                             frame[0], frame[1], frame[2]))
+        walk_beams(px, py, ux, uy, reach, out, skips, solid.shape[0], solid.shape[1], frame)
     for k in range(samples):
         out[k] = rep117(out[k], range_min, reach)
 
