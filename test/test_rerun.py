@@ -23,6 +23,7 @@ import pytest
 import rerun as rr
 
 from ball_world.recording import rerun_log, rerun_outlet
+from ball_world.recording.files import claim_output
 from ball_world.recording.mcap_writer import McapSink
 from ball_world.recording.rerun_labels import box_of, LabelScale
 from ball_world.recording.rerun_log import (ARENA, ARROW_MAX_FRACTION, ARROW_MIN_FRACTION,
@@ -682,6 +683,59 @@ def test_a_destination_that_hangs_is_dropped_without_blocking(monkeypatch):
         assert stream.logged == [('a',)]
     finally:
         stream.release.set()
+
+
+class SlowStream:
+    """A stream that takes its time over every call, as a file writer on a loaded machine."""
+
+    def __init__(self, seconds):
+        self.seconds = seconds
+        self.logged = []
+
+    def log(self, *args, **kwargs):
+        time.sleep(self.seconds)
+        self.logged.append(args)
+
+    def flush(self, timeout_sec):
+        pass
+
+    def disconnect(self):
+        pass
+
+
+def test_a_slow_file_holds_a_burst_of_steps_back_instead_of_losing_the_recording(tmp_path):
+    stream = SlowStream(0.002)
+    claim = claim_output(tmp_path / 'slow.rrd', overwrite=True)
+    outlet = Outlet('file slow.rrd', stream, connect=lambda: None, claim=claim)
+    try:
+        burst = rerun_outlet.MAX_QUEUED_CALLS * 3  # more calls at once than the queue holds
+        for k in range(burst):
+            outlet.call('log', k)
+        outlet.close(timeout=LIVENESS_SECONDS)
+        assert outlet.failed is None and stream.logged == [(k,) for k in range(burst)]
+    finally:
+        claim.discard()
+
+
+def test_a_stuck_file_with_a_full_queue_holds_the_steps_back_at_most_the_stall_time(
+        monkeypatch, tmp_path):
+    monkeypatch.setattr(rerun_outlet, 'STALL_SECONDS', 0.3)
+    stream = HangingStream()
+    claim = claim_output(tmp_path / 'stuck.rrd', overwrite=True)
+    outlet = Outlet('file stuck.rrd', stream, connect=lambda: None, claim=claim)
+    try:
+        outlet.flush()
+        assert stream.entered.wait(LIVENESS_SECONDS)  # the worker now hangs in flush
+        began = time.monotonic()
+        for _ in range(rerun_outlet.MAX_QUEUED_CALLS + 10):
+            outlet.call('log', 'b')
+        held = time.monotonic() - began
+        with pytest.raises(OutletFailed, match=r'calls waiting, none begun or ended for 0.3 s'):
+            outlet.flush()
+        assert 0.3 <= held < LIVENESS_SECONDS  # held back once, then the calls are dropped
+    finally:
+        stream.release.set()
+        claim.discard()
 
 
 FULL_DISK_SCRIPT = """

@@ -9,9 +9,11 @@ the stepping thread never waits on, and every wait on that thread is bounded:
 
 - a call that raises (a write error, a flush of the file that times out) fails the outlet;
   a view's flushes may time out for VIEW_PATIENCE s (a slow viewer) before it fails;
-- a call that has not returned after STALL_SECONDS, or a queue that fills up, fails it too;
-  the stuck thread is abandoned (a daemon) with its stream, and the SDK's at-exit hook,
-  which would wait on that stream for good, is dropped;
+- a call that has not returned after STALL_SECONDS fails it too, and so does a full queue:
+  at once for a view, and for a file once no call has begun or ended for STALL_SECONDS (a
+  file's writer slower than a burst of steps, on a loaded machine, holds the steps back
+  instead of losing the recording); the stuck thread is abandoned (a daemon) with its
+  stream, and the SDK's at-exit hook, which would wait on that stream for good, is dropped;
 - a view is also failed when its viewer's port stops accepting connections: the SDK drops
   data silently once a viewer is gone, so only a probe can tell (a stalled viewer still
   accepts connections and is kept: the SDK drops what it cannot send, never blocking).
@@ -42,6 +44,8 @@ VIEW_PATIENCE = 10.0
 CLOSE_TIMEOUT = 10.0
 #: Calls that may wait for the worker (a logged step makes a few per 64 steps).
 MAX_QUEUED_CALLS = 256
+#: How often a step held back by a file's full queue looks whether its worker is stuck.
+QUEUE_POLL_SECONDS = 0.1
 #: Streams of failed outlets, never touched again and never destroyed before the process ends.
 _ABANDONED = []
 #: Longest wait for a viewer's port to accept the liveness probe.
@@ -134,6 +138,7 @@ class Outlet:
         self._error = None
         self._reported = False
         self._busy_since = None
+        self._progress = time.monotonic()  # when the worker last began or ended a call
         self._queue = queue.Queue(maxsize=MAX_QUEUED_CALLS)
         self._thread = threading.Thread(target=self._work, daemon=True,
                                         name=f'rerun-{description.split()[0]}')
@@ -231,8 +236,20 @@ class Outlet:
             return
         try:
             self._queue.put_nowait((call, args))
+            return
         except queue.Full:
-            self._fail(f'no answer: {MAX_QUEUED_CALLS} calls waiting')
+            if self.claim is None:
+                self._fail(f'no answer: {MAX_QUEUED_CALLS} calls waiting')
+                return
+        # A file: slow is not stuck. Wait for room while its worker makes progress.
+        while self._error is None:
+            try:
+                self._queue.put((call, args), timeout=QUEUE_POLL_SECONDS)
+                return
+            except queue.Full:
+                if time.monotonic() - self._progress > STALL_SECONDS:
+                    self._fail(f'no answer: {MAX_QUEUED_CALLS} calls waiting, none begun or '
+                               f'ended for {STALL_SECONDS:g} s')
 
     def _fail(self, error):
         if self._error is None:
@@ -274,13 +291,14 @@ class Outlet:
                 return
             if self._error is not None:
                 continue
-            self._busy_since = time.monotonic()
+            self._busy_since = self._progress = time.monotonic()
             try:
                 call(*args)
             except Exception as error:  # noqa: B902 - any SDK failure ends this outlet only
                 self._fail(_one_line(error))
             finally:
                 self._busy_since = None
+                self._progress = time.monotonic()
             if call == self._close and self._error is None:
                 return
 
