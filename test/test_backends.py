@@ -288,7 +288,7 @@ def test_warming_for_a_run_leaves_a_default_run_nothing_to_compile(tmp_path):
     done = subprocess.run([sys.executable, '-m', 'ball_world.core.warm', '--kernels', 'run'],
                           capture_output=True, text=True, timeout=1800, env=environment)
     assert done.returncode == 0, done.stderr
-    assert 'numba kernels (seed mode and the lidar) ready' in done.stdout
+    assert 'numba kernels (seed mode) ready' in done.stdout
 
     def cache():
         return sorted((str(p), p.stat().st_size) for p in tmp_path.rglob('*') if p.is_file())
