@@ -878,12 +878,17 @@ def cpu_by_part(pid, before, after, seconds):
 
 
 def rtf_parameters(args, path):
-    """The node scene: equal balls of radius 0.5 m at 20% of a square box, 100 Hz."""
+    """The node scene: equal balls of radius 0.5 m at 20% of a square box, 100 Hz; with
+    --map, balls of radius 0.1-0.2 m (robots' sizes) placed in the map's free cells."""
     side = round(0.5 * math.sqrt(args.balls * math.pi / 0.2), 3)
     parameters = {'random.count': args.balls, 'random.radius': '[0.5, 0.5]',
                   'random.speed': args.speed, 'arena': f'[0.0, 0.0, {side}, {side}]',
                   'dt': DT, 'rate_hz': 100.0, 'physics.backend': args.backend,
                   'physics.mode': args.mode}
+    if getattr(args, 'map', None):
+        parameters.update({'map': args.map, 'arena': '[]', 'random.radius': '[0.1, 0.2]'})
+    if getattr(args, 'drive', None):
+        parameters['agent.drive'] = args.drive
     if args.record:
         parameters['record.mcap'] = path
     if args.agents:
@@ -891,6 +896,7 @@ def rtf_parameters(args, path):
         parameters['agent.scan.samples'] = 0  # agents alone; --scanning-agents scan
     if getattr(args, 'scanning_agents', 0):
         parameters['agents'] = '[' + ', '.join(agent_names(args.scanning_agents)) + ']'
+        parameters.pop('agent.scan.samples', None)
     return parameters, side
 
 
@@ -916,6 +922,7 @@ class Commander:
                            for name in agent_names(count)]
         self.due = 0.0
         self.sent = 0
+        self.count = count
 
     def tick(self):
         now = time.monotonic()
@@ -934,7 +941,8 @@ def run_rtf(args, workdir):
     parameters, side = rtf_parameters(args, path)
     node = NodeProcess(workdir, ns, f'rtf-{args.mode}', parameters)
     listener = Listener(ns, stats=True)
-    commander = Commander(listener.probe.node, ns, args.agents)
+    commander = Commander(listener.probe.node, ns,
+                          max(args.agents, getattr(args, 'scanning_agents', 0)))
     me = psutil.Process()
     try:
         listener.spin_until(lambda: listener.heard > 0, 'the first step', node)
@@ -964,13 +972,16 @@ def run_rtf(args, workdir):
     if path.exists() and not args.keep:
         path.unlink()
     overall = steps * DT / elapsed
-    what = (f'{args.balls:,} balls (r 0.5 m, 20% of a {side:g} m box, speeds up to '
+    scene = (f'in the map {args.map}, r 0.1-0.2 m' if getattr(args, 'map', None)
+             else f'r 0.5 m, 20% of a {side:g} m box')
+    what = (f'{args.balls:,} balls ({scene}, speeds up to '
             f'{args.speed:g} m/s), {args.mode} mode ({args.backend} backend), rate_hz 100, '
             f'dt {DT:g} s, markers at their default rate, a probe subscribed to `balls` and '
             '`stats`' + (f', recording MCAP ({size:,.0f} MB)' if args.record else '')
-            + (f', {args.agents} agents commanded at {Commander.COMMAND_HZ:g} Hz '
+            + (f', {commander.count} agents commanded at {Commander.COMMAND_HZ:g} Hz '
                f'({commander.sent:,} cmd_vel sent; each publishes odom and /tf)'
-               if args.agents else '')
+               if commander.count else '')
+            + (f', agent.drive {args.drive}' if getattr(args, 'drive', None) else '')
             + f'; {steps:,} steps in {elapsed:.1f} s; node exit {code}; CPU (share of one '
             'core): ' + ', '.join(f'{part} {share:.2f}' for part, share in sorted(parts.items()))
             + f', this probe {(mine_after - mine_before) / elapsed:.2f}; node RSS '
@@ -986,7 +997,9 @@ def run_rtf(args, workdir):
         what += f'; {agents} agents, each scanning 360 beams at 10 Hz (recorded)'
     row(f'rtf --mode {args.mode} --balls {args.balls} --speed {args.speed:g}'
         + (f' --agents {args.agents}' if args.agents else '')
-        + (f' --scanning-agents {agents}' if agents else ''), what, figure)
+        + (f' --scanning-agents {agents}' if agents else '')
+        + (f' --map {args.map}' if getattr(args, 'map', None) else '')
+        + (f' --drive {args.drive}' if getattr(args, 'drive', None) else ''), what, figure)
     return 0 if code == 0 and overall >= args.target else 1
 
 
@@ -1473,6 +1486,10 @@ def main(argv=None):
     rtf.add_argument('--scanning-agents', type=int, default=0,
                      help='make ball_0 ... ball_<N-1> agents, each scanning 360 beams at 10 Hz '
                           '(issue 22: 10 in the 10,000-ball world; default 0)')
+    rtf.add_argument('--map', metavar='YAML', help='a nav2 map the balls are placed in (radius '
+                     '0.1-0.2 m), e.g. the warehouse `python -m benchmarks.warehouse DIR` '
+                     'writes (issue 27: 1,000 balls, 100 scanning diff-drive agents)')
+    rtf.add_argument('--drive', choices=('omni', 'diff'), help='agent.drive (default: omni)')
     startup = cases.add_parser('startup', help='process start to the first `balls` message of '
                                                'the default world, numba cached and cold, numpy')
     startup.add_argument('--repeats', type=int, default=3)
