@@ -6,7 +6,7 @@ light theme, dark grey (28) in the dark one. No colour has 4:1 on both (the best
 on each), and a label's text cannot take the theme's own text colour from a 2D archetype:
 Rerun 0.41 gives a Points2D, Arrows2D, LineStrips2D or Boxes2D without colours its entity's
 automatic colour, and that colour draws the text too (screenshots of both themes, docs/
-view.md). So the live view draws its texts itself, as geometry whose every colour is ours:
+view.md). So the view draws its texts itself, as geometry whose every colour is ours:
 a tag is a capsule of TAG_COLOR (a Boxes2D of no height whose outline is as thick as the
 tag), the text over it as line strips of a small monospaced stroke font (FONT). A tag's
 text keeps TEXT_CONTRAST or more against TAG_COLOR on either theme.
