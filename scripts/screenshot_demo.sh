@@ -7,6 +7,9 @@
 # the page, takes shots at SHOTS seconds after it loaded (default 10,40,70) into
 # runs/screenshots/, light and dark (THEMES), measures their contrast (scripts/contrast.py)
 # and copies the light one at PICK seconds (default 70) to OUT (default docs/demo.png).
+# OPEN_AFTER=S opens the page S seconds after the demo started (default 2): a page opened
+# late, which should show the present within seconds. After the shots it prints the world's
+# progress lines (step and wall time), to compare with the simulated time each shot shows.
 # Usage: scripts/screenshot_demo.sh [OUT.png]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -24,10 +27,10 @@ for theme in ${THEMES:-light dark}; do
     --log-dir runs/screenshots/demo-logs > "runs/screenshots/demo-$theme.out" 2>&1 &
   demo=$!
   trap 'kill -INT $demo 2>/dev/null; wait $demo' EXIT
-  sleep 2
+  sleep "${OPEN_AFTER:-2}"
   echo "$theme: page opened $(date -u +%H:%M:%S) UTC, load $(cut -d' ' -f1-3 /proc/loadavg)"
   THEME=$theme node scripts/screenshot_web.js "$url" "runs/screenshots/demo-$theme" "$shots"
-  grep -h 'step' runs/screenshots/demo-logs/world.log | tail -n 3 || true
+  grep -h 'step' runs/screenshots/demo-logs/world.log | tail -n 12 || true
   kill -INT "$demo"; wait "$demo" || true
   trap - EXIT
 done

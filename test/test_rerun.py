@@ -22,15 +22,15 @@ import numpy as np
 import pytest
 import rerun as rr
 
-from ball_world.recording import rerun_log, rerun_outlet
+from ball_world.recording import rerun_log, rerun_outlet, rerun_text
 from ball_world.recording.files import claim_output
 from ball_world.recording.mcap_writer import McapSink
-from ball_world.recording.rerun_labels import box_of, LabelScale
+from ball_world.recording.rerun_labels import box_of, LabelScale, TAG_INSET_PIXELS
 from ball_world.recording.rerun_log import (ARENA, ARROW_MAX_FRACTION, ARROW_MIN_FRACTION,
                                             ARROW_SECONDS, ball_color, BALLS, clip_arrow,
                                             COLLISIONS, ENERGY, IMPULSE_COLOR, IMPULSES,
                                             LABEL_LIMIT, LABEL_LINE_FRACTION, LABELS,
-                                            MOMENTUM, REAL_TIME_FACTOR, RealTimeFactor,
+                                            MOMENTUM, NAMES, REAL_TIME_FACTOR, RealTimeFactor,
                                             RerunSink, scene_bounds, SIM_TIME, STEP, TRAILS,
                                             VELOCITIES, VELOCITY_SECONDS, view_bounds,
                                             VIEW_FPS, VIEW_TRAIL_SPACING, WALL_COLOR, WALLS)
@@ -248,7 +248,8 @@ def grown_past_label_limit(first):
 
 def test_a_live_view_hides_its_labels_when_the_world_grows_past_the_limit():
     """A live feed's calls, recorded instead of sent: the labels ride in the balls' row (as
-    arrows of length 0) and go when the balls outnumber LABEL_LIMIT."""
+    arrows of length 0, their text kept but not shown), each drawn as a tag in its box
+    (NAMES), and go when the balls outnumber LABEL_LIMIT."""
     calls = []
 
     class Recorder:
@@ -281,9 +282,45 @@ def test_a_live_view_hides_its_labels_when_the_world_grows_past_the_limit():
         assert not [args for name, args, _ in calls if name == 'log' and args[0] == LABELS]
         return ([a for static, a in logged if static], [a for static, a in logged if not static])
 
+    def tags_logged():
+        """(pills, strips) of the frame's tags."""
+        (tags,) = [args[1:] for name, args, _ in calls if name == 'log' and args[0] == NAMES]
+        (pills,) = [a for a in tags if isinstance(a, rr.Boxes2D)]
+        (strips,) = [a for a in tags if isinstance(a, rr.LineStrips2D)]
+        return pills, strips
+
     (looks,), (frame,) = arrows_logged(first)
-    assert looks.show_labels.as_arrow_array().to_pylist() == [True]
+    assert looks.show_labels.as_arrow_array().to_pylist() == [False]
     assert sorted(frame.labels.as_arrow_array().to_pylist()) == ['ball_0', 'ball_1', 'ball_2']
+    # Each name is a pill filling its label's box but for the inset, its strokes in the
+    # ball's light hue, inside the pill.
+    pills, strips = tags_logged()
+    scale = LabelScale(view_bounds(world))
+    centres = pills.centers.as_arrow_array().to_pylist()
+    half_sizes = pills.half_sizes.as_arrow_array().to_pylist()
+    thickness = pills.radii.as_arrow_array().to_pylist()
+    lines = strips.strips.as_arrow_array().to_pylist()
+    line_colors = strips.colors.as_arrow_array().to_pylist()
+    assert len(centres) == 3
+    used = 0
+    for k, (point, text) in enumerate(zip(frame.origins.as_arrow_array().to_pylist(),
+                                          frame.labels.as_arrow_array().to_pylist())):
+        xmin, ymin, xmax, ymax = box_of(point, *scale.size(text), scale)
+        inset = TAG_INSET_PIXELS * scale.metres_per_pixel
+        (cx, cy), (hx, hy), r = centres[k], half_sizes[k], thickness[k]
+        assert hy == 0.0 and r == pytest.approx(0.5 * (ymax - ymin) - inset, rel=1e-5)
+        assert cx - hx - r == pytest.approx(xmin, rel=1e-5, abs=1e-6)
+        assert cx + hx + r == pytest.approx(xmax, rel=1e-5, abs=1e-6)
+        assert cy == pytest.approx(0.5 * (ymin + ymax), rel=1e-5, abs=1e-6)
+        count = len(rerun_text.strokes(text))
+        mine = np.concatenate([np.asarray(line) for line in lines[used:used + count]])
+        assert np.all(mine[:, 0] >= xmin) and np.all(mine[:, 0] <= xmax)
+        assert np.all(mine[:, 1] >= ymin + inset) and np.all(mine[:, 1] <= ymax - inset)
+        red, green, blue = rerun_log.name_color(text)
+        assert set(line_colors[used:used + count]) == {
+            (red << 24) | (green << 16) | (blue << 8) | 0xFF}
+        used += count
+    assert used == len(lines)
     assert_labels_clear(frame.origins.as_arrow_array().to_pylist(),
                         frame.labels.as_arrow_array().to_pylist(),
                         as_float32(first.positions), world.radii,
@@ -293,6 +330,9 @@ def test_a_live_view_hides_its_labels_when_the_world_grows_past_the_limit():
     assert looks == []  # no label looks for a world past the limit
     assert frame.labels.as_arrow_array().to_pylist() == []  # an empty set: no names left
     assert frame.origins.as_arrow_array().to_pylist() == []
+    pills, strips = tags_logged()
+    assert pills.centers.as_arrow_array().to_pylist() == []
+    assert strips.strips.as_arrow_array().to_pylist() == []
     feed.close()
 
 

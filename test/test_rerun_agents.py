@@ -7,6 +7,7 @@ from test_rerun import read, shown_at
 
 from ball_world.recording.rerun_agents import AGENTS, HEADING_RADII
 from ball_world.recording.rerun_log import LABELS, RerunSink
+from ball_world.recording.rerun_text import strokes
 from ball_world.simulation import Simulation
 
 
@@ -92,3 +93,14 @@ def test_a_bumper_hit_is_drawn_along_the_impulse_then_cleared(tmp_path):
     assert vector[1] == pytest.approx(0.0, abs=1e-6) and vector[0] < 0.0  # pushed along -x
     assert shown_at(labels, hit) == ['ball_0 hit 4 N s']  # 2 m1 m2 / (m1 + m2) x 3 m/s
     assert shown_at(vectors, hit + round(BUMPER_SHOWN * 100) + 1) in ([], None)
+    # The label is kept, not shown: a tag under the arrow's middle draws it (rerun_text).
+    assert content[(f'/{BUMPERS}', 'Arrows2D:show_labels')][hit] == [False]
+    [origin] = shown_at(content[(f'/{BUMPERS}', 'Arrows2D:origins')], hit)
+    [centre] = shown_at(content[(f'/{BUMPERS}', 'Boxes2D:centers')], hit)
+    assert centre[0] == pytest.approx(origin[0] + 0.5 * vector[0], abs=1e-5)
+    assert centre[1] < origin[1] + 0.5 * vector[1]  # the tag hangs below the middle
+    strips = shown_at(content[(f'/{BUMPERS}', 'LineStrips2D:strips')], hit)
+    assert len(strips) == len(strokes('ball_0 hit 4 N s'))
+    for key in ('Boxes2D:centers', 'LineStrips2D:strips'):
+        assert shown_at(content[(f'/{BUMPERS}', key)],
+                        hit + round(BUMPER_SHOWN * 100) + 1) in ([], None), key

@@ -1,18 +1,26 @@
 """What the view draws of robots, read back from the .rrd with Rerun's reader: each scan as a
 fan of rays from its robot, the drive's impulses apart from pushes (and counted apart), the
-clock line, and colours that read on both of the viewer's themes."""
+clock line, and colours that read on both of the viewer's themes: no text in Rerun's label
+boxes (no colour reads on both themes' boxes), tags whose every colour is ours instead."""
 import math
+from types import SimpleNamespace
 
+from ball_world_testing.harness import Truth
 import numpy as np
 import pytest
-from test_rerun import read, shown_at
+import rerun as rr
+from test_rerun import FakeClock, read, shown_at
 
 from ball_world.core.lidar import hit_points
-from ball_world.recording.rerun_agents import AGENT_COLOR, AGENTS
-from ball_world.recording.rerun_log import (CLOCK, CLOCK_COLOR, COLLISIONS,
-                                            COLLISIONS_HEADROOM, ENERGY, ENERGY_HEADROOM,
-                                            Headroom, IMPULSE_COLOR, IMPULSES, RerunSink)
+from ball_world.recording import rerun_log
+from ball_world.recording.rerun_agents import (AGENT_COLOR, AGENTS, BUMPER_TEXT_COLOR,
+                                               BUMPER_VIEW_COLOR)
+from ball_world.recording.rerun_log import (CLOCK, COLLISIONS, COLLISIONS_HEADROOM, ENERGY,
+                                            ENERGY_HEADROOM, Headroom, IMPULSE_COLOR,
+                                            IMPULSE_TEXT_COLOR, IMPULSES, name_color,
+                                            NAMES, RerunSink, RULER_TEXT_COLOR, SCALE_LABELS)
 from ball_world.recording.rerun_scans import MAX_RAYS, SCANS
+from ball_world.recording.rerun_text import FONT, strokes, TAG_COLOR, TEXT_CONTRAST, width
 from ball_world.simulation import Simulation
 from ball_world.tools.view_tracks import TRACK_COLOR
 
@@ -96,33 +104,134 @@ def test_the_drive_is_no_push_drawn_or_counted(robot_run):
 
 
 def test_the_clock_line_says_the_simulated_time(robot_run):
+    """A text document (drawn in the theme's own text colour), every 0.1 s of a file."""
     _, records, content = robot_run
-    clock = content[(f'/{CLOCK}', 'Points2D:labels')]
+    clock = content[(f'/{CLOCK}', 'TextDocument:text')]
     assert clock[0] == ['simulated time 0.0 s']
     assert len(clock) >= 10  # every 0.1 s of simulated time in a file
     for step, (text,) in clock.items():
         assert text.startswith(f'simulated time {records[step].stamp_ns * 1e-9:.1f} s')
 
 
-@pytest.mark.parametrize('color', [AGENT_COLOR, IMPULSE_COLOR, TRACK_COLOR],
-                         ids=['heading', 'push', 'track'])
+def test_a_push_and_the_ruler_are_tags_their_text_kept_not_shown(robot_run):
+    _, _, content = robot_run
+    assert content[(f'/{IMPULSES}', 'Points2D:show_labels')][20] == [False]
+    pills = content[(f'/{IMPULSES}', 'Boxes2D:centers')]
+    text = content[(f'/{IMPULSES}', 'LineStrips2D:strips')]
+    assert len(pills[20]) == 1 and len(text[20]) == len(strokes('ball_3: J = (0.02, 0) N s'))
+    assert content[(f'/{IMPULSES}', 'LineStrips2D:colors')][20] == [
+        int.from_bytes(bytes((*IMPULSE_TEXT_COLOR, 255)), 'big')] * len(text[20])
+    assert shown_at(pills, 19) in (None, [])
+    labels = content[(f'/{SCALE_LABELS}', 'Points2D:labels')][0]
+    assert content[(f'/{SCALE_LABELS}', 'Points2D:show_labels')][0] == [False]
+    assert len(content[(f'/{SCALE_LABELS}', 'Boxes2D:centers')][0]) == len(labels)
+    assert len(content[(f'/{SCALE_LABELS}', 'LineStrips2D:strips')][0]) == sum(
+        len(strokes(t)) for t in labels)
+
+
+def test_a_live_view_draws_no_text_in_rerun_label_boxes():
+    """A live feed's calls on a robot world with a push, recorded instead of sent: every
+    label the view is sent is hidden (show_labels False where labels are), and every name
+    is a tag (NAMES) in the ball's light hue."""
+    calls = []
+
+    class Recorder:
+        def call(self, name, *args, **kwargs):
+            calls.append((name, args, kwargs))
+
+        def flush(self):
+            pass
+
+        def close(self):
+            pass
+
+    clock = FakeClock()
+    feed = rerun_log._Feed(lambda stream, plan: Recorder(), frame_period=0.1, frame_clock=clock)
+    collector = Truth()
+    simulation = Simulation(ROBOTS, sinks=[collector])
+    simulation.command('ball_0', 0.8, 0.0, 1.0)
+    for k in range(1, 31):
+        if k == 10:
+            simulation.queue_impulse('ball_3', 0.02, 0.0)
+        simulation.step()
+    simulation.close()
+    world, _ = collector.segments[0]
+    feed.start_segment(world, SimpleNamespace(parameters={}, log_offset_ns=0))
+    for record in collector.records[1:]:
+        clock.now += 0.05
+        feed.write_step(record)
+    feed.close()
+    shown, labelled, names = {}, set(), []
+    for name, args, _ in calls:
+        if name != 'log':
+            continue
+        for archetype in args[1:]:
+            key = (args[0], type(archetype).__name__)
+            flag = getattr(archetype, 'show_labels', None)
+            if flag is not None:
+                shown.setdefault(key, set()).update(flag.as_arrow_array().to_pylist())
+            texts = getattr(archetype, 'labels', None)
+            if texts is not None and texts.as_arrow_array().to_pylist():
+                labelled.add(key)
+            if args[0] == NAMES and isinstance(archetype, rr.LineStrips2D):
+                names.append(archetype)
+    assert {key[0] for key in labelled} >= {rerun_log.BALLS, IMPULSES, SCALE_LABELS}
+    assert all(shown.get(key) == {False} for key in labelled), (labelled, shown)
+    assert all(True not in flags for flags in shown.values())
+    assert len(names) >= 10  # a frame a tenth of a second: the names at each
+    colors = {color for strips in names for color in strips.colors.as_arrow_array().to_pylist()}
+    hue = {int.from_bytes(bytes((*name_color(f'ball_{i}'), 255)), 'big'): i for i in range(10)}
+    # Names in their balls' light hues; the robots always named, the balls where there is room.
+    assert colors <= set(hue) and {hue[c] for c in colors} >= {0, 1} and len(colors) >= 6
+
+
+@pytest.mark.parametrize('color', [AGENT_COLOR, IMPULSE_COLOR, TRACK_COLOR, BUMPER_VIEW_COLOR],
+                         ids=['heading', 'push', 'track', 'bumper'])
 def test_arrows_keep_4_to_1_on_both_themes(color):
-    """The heading was yellow (1.3:1 on the light theme). Every arrow and ring keeps at
-    least 4:1 against the view's background, light theme and dark."""
+    """The heading was yellow (1.3:1 on the light theme), the bumper hit orange (3.3:1).
+    Every arrow and ring keeps at least 4:1 against the view's background, light theme
+    and dark."""
     for where, background in VIEW.items():
         assert contrast(color, background) >= 4.0, where
 
 
-@pytest.mark.parametrize('color', [IMPULSE_COLOR, CLOCK_COLOR], ids=['push', 'clock'])
-def test_label_text_keeps_the_most_one_colour_can_on_both_themes(color):
-    """Rerun draws a label's text in its colour on a box of the theme's: light grey or dark
-    grey. No one colour has 4:1 on both (the best, luminance 0.185, has 3.85:1 on each), so
-    each text colour is within 0.2 of that best on both."""
+def test_no_one_text_colour_reads_on_both_themes_label_boxes():
+    """Why the view draws its text itself: Rerun draws a label's text in one colour on a
+    box of the theme's, light grey or dark grey, and the best any colour can have on both
+    (luminance 0.185) is 3.85:1."""
     light, dark = LABEL_BOXES.values()
     best = math.sqrt((luminance(light) + 0.05) / (luminance(dark) + 0.05))
     assert best == pytest.approx(3.85, abs=0.01)
-    for where, background in LABEL_BOXES.items():
-        assert contrast(color, background) >= best - 0.2, where
+    assert max(min(contrast((v, v, v), light), contrast((v, v, v), dark))
+               for v in range(256)) < 4.0
+
+
+@pytest.mark.parametrize('name', [f'ball_{i}' for i in range(30)] + ['ball', 'robot', 'ZZ 9'])
+def test_a_names_text_keeps_its_contrast_on_its_tag(name):
+    """A tag's fill is ours, the same on either theme: the name's light hue keeps
+    TEXT_CONTRAST (7:1) on it, any hue."""
+    assert contrast(name_color(name), TAG_COLOR) >= TEXT_CONTRAST
+
+
+@pytest.mark.parametrize('color', [IMPULSE_TEXT_COLOR, BUMPER_TEXT_COLOR, RULER_TEXT_COLOR],
+                         ids=['push', 'bumper', 'ruler'])
+def test_tag_texts_keep_their_contrast(color):
+    assert contrast(color, TAG_COLOR) >= TEXT_CONTRAST
+
+
+def test_the_font_has_every_printable_character_inside_its_cell():
+    """Glyphs lie in their cell (x 0 to 4, y from the descender to the bracket's top), so a
+    tag's text stays inside the tag; a character the font lacks is drawn as '?'."""
+    assert set(FONT) >= {chr(c) for c in range(32, 127)} - set('@$&^`{}~\\')
+    for char, glyph in FONT.items():
+        for stroke in glyph:
+            assert len(stroke) >= 2, char
+            assert np.all(stroke[:, 0] >= 0.0) and np.all(stroke[:, 0] <= 4.0), char
+            assert np.all(stroke[:, 1] >= -2.0) and np.all(stroke[:, 1] <= 7.0), char
+    assert [s.tolist() for s in strokes('~')] == [s.tolist() for s in strokes('?')]
+    drawn = np.concatenate(strokes('ball_14: J = (0.02, 0) N s'))
+    assert drawn[:, 0].min() >= 0.0
+    assert drawn[:, 0].max() <= width('ball_14: J = (0.02, 0) N s')
 
 
 def test_plots_keep_room_above_and_below_their_data(robot_run):

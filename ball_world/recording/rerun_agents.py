@@ -13,8 +13,7 @@ BUMPER_SHOWN seconds of simulated time, since one step is too short to see.
 import numpy as np
 import rerun as rr
 
-from ball_world.msgs.bumper_markers import (BUMPER_COLOR, BUMPER_MIN_RADII,
-                                            BUMPER_SECONDS, BUMPER_SHOWN)
+from ball_world.msgs.bumper_markers import BUMPER_MIN_RADII, BUMPER_SECONDS, BUMPER_SHOWN
 
 #: Entity path of the arrows, under the arena's +y-up transform.
 AGENTS = 'arena/agents'
@@ -27,6 +26,11 @@ DEFAULT_LENGTH = 0.5
 AGENT_COLOR = (200, 80, 0)
 #: Entity path of the bumper hits, under the arena's +y-up transform.
 BUMPERS = 'arena/bumpers'
+#: Violet: no ball has it, apart from the heading's orange and the pushes' pink, and over 4:1
+#: on both viewer themes (the markers' orange, (255, 80, 0), has 3.3:1 on the light one).
+BUMPER_VIEW_COLOR = (160, 80, 235)
+#: The text of a hit's tag (rerun_text): a light violet.
+BUMPER_TEXT_COLOR = (226, 208, 255)
 
 
 def heading_arrows(record):
@@ -46,7 +50,8 @@ def heading_arrows(record):
 
 def bumper_arrows(record):
     """rr.Arrows2D of the record's bumper hits (world frame, from each agent's centre), or
-    None when no agent was hit in its step."""
+    None when no agent was hit in its step. Their labels are kept, not shown: rerun_log
+    draws them as tags under each arrow's middle, where Rerun would draw them."""
     frame = getattr(record, 'agents', None)
     if frame is None or not frame.bumpers:
         return None
@@ -71,7 +76,7 @@ def bumper_arrows(record):
         origins=np.asarray(record.positions, dtype=np.float64)[indices], vectors=vectors,
         labels=[f'{bumper.name} hit {value:.3g} N s' for bumper, value in zip(frame.bumpers,
                                                                               size)],
-        show_labels=True, colors=BUMPER_COLOR, radii=rr.Radius.ui_points(3.0),
+        show_labels=False, colors=BUMPER_VIEW_COLOR, radii=rr.Radius.ui_points(3.0),
         draw_order=36.0)
 
 

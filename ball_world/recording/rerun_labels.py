@@ -8,23 +8,33 @@ every place would overlap another label or another ball. Agents come first (a ro
 always named when it can be), then the balls in pose order; a name keeps the place it had
 at the previous step while that place stays free, so names do not jump around.
 
+A live view draws each name as a tag (rerun_text) filling its box but for TAG_INSET_PIXELS
+above and below (tag_rect); a file keeps Rerun's own labels, a little narrower than the box.
+
 Pure geometry (numpy), no Rerun: rerun_log logs the points it returns, and the tests check
 the boxes these functions describe.
 """
 import numpy as np
 
+from ball_world.recording.rerun_text import ADVANCE
+
 #: The arena view's larger side is assumed to be this many pixels: a 1600 x 900 page gives
 #: about 800, a 1280 x 720 laptop window about 600. Assuming fewer pixels than there are makes
 #: boxes larger than drawn, so a label judged free is free on any window at least that big.
 VIEW_PIXELS = 600.0
-#: Rerun's label box, measured on screenshots of the web viewer (Inter, 12 px): the width
-#: of a character, the box's padding, its height, and the gap between a point and the box.
-CHAR_PIXELS = 6.4
-PAD_PIXELS = 12.0
+#: A glyph unit of a tag's text (rerun_text), pixels: its characters are ADVANCE units apart.
+UNIT_PIXELS = 1.2
+#: A label's box: the width of a character (a tag's; Rerun's labels, Inter at 12 px, are 6.4
+#: on screenshots of the web viewer), the box's padding, its height (Rerun's, measured), and
+#: the gap between a point and the box.
+CHAR_PIXELS = ADVANCE * UNIT_PIXELS
+PAD_PIXELS = 14.0
 BOX_PIXELS = 24.0
 GAP_PIXELS = 4.0
 #: Room kept between a label box and a ball or another box, pixels.
 CLEARANCE_PIXELS = 2.0
+#: A tag is its label's box less this much at the top and at the bottom, pixels.
+TAG_INSET_PIXELS = 3.0
 
 BELOW, ABOVE, RIGHT, LEFT = range(4)
 PLACES = (BELOW, ABOVE, RIGHT, LEFT)
@@ -68,6 +78,15 @@ def box_of(point, width, height, scale):
     box hangs below the point)."""
     x, y = point
     return (x - 0.5 * width, y - scale.gap - height, x + 0.5 * width, y - scale.gap)
+
+
+def tag_rect(point, text, scale):
+    """(rect (xmin, ymin, xmax, ymax), glyph unit in metres) of the tag drawn for a label of
+    `text` at `point`: the label's box, TAG_INSET_PIXELS shorter at either end."""
+    width, height = scale.size(text)
+    xmin, ymin, xmax, ymax = box_of(point, width, height, scale)
+    inset = TAG_INSET_PIXELS * scale.metres_per_pixel
+    return (xmin, ymin + inset, xmax, ymax - inset), UNIT_PIXELS * scale.metres_per_pixel
 
 
 def boxes_overlap(a, b):

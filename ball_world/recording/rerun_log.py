@@ -15,8 +15,14 @@ Layout of the recording (application id 'ball_world'):
   with no other name and no other ball, or dropped (rerun_labels): points, names and colours
   per step. A live view without velocities gets them in `arena/balls` instead, in the
   frame's row, as Arrows2D of length 0 at the same points (see _Feed._log_balls).
-- `arena/clock` (Points2D): one line of text above the scene, the simulated time and the
-  real-time factor (every frame of a view, every FILE_CLOCK_SECONDS of a file).
+- `arena/names` (a live view's; Boxes2D and LineStrips2D): the same names drawn as tags
+  (rerun_text), the labels above keeping their text, not shown. Rerun draws a label's text
+  in one colour on a box of the theme's, and no colour reads on both themes' boxes (3.85:1
+  at best); a tag's colours are all ours. A file keeps Rerun's labels (a tag per step would
+  be most of the file).
+- `clock` (TextDocument): the simulated time and the real-time factor, in a strip above
+  the arena, in the theme's own text colour (every frame of a view, every
+  FILE_CLOCK_SECONDS of a file).
 - `arena/scans/<agent>` (LineStrips2D, Points2D): each scan as a fan of rays from its robot
   and its hit points (rerun_scans): a file every scan, a view the latest at each frame.
 - `arena/walls` (LineStrips2D), once per segment at its first step: not static in a file,
@@ -33,11 +39,14 @@ Layout of the recording (application id 'ball_world'):
   Its label (the ball's name and J) is a Points2D of the same entity and row, so a viewer
   never draws an arrow with another one's label: Rerun draws an arrow's own label over the
   middle of its shaft, so the label point lies under the arrow's lowest end instead, and
-  when that is the tail, where the ball was, under the ball's label too.
+  when that is the tail, where the ball was, under the ball's label too. The label keeps
+  the text, not shown; a tag of the same entity and row draws it (rerun_text).
 - `arena/velocities` (Arrows2D, optional): each ball's velocity times VELOCITY_SECONDS.
 - `arena/trails` (LineStrips2D, optional): each ball's path over the last trail seconds.
 - `arena/agents` (Arrows2D): each agent's heading (rerun_agents); its name is a label.
-- `arena/bumpers` (Arrows2D): each agent's bumper hit, along the impulse (rerun_agents).
+- `arena/bumpers` (Arrows2D): each agent's bumper hit, along the impulse (rerun_agents), its
+  label a tag under the arrow's middle.
+- `arena/scale`, `arena/scale/labels`: the ruler (rerun_scale), its labels tags.
 - `plots/energy_change` (Scalars): kinetic energy relative to step 0 of the segment, in
   percent, rounded to ENERGY_RESOLUTION: an exact simulation conserves energy to ~1e-15, and
   an autoscaled plot would blow that rounding noise up to full-height steps. Real changes
@@ -76,6 +85,7 @@ carries, in pose order, so balls may appear and disappear between steps; a recor
 carry `radii` and `masses` for names its segment did not start with.
 """
 from collections import deque
+import functools
 import json
 import math
 from pathlib import Path
@@ -90,12 +100,14 @@ import rerun.blueprint as rrb
 
 from ball_world.core.parameters import BY_NAME
 from ball_world.recording.files import claim_output, OutputClaim
-from ball_world.recording.rerun_agents import AGENTS, BUMPERS, BumperView, heading_arrows
-from ball_world.recording.rerun_labels import LabelPlacer
+from ball_world.recording.rerun_agents import (AGENTS, BUMPER_TEXT_COLOR, BUMPERS, BumperView,
+                                               heading_arrows)
+from ball_world.recording.rerun_labels import LabelPlacer, tag_rect
 from ball_world.recording.rerun_map import map_bounds, map_entities
 from ball_world.recording.rerun_outlet import new_stream, Outlet, OutletFailed, parse_view
 from ball_world.recording.rerun_scale import padded, ruler
 from ball_world.recording.rerun_scans import scan_layers, SCANS, VIEW_MAX_POINTS
+from ball_world.recording.rerun_text import Tags
 from ball_world.step_record import PACKAGE_NAME
 
 APPLICATION_ID = PACKAGE_NAME
@@ -109,8 +121,12 @@ TRAILS = 'arena/trails'
 LABELS = 'arena/labels'
 SCALE = 'arena/scale'
 SCALE_LABELS = 'arena/scale/labels'
-#: The simulated time and the real-time factor, as a line of text above the scene.
-CLOCK = 'arena/clock'
+#: The simulated time and the real-time factor: a text document, in a strip of its own above
+#: the arena, drawn in the theme's own text colour.
+CLOCK = 'clock'
+#: A live view's names, as tags (rerun_text): the labels' text stays in the recording (the
+#: balls' row, or LABELS), not shown.
+NAMES = 'arena/names'
 ENERGY = 'plots/energy_change'
 COLLISIONS = 'plots/collisions'
 MOMENTUM = 'plots/momentum'
@@ -129,11 +145,17 @@ LABEL_LIMIT = 30
 #: an impulse's label below the tail of its arrow goes a line further down, under the label
 #: of the ball it pushed.
 LABEL_LINE_FRACTION = 0.03
-#: Slate grey, for the clock line: 3.8:1 on the label boxes of both themes, the most one colour
-#: can have on both (docs/view.md); bluer than the walls' grey, so screenshots tell them apart.
-CLOCK_COLOR = (108, 120, 138)
-#: Room above the scene for the clock line, as a fraction of the view's larger side.
-CLOCK_FRACTION = 0.05
+#: Perceived lightness (OKLCH L) and chroma of a name's text on its tag: the ball's hue, light
+#: enough for TEXT_CONTRAST on the tag's dark fill.
+NAME_LIGHTNESS = 0.92
+NAME_CHROMA = 0.06
+#: Text of a push's tag (a light pink: the push arrow's hue) and of the ruler's.
+IMPULSE_TEXT_COLOR = (255, 208, 232)
+RULER_TEXT_COLOR = (230, 230, 230)
+#: Draw order of the names' tags (over the balls, the headings and the scans' hits) and of
+#: the pushes' (over everything).
+NAME_ORDER = 45.0
+IMPULSE_TAG_ORDER = 50.0
 #: A file's clock line is logged every this many simulated seconds (a view's every frame).
 FILE_CLOCK_SECONDS = 0.1
 
@@ -200,6 +222,11 @@ BALL_LIGHTNESS = 0.565
 BALL_CHROMA = 0.14
 
 
+#: What IMPULSES holds when no push is on screen.
+IMPULSES_CLEARED = (rr.Arrows2D.cleared(), rr.Points2D.cleared(), rr.Boxes2D.cleared(),
+                    rr.LineStrips2D.cleared())
+
+
 def ball_color(name):
     """A stable colour per ball name, kept when other balls come and go.
 
@@ -209,14 +236,29 @@ def ball_color(name):
     and against black: a ball and its label are seen on the viewer's light theme and on its
     dark one alike (light pastels vanished on the light one).
     """
+    return _oklch_color(BALL_LIGHTNESS, BALL_CHROMA, _hue(name))
+
+
+@functools.lru_cache(maxsize=4096)
+def name_color(name):
+    """The colour of a ball's name on its tag (a live view's, rerun_text): the ball's hue,
+    light (NAME_LIGHTNESS), so the name reads on the tag's dark fill on either theme."""
+    return _oklch_color(NAME_LIGHTNESS, NAME_CHROMA, _hue(name))
+
+
+def _hue(name):
+    """A ball's hue in turns: `ball_<i>` i times the golden ratio, any other name its CRC-32."""
     prefix, _, index = name.rpartition('_')
     if prefix == 'ball' and index.isdigit() and len(index) < 10:
-        hue = (int(index) * GOLDEN_RATIO_CONJUGATE) % 1.0
-    else:
-        hue = zlib.crc32(name.encode()) / 2**32
-    chroma = BALL_CHROMA
-    while True:  # the most colourful of this lightness and hue that sRGB can show
-        linear = _oklch_to_linear_srgb(BALL_LIGHTNESS, chroma, hue)
+        return (int(index) * GOLDEN_RATIO_CONJUGATE) % 1.0
+    return zlib.crc32(name.encode()) / 2**32
+
+
+def _oklch_color(lightness, chroma, hue):
+    """sRGB (0-255) of the most colourful colour of this lightness and hue, up to `chroma`,
+    that sRGB can show."""
+    while True:
+        linear = _oklch_to_linear_srgb(lightness, chroma, hue)
         if all(-1e-9 <= c <= 1.0 + 1e-9 for c in linear) or chroma <= 0.0:
             break
         chroma -= 0.005
@@ -299,10 +341,9 @@ def clock_text(record, rtf):
 
 
 def view_bounds(world):
-    """The arena view's bounds: the scene, room for the ruler's labels at the bottom and
-    the left (rerun_scale.padded), and a line for the clock at the top."""
-    xmin, ymin, xmax, ymax = padded(scene_bounds(world))
-    return (xmin, ymin, xmax, ymax + CLOCK_FRACTION * max(xmax - xmin, ymax - ymin))
+    """The arena view's bounds: the scene and room for the ruler's labels at the bottom and
+    the left (rerun_scale.padded)."""
+    return padded(scene_bounds(world))
 
 
 def expected_real_time_factor(parameters):
@@ -331,12 +372,15 @@ def blueprint(world, parameters=None, plot_seconds=None):
     the plots show only that much simulated time up to the time shown (a live view: what a
     viewer draws each frame stays bounded however long the run), else the whole run.
     """
-    # With room at the bottom and the left for the ruler's labels (rerun_scale), and at the
-    # top for the clock.
+    # With room at the bottom and the left for the ruler's labels (rerun_scale).
     xmin, ymin, xmax, ymax = (float(v) for v in view_bounds(world))
-    arena = rrb.Spatial2DView(
-        origin='/', contents=f'/{ARENA}/**', name='arena (+y up)',
-        visual_bounds=rrb.VisualBounds2D(x_range=[xmin, xmax], y_range=[-ymax, -ymin]))
+    arena = rrb.Vertical(
+        # The clock line: a text document is drawn in the theme's text colour.
+        rrb.TextDocumentView(origin=f'/{CLOCK}', name='clock'),
+        rrb.Spatial2DView(
+            origin='/', contents=f'/{ARENA}/**', name='arena (+y up)',
+            visual_bounds=rrb.VisualBounds2D(x_range=[xmin, xmax], y_range=[-ymax, -ymin])),
+        row_shares=[1, 12])
     window = {} if plot_seconds is None else {'time_ranges': rrb.VisibleTimeRange(
         SIM_TIME, start=rrb.TimeRangeBoundary.cursor_relative(seconds=-plot_seconds),
         end=rrb.TimeRangeBoundary.cursor_relative())}
@@ -515,8 +559,6 @@ class _Segment:
         inset = ARROW_INSET_FRACTION * self.span
         self.inside = (xmin + inset, ymin + inset, xmax - inset, ymax - inset)
         self.view = view_bounds(world)
-        # The clock line hangs below this point, centred, in the room above the scene.
-        self.clock_point = (0.5 * (xmin + xmax), self.view[3])
 
 
 class RerunSink:
@@ -690,7 +732,6 @@ class _Feed:
         self._clock_rows = []  # a file's clock lines not sent yet: (step, log ns, text)
         self._headroom = Headroom(VIEW_PLOT_SECONDS if self.live else None)
         self._headroom_rows = []  # (step, log ns, energy above, below, collisions above)
-        self._clock_looks = False  # a file's clock looks (colour, no radius) are logged
         self._impulses = []  # (expires log ns, origin, vector, label, label point) on screen
         #                      or due
         self._impulses_changed = False
@@ -738,7 +779,7 @@ class _Feed:
         self._emit('log', WALLS, rr.LineStrips2D(
             strips, radii=rr.Radius.ui_points(1.5), colors=WALL_COLOR, draw_order=20.0),
             static=self.live)
-        self._emit('log', IMPULSES, rr.Arrows2D.cleared(), rr.Points2D.cleared())
+        self._emit('log', IMPULSES, *IMPULSES_CLEARED)
         self._log_map(world)
         self._log_ruler(world)
 
@@ -778,9 +819,14 @@ class _Feed:
         self._emit('log', SCALE, rr.LineStrips2D(
             ticks, radii=rr.Radius.ui_points(1.0), colors=WALL_COLOR, draw_order=20.0),
             static=self.live)  # static for a view: a late page still has it
+        tags = Tags()
+        for point, text in zip(places.tolist(), texts):
+            rect, unit = tag_rect(point, text, self._labels.scale)
+            tags.add(text, rect, unit, RULER_TEXT_COLOR)
+        # The labels keep the text (not shown); the tags draw it (rerun_text).
         self._emit('log', SCALE_LABELS, rr.Points2D(
-            places, radii=0.0, labels=texts, show_labels=True, colors=WALL_COLOR),
-            static=self.live)
+            places, radii=0.0, labels=texts, show_labels=False, colors=WALL_COLOR),
+            *tags.layers(order=NAME_ORDER), static=self.live)
 
     def write_step(self, record):
         """Log the step if it is one to log; a file sends its buffer when it is full."""
@@ -819,7 +865,11 @@ class _Feed:
         bumpers = self._bumpers.update(record)
         if bumpers is not None:
             self._set_time(self._segment_base + record.step, record.log_time_ns)
-            self._emit('log', BUMPERS, bumpers[1] or rr.Arrows2D.cleared())
+            if bumpers[1] is None:
+                self._emit('log', BUMPERS, rr.Arrows2D.cleared(), rr.Boxes2D.cleared(),
+                           rr.LineStrips2D.cleared())
+            else:
+                self._emit('log', BUMPERS, bumpers[1], *self._bumper_tags(bumpers[1]))
 
     def flush(self):
         if self._opened and not self._closed:
@@ -1009,6 +1059,8 @@ class _Feed:
                 self._emit('log', LABELS, rr.Points2D.from_fields(
                     positions=points, labels=texts, colors=colors))
         self._emit('log', BALLS, *frame)
+        if labels is not None:
+            self._emit('log', NAMES, *self._name_tags(points, texts))
         self._log_clock(record, rtf)
         self._buffer_plots(record, rtf, step)
         now = self._frame_clock()
@@ -1044,20 +1096,38 @@ class _Feed:
         if self.live and self.velocities:
             looks.append(rr.Arrows2D.from_fields(colors=colors, draw_order=35.0))
         named = self._labelled or getattr(record, 'agents', None) is not None
+        # A view draws the names as tags (NAMES); the labels keep the text, not shown.
         if self._labels_in_row and named:
-            looks.append(rr.Arrows2D.from_fields(radii=0.0, show_labels=True))
+            looks.append(rr.Arrows2D.from_fields(radii=0.0, show_labels=False))
         self._emit('log', BALLS, *looks, static=self.live)
         if not self._labels_in_row and named:
-            self._emit('log', LABELS, rr.Points2D.from_fields(radii=0.0, show_labels=True),
-                       static=self.live)
+            self._emit('log', LABELS, rr.Points2D.from_fields(
+                radii=0.0, show_labels=not self.live), static=self.live)
+
+    def _bumper_tags(self, arrows):
+        """Each hit's label as a tag below its arrow's middle (rerun_text)."""
+        origins = np.asarray(arrows.origins.as_arrow_array().to_pylist(), dtype=np.float64)
+        vectors = np.asarray(arrows.vectors.as_arrow_array().to_pylist(), dtype=np.float64)
+        tags = Tags()
+        for point, text in zip((origins + 0.5 * vectors).tolist(),
+                               arrows.labels.as_arrow_array().to_pylist()):
+            rect, unit = tag_rect(point, text, self._labels.scale)
+            tags.add(text, rect, unit, BUMPER_TEXT_COLOR)
+        return tags.layers(order=IMPULSE_TAG_ORDER)
+
+    def _name_tags(self, points, texts):
+        """A view's names as tags (rerun_text) in their labels' boxes (rerun_labels)."""
+        tags = Tags()
+        scale = self._labels.scale
+        for point, text in zip(np.asarray(points, dtype=np.float64).tolist(), texts):
+            rect, unit = tag_rect(point, text, scale)
+            tags.add(text, rect, unit, name_color(text))
+        return tags.layers(order=NAME_ORDER)
 
     def _log_clock(self, record, rtf):
-        """A view's clock line: the simulated time and the real-time factor, as a line of
-        text above the scene (the real-time factor also has its plot; this says it at a
-        glance)."""
-        self._emit('log', CLOCK, rr.Points2D(
-            [self._segment.clock_point], radii=0.0, labels=[clock_text(record, rtf)],
-            show_labels=True, colors=CLOCK_COLOR))
+        """A view's clock line: the simulated time and the real-time factor, a text document
+        (the real-time factor also has its plot; this says it at a glance)."""
+        self._emit('log', CLOCK, rr.TextDocument(clock_text(record, rtf)))
 
     def _send_headroom(self):
         rows, self._headroom_rows = self._headroom_rows, []
@@ -1071,22 +1141,13 @@ class _Feed:
             scalars=np.asarray(collisions, dtype=np.float64)))
 
     def _send_clock(self):
-        """A file's clock lines since the last send, as columns; its looks once."""
+        """A file's clock lines since the last send, as columns."""
         rows, self._clock_rows = self._clock_rows, []
         if not rows:
             return
         steps, times, texts = zip(*rows)
-        if not self._clock_looks:
-            self._clock_looks = True
-            self._set_time(steps[0], times[0])
-            self._emit('log', CLOCK, rr.Points2D.from_fields(
-                radii=0.0, show_labels=True, colors=CLOCK_COLOR))
-        point = np.asarray([self._segment.clock_point], dtype=np.float32)
-        self._emit('send_columns', CLOCK, self._index(steps, times), [
-            rr.ComponentColumn(rr.Points2D.descriptor_positions(),
-                               rr.components.Position2DBatch(np.repeat(point, len(rows), 0))),
-            rr.ComponentColumn(rr.Points2D.descriptor_labels(),
-                               rr.components.TextBatch(list(texts)))])
+        self._emit('send_columns', CLOCK, self._index(steps, times),
+                   rr.TextDocument.columns(text=list(texts)))
 
     def _add_impulses(self, record):
         """Put the step's pushes on screen for IMPULSE_SECONDS from the step on.
@@ -1142,15 +1203,20 @@ class _Feed:
             return
         self._set_time(step, now)
         if not shown:
-            self._emit('log', IMPULSES, rr.Arrows2D.cleared(), rr.Points2D.cleared())
+            self._emit('log', IMPULSES, *IMPULSES_CLEARED)
             return
         arrows = rr.Arrows2D(
             origins=[i[1] for i in shown], vectors=[i[2] for i in shown],
             colors=IMPULSE_COLOR, radii=rr.Radius.ui_points(3.0), draw_order=40.0)
+        # The label's text is kept (not shown); a tag draws it (rerun_text).
         labels = rr.Points2D(
-            [i[4] for i in shown], radii=0.0, labels=[i[3] for i in shown], show_labels=True,
+            [i[4] for i in shown], radii=0.0, labels=[i[3] for i in shown], show_labels=False,
             colors=IMPULSE_COLOR)
-        self._emit('log', IMPULSES, arrows, labels)
+        tags = Tags()
+        for _, _, _, text, point in shown:
+            rect, unit = tag_rect(point, text, self._labels.scale)
+            tags.add(text, rect, unit, IMPULSE_TEXT_COLOR)
+        self._emit('log', IMPULSES, arrows, labels, *tags.layers(order=IMPULSE_TAG_ORDER))
 
     def _take_scans(self, record, agents):
         """Keep the step's scans, with where each was taken from, until they are logged."""

@@ -14,8 +14,9 @@ TICKS = 5
 #: scene's larger side.
 TICK_FRACTION = 0.012
 LABEL_FRACTION = 0.035
-#: Room added at the bottom and the left of the view for the labels, same unit.
-PAD_FRACTION = 0.07
+#: Room added at the bottom and the left of the view for the labels, same unit: their tags
+#: (rerun_text) hang below their points, a label box high in a view fitted into 600 pixels.
+PAD_FRACTION = 0.09
 
 
 def tick_step(span):
