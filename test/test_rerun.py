@@ -1180,13 +1180,18 @@ class InterruptAt:
         return self
 
 
+#: Steps logged (and held in the sink's buffers) before the step that is interrupted, each
+#: with a push on screen: the file must keep them all.
+BUFFERED = 4
+
+
 def test_an_interrupt_anywhere_in_logging_a_step_loses_no_buffered_step(tmp_path):
     """Every line of write_step (and what it calls in rerun_log) is interrupted in turn; the
     buffered steps before it must all reach the file, in columns of one length."""
 
     def logged_until_interrupt(n, path):
         simulation = Simulation({}, sinks=[RerunSink(path, velocities=True, trail_seconds=0.1)])
-        for _ in range(10):
+        for _ in range(BUFFERED):
             simulation.queue_impulse('ball_1', 0.01, 0.0)
             simulation.step(real_time_factor=1.0)
         tracer = InterruptAt(n)
@@ -1209,7 +1214,8 @@ def test_an_interrupt_anywhere_in_logging_a_step_loses_no_buffered_step(tmp_path
         logged_until_interrupt(n, path)
         _, content, _, _ = read(path)
         steps = sorted(content[(f'/{BALLS}', 'Points2D:positions')])
-        assert steps[:11] == list(range(11)), n  # every step buffered before the interrupt
+        # every step buffered before the interrupt
+        assert steps[:BUFFERED + 1] == list(range(BUFFERED + 1)), n
         for column in ((f'/{VELOCITIES}', 'Arrows2D:vectors'), (f'/{ENERGY}', 'Scalars:scalars'),
                        (f'/{MOMENTUM}', 'Scalars:scalars')):
             assert sorted(content[column]) == steps, (n, column)

@@ -13,8 +13,13 @@ text keeps TEXT_CONTRAST or more against TAG_COLOR on either theme.
 
 Glyphs are polylines on a grid: x from 0 to 4, the baseline at y 0, lower case 4 high,
 capitals and digits 6, descenders to -2, ADVANCE units from one character to the next.
-A character the font does not have is drawn as '?'.
+A character the font does not have is drawn as '?'. Each polyline is kept as its segments
+(strokes of two points): the SDK converts strips of one length from a single numpy array,
+but polylines of mixed lengths one by one in Python, which took 7 ms a step for the names of
+a 20-ball world.
 """
+import functools
+
 import numpy as np
 
 #: Advance from one character to the next, in glyph units.
@@ -117,22 +122,33 @@ _GLYPHS = {
 
 
 def _parse(spec):
-    return tuple(np.array([[float(v) for v in point.split(',')] for point in stroke.split()],
-                          dtype=np.float64)
-                 for stroke in spec.split('|') if stroke)
+    """A glyph's polylines ('x,y x,y|x,y ...') as an (n, 2, 2) array of segments (a lone point
+    as a segment of no length)."""
+    segments = []
+    for stroke in spec.split('|'):
+        points = [[float(v) for v in point.split(',')] for point in stroke.split()]
+        if len(points) == 1:
+            points = points * 2
+        segments.extend([a, b] for a, b in zip(points, points[1:]))
+    return np.array(segments, dtype=np.float64).reshape(-1, 2, 2)
 
 
 FONT = {char: _parse(spec) for char, spec in _GLYPHS.items()}
 
 
-def strokes(text):
-    """The text's strokes in glyph units from its left end on the baseline: a list of (k, 2)
-    polylines."""
-    out = []
-    for column, char in enumerate(text):
-        for stroke in FONT.get(char, FONT['?']):
-            out.append(stroke + (column * ADVANCE, 0.0))
+@functools.lru_cache(maxsize=4096)
+def _strokes(text):
+    glyphs = [FONT.get(char, FONT['?']) + (column * ADVANCE, 0.0)
+              for column, char in enumerate(text)]
+    out = np.concatenate(glyphs) if glyphs else np.zeros((0, 2, 2))
+    out.flags.writeable = False  # shared by every tag of the same text
     return out
+
+
+def strokes(text):
+    """The text's strokes in glyph units from its left end on the baseline: an (n, 2, 2)
+    array of segments (kept for each text: names repeat every step)."""
+    return _strokes(text)
 
 
 def width(text):
@@ -145,8 +161,8 @@ class Tags:
 
     def __init__(self):
         self.rects = []  # (xmin, ymin, xmax, ymax)
-        self.strips = []  # polylines, world coordinates
-        self.strip_colors = []  # (r, g, b) per strip
+        self.strips = []  # per tag, its (n, 2, 2) segments in world coordinates
+        self.strip_colors = []  # per tag, the (r, g, b) of its segments
 
     def add(self, text, rect, unit, color):
         """A tag filling rect (xmin, ymin, xmax, ymax), the text centred in it, glyph unit
@@ -155,9 +171,8 @@ class Tags:
         self.rects.append(rect)
         left = 0.5 * (xmin + xmax) - 0.5 * width(text) * unit
         baseline = 0.5 * (ymin + ymax) - 0.5 * (DESCENT + 6.0) * unit
-        for stroke in strokes(text):
-            self.strips.append((stroke * unit + (left, baseline)).astype(np.float32))
-            self.strip_colors.append(color)
+        self.strips.append(strokes(text) * unit + (left, baseline))
+        self.strip_colors.append(color)
 
     def layers(self, stroke_points=0.8, order=60.0):
         """[rr.Boxes2D of the pills, rr.LineStrips2D of the text]: the pills drawn at `order`,
@@ -169,11 +184,14 @@ class Tags:
         # A box of no size is not drawn: a tag narrower than high is a disc, just.
         half_length = np.maximum(0.5 * (rects[:, 2] - rects[:, 0]) - half_height,
                                  1e-3 * half_height)
-        colors = np.asarray(self.strip_colors, dtype=np.uint8).reshape(-1, 3)
+        counts = [len(segments) for segments in self.strips]
+        colors = np.repeat(np.asarray(self.strip_colors, dtype=np.uint8).reshape(-1, 3), counts,
+                           axis=0)
+        segments = (np.concatenate(self.strips) if self.strips else np.zeros((0, 2, 2)))
         return [rr.Boxes2D(centers=centres.astype(np.float32),
                            half_sizes=np.column_stack((half_length, np.zeros(len(rects))))
                            .astype(np.float32),
                            radii=half_height.astype(np.float32), colors=TAG_COLOR,
                            draw_order=order),
-                rr.LineStrips2D(self.strips, colors=colors,
+                rr.LineStrips2D(segments.astype(np.float32), colors=colors,
                                 radii=rr.Radius.ui_points(stroke_points), draw_order=order + 1.0)]
