@@ -250,20 +250,7 @@ def test_a_live_view_hides_its_labels_when_the_world_grows_past_the_limit():
     """A live feed's calls, recorded instead of sent: the labels ride in the balls' row (as
     arrows of length 0, their text kept but not shown), each drawn as a tag in its box
     (NAMES), and go when the balls outnumber LABEL_LIMIT."""
-    calls = []
-
-    class Recorder:
-        def call(self, name, *args, **kwargs):
-            calls.append((name, args, kwargs))
-
-        def flush(self):
-            pass
-
-        def close(self):
-            pass
-
-    clock = FakeClock()
-    feed = rerun_log._Feed(lambda stream, plan: Recorder(), frame_period=0.1, frame_clock=clock)
+    feed, calls, clock = recorded_view_feed()
     collector = Truth()
     Simulation({'random.count': 3}, sinks=[collector])
     world, _ = collector.segments[0]
@@ -608,6 +595,32 @@ class FakeClock:
 
     def __call__(self):
         return self.now
+
+
+class CallRecorder:
+    """An outlet that keeps the calls made on it instead of sending them."""
+
+    def __init__(self, calls):
+        self.calls = calls
+
+    def call(self, name, *args, **kwargs):
+        self.calls.append((name, args, kwargs))
+
+    def flush(self):
+        pass
+
+    def close(self):
+        pass
+
+
+def recorded_view_feed():
+    """(a live view's feed whose calls are kept, the calls, its FakeClock): a frame every
+    0.1 s of that clock."""
+    calls = []
+    clock = FakeClock()
+    feed = rerun_log._Feed(lambda stream, plan: CallRecorder(calls), frame_period=0.1,
+                           frame_clock=clock)
+    return feed, calls, clock
 
 
 def test_real_time_factor_is_over_the_last_second_and_shows_a_stall(tmp_path):

@@ -9,7 +9,7 @@ from ball_world_testing.harness import Truth
 import numpy as np
 import pytest
 import rerun as rr
-from test_rerun import FakeClock, read, shown_at
+from test_rerun import read, recorded_view_feed, shown_at
 
 from ball_world.core.lidar import hit_points
 from ball_world.recording import rerun_log
@@ -133,20 +133,7 @@ def test_a_live_view_draws_no_text_in_rerun_label_boxes():
     """A live feed's calls on a robot world with a push, recorded instead of sent: every
     label the view is sent is hidden (show_labels False where labels are), and every name
     is a tag (NAMES) in the ball's light hue."""
-    calls = []
-
-    class Recorder:
-        def call(self, name, *args, **kwargs):
-            calls.append((name, args, kwargs))
-
-        def flush(self):
-            pass
-
-        def close(self):
-            pass
-
-    clock = FakeClock()
-    feed = rerun_log._Feed(lambda stream, plan: Recorder(), frame_period=0.1, frame_clock=clock)
+    feed, calls, clock = recorded_view_feed()
     collector = Truth()
     simulation = Simulation(ROBOTS, sinks=[collector])
     simulation.command('ball_0', 0.8, 0.0, 1.0)
