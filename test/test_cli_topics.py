@@ -103,11 +103,12 @@ def test_drive_sends_the_type_the_agent_takes_and_a_zero_command_last(
 def test_drive_waiting_for_more_subscriptions_than_come_says_so_and_sends_nothing(
         world, probe):
     heard = probe.listen(Twist, f'{NAMESPACE}/ball_0/cmd_vel')
-    code, out, err = run_tool('ball_world_cli', '--ns', NAMESPACE, '--timeout', '3', 'drive',
+    # 8 s: the agent must be found first, and DDS discovery takes up to about 3 s here.
+    code, out, err = run_tool('ball_world_cli', '--ns', NAMESPACE, '--timeout', '8', 'drive',
                               'ball_0', '1', '0', '-w', '3')
     assert (code, out) == (1, '') and err == (
         f'ball_world_cli: {NAMESPACE}/ball_0/cmd_vel: fewer than the 3 subscriptions asked '
-        'for (-w) matched within 3 s\n'), err
+        'for (-w) matched within 8 s\n'), err
     assert heard == []
 
 
@@ -138,10 +139,11 @@ def test_echo_once_prints_the_message_as_yaml(world):
 
 
 def test_echo_once_of_a_silent_topic_says_so(world):
-    code, out, err = run_tool('ball_world_cli', '--ns', NAMESPACE, '--timeout', '2', 'echo',
+    # 8 s: the topic must be found first, and DDS discovery takes up to about 3 s here.
+    code, out, err = run_tool('ball_world_cli', '--ns', NAMESPACE, '--timeout', '8', 'echo',
                               'state', '--once')
     assert (code, out) == (1, '') and err == (
-        f'ball_world_cli: no message on {NAMESPACE}/state within 2 s (1 publisher; a paused '
+        f'ball_world_cli: no message on {NAMESPACE}/state within 8 s (1 publisher; a paused '
         'world publishes nothing: resume or step it)\n')
 
 
