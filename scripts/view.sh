@@ -12,4 +12,4 @@ if [ -n "${WORLD:-}" ]; then world=(--world "$WORLD"); fi
 # shellcheck disable=SC2086  # ARGS is meant to be split
 exec .venv/bin/ball_world_view "${world[@]}" --steps "${STEPS:-0}" \
   --grpc-port "${VIEW_GRPC_PORT:-9876}" --web-port "${VIEW_WEB_PORT:-9090}" \
-  --server-memory "${VIEW_SERVER_MEMORY:-128KiB}" --ros-args ${ARGS:-}
+  --server-memory "${VIEW_SERVER_MEMORY:-256KiB}" --ros-args ${ARGS:-}

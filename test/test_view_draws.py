@@ -251,3 +251,45 @@ def test_a_views_headroom_follows_the_last_seconds_it_shows():
     # 40 s later the first rows are out of the window.
     assert room.add(40 * 10**9, 0.0, 5.0) == (21.6, -1.6, 6.4)
     assert room.add(45 * 10**9, 0.0, 5.0) == (0.5, -0.5, 6.4)
+
+
+def test_a_live_view_draws_every_robots_latest_scan_in_one_entity():
+    """A view is sent all robots' scans as one entity (a software-rendered page takes in few
+    messages a second, whatever the number of robots): at each frame after a scan, the fans
+    of both robots from where each scanned; after one robot is deleted, only the other's."""
+    feed, calls, clock = recorded_view_feed()
+    collector = Truth()
+    simulation = Simulation(ROBOTS, sinks=[collector])
+    for _ in range(30):
+        simulation.step()
+    simulation.delete('ball_0')
+    for _ in range(30):
+        simulation.step()
+    simulation.close()
+    world, _ = collector.segments[0]
+    feed.start_segment(world, SimpleNamespace(parameters={}, log_offset_ns=0))
+    logged = []  # (ray origins of each scans call, the steps' latest scanners' positions)
+    latest = {}
+    for record in collector.records[1:]:
+        clock.now += 0.05
+        for scan in record.agents.scans:
+            row = record.agents.names.index(scan.name)
+            latest[scan.name] = tuple(np.float32(record.positions[record.agents.indices[row]]))
+        latest = {name: at for name, at in latest.items() if name in record.agents.names}
+        before = len(calls)
+        feed.write_step(record)
+        for name, args, _ in calls[before:]:
+            if name == 'log' and args[0].startswith(SCANS):
+                assert args[0] == SCANS
+                rays, hits = args[1], args[2]
+                assert isinstance(rays, rr.LineStrips2D) and isinstance(hits, rr.Points2D)
+                origins = {tuple(strip[0]) for strip in rays.strips.as_arrow_array().to_pylist()}
+                logged.append((origins, set(latest.values())))
+                assert len(hits.positions.as_arrow_array()) > 0
+    feed.close()
+    assert len(logged) >= 4
+    both = [origins for origins, _ in logged if len(origins) == 2]
+    alone = [origins for origins, _ in logged if len(origins) == 1]
+    assert both and alone  # both robots' fans, then ball_1's alone after ball_0 was deleted
+    for origins, expected in logged:
+        assert origins == {tuple(np.float32(v) for v in at) for at in expected}

@@ -24,7 +24,9 @@ Layout of the recording (application id 'ball_world'):
   the arena, in the theme's own text colour (every frame of a view, every
   FILE_CLOCK_SECONDS of a file).
 - `arena/scans/<agent>` (LineStrips2D, Points2D): each scan as a fan of rays from its robot
-  and its hit points (rerun_scans): a file every scan, a view the latest at each frame.
+  and its hit points (rerun_scans), in a file at every scan. A view draws every agent's
+  latest scan together at `arena/scans`, at each frame a new one came: one message however
+  many robots (a software-rendered page takes in few a second).
 - `arena/walls` (LineStrips2D), once per segment at its first step: not static in a file,
   because a reset may change the walls and static data would rewrite the earlier segments.
 - `arena/map` (a map's cells as a SegmentationImage under its origin and scale, rerun_map),
@@ -106,7 +108,8 @@ from ball_world.recording.rerun_labels import LabelPlacer, tag_rect
 from ball_world.recording.rerun_map import map_bounds, map_entities
 from ball_world.recording.rerun_outlet import new_stream, Outlet, OutletFailed, parse_view
 from ball_world.recording.rerun_scale import padded, ruler
-from ball_world.recording.rerun_scans import scan_layers, SCANS, VIEW_MAX_POINTS
+from ball_world.recording.rerun_scans import (scan_geometry, scan_layers, SCANS, view_layers,
+                                              VIEW_MAX_POINTS)
 from ball_world.recording.rerun_text import Tags
 from ball_world.step_record import PACKAGE_NAME
 
@@ -169,9 +172,12 @@ MAX_PENDING_POSITIONS = 500_000
 #: behind.
 VIEW_FPS = 10.0
 #: A view's SDK stream sends what it gathered this often: one chunk per entity holding
-#: several frames. The web viewer takes in about one message per frame it draws, and draws
-#: a few a second in software: its cost is per message more than per byte.
-VIEW_FLUSH_SECONDS = 0.5
+#: several frames. The web viewer ingests for a short while per frame it draws, and draws
+#: about one frame a second in software (Chromium's SwiftShader, 2 cores): what it takes in
+#: is counted in messages more than bytes. The demo at 0.5 s (12 chunks a second from the
+#: world, 10 from the tracks) left a page opened late further behind by 0.7 s every second;
+#: at 1 s it shows the present (docs/view.md, Screenshots and timings).
+VIEW_FLUSH_SECONDS = 1.0
 #: A view's plots show this much simulated time up to now...
 VIEW_PLOT_SECONDS = 30.0
 #: ...and are sent every this many seconds of wall time, as columns.
@@ -727,7 +733,9 @@ class _Feed:
         # A live view's labels are arrows of length 0 in the balls' row, unless the row's
         # arrows are the velocities (_log_balls).
         self._labels_in_row = self.live and not velocities
-        self._scans = {}  # agent name -> (scan, x, y, yaw): a view's scans for the next frame
+        self._scans = {}  # agent name -> (scan, x, y, yaw): a file's scans of the step
+        self._view_scans = {}  # a view's: agent name -> (rays, hits) of its latest scan
+        self._view_scans_new = False  # ...and one of them is not drawn yet
         self._clock_due = None  # a file's next clock line, log ns
         self._clock_rows = []  # a file's clock lines not sent yet: (step, log ns, text)
         self._headroom = Headroom(VIEW_PLOT_SECONDS if self.live else None)
@@ -758,6 +766,7 @@ class _Feed:
         self._segment = _Segment(world)
         self._labels = LabelPlacer(self._segment.view)
         self._scans = {}
+        self._forget_view_scans(())
         self._clock_due = None
         if not same:
             self._headroom.clear()
@@ -848,6 +857,8 @@ class _Feed:
         if pushed:
             self._add_impulses(record)
         agents = getattr(record, 'agents', None)
+        if self.live:
+            self._forget_view_scans(() if agents is None else agents.names)
         if agents is not None and agents.scans:
             self._take_scans(record, agents)
         if self.live:
@@ -966,8 +977,8 @@ class _Feed:
         if self.live:
             self._log_frame(record, rtf, step)
             self._show_impulses(step, record.log_time_ns)
-            if self._scans:
-                self._log_scans(step, record.log_time_ns)
+            if self._view_scans_new:
+                self._log_view_scans(step, record.log_time_ns)
             return
         self._buffer(record, rtf, step)
         if self._clock_due is None or record.log_time_ns >= self._clock_due:
@@ -1219,23 +1230,39 @@ class _Feed:
         self._emit('log', IMPULSES, arrows, labels, *tags.layers(order=IMPULSE_TAG_ORDER))
 
     def _take_scans(self, record, agents):
-        """Keep the step's scans, with where each was taken from, until they are logged."""
+        """Keep the step's scans, with where each was taken from, until they are logged (a
+        view: its agents' latest, as what it draws)."""
         rows = dict(zip(agents.names, zip(agents.indices, agents.yaws)))
         for scan in agents.scans:
             index, yaw = rows[scan.name]
             x, y = record.positions[index]
-            self._scans[scan.name] = (scan, float(x), float(y), float(yaw))
+            if self.live:
+                self._view_scans[scan.name] = scan_geometry(scan, float(x), float(y),
+                                                            float(yaw), VIEW_MAX_POINTS)
+                self._view_scans_new = True
+            else:
+                self._scans[scan.name] = (scan, float(x), float(y), float(yaw))
+
+    def _forget_view_scans(self, names):
+        """A view stops drawing the scans of agents not in `names` (deleted, or a reset)."""
+        gone = set(self._view_scans) - set(names)
+        for name in gone:
+            del self._view_scans[name]
+        self._view_scans_new = self._view_scans_new or bool(gone)
 
     def _log_scans(self, step, log_time_ns):
-        """Each kept scan as a fan of rays from its robot and its hit points (rerun_scans).
-
-        A file gets every scan at its step; a view the latest of each agent at its frames.
-        """
+        """A file's scans of this step, each as a fan of rays from its robot and its hit
+        points (rerun_scans), at arena/scans/<agent>."""
         self._set_time(step, log_time_ns)
         for name, (scan, x, y, yaw) in self._scans.items():
-            self._emit('log', f'{SCANS}/{name}', *scan_layers(
-                scan, x, y, yaw, VIEW_MAX_POINTS if self.live else None))
+            self._emit('log', f'{SCANS}/{name}', *scan_layers(scan, x, y, yaw))
         self._scans = {}
+
+    def _log_view_scans(self, step, log_time_ns):
+        """A view's frame: every agent's latest scan at arena/scans, together."""
+        self._set_time(step, log_time_ns)
+        self._emit('log', SCANS, *view_layers(self._view_scans.values()))
+        self._view_scans_new = False
 
     def _arrow(self, origin, dvx, dvy):
         """The velocity change times ARROW_SECONDS, its length clamped to the scene's size,

@@ -21,6 +21,7 @@ the stepping thread never waits on, and every wait on that thread is bounded:
 Each outlet has its own RecordingStream with the same application and recording id, so the
 file and the viewer hold one recording with the same content, and one can fail alone.
 """
+import ctypes
 import os
 from pathlib import Path
 import queue
@@ -46,7 +47,7 @@ CLOSE_TIMEOUT = 10.0
 MAX_QUEUED_CALLS = 256
 #: How often a step held back by a file's full queue looks whether its worker is stuck.
 QUEUE_POLL_SECONDS = 0.1
-#: Streams of failed outlets, never touched again and never destroyed before the process ends.
+#: Streams of failed outlets, never touched again and never destroyed (_keep_forever).
 _ABANDONED = []
 #: Longest wait for a viewer's port to accept the liveness probe.
 PROBE_TIMEOUT = 1.0
@@ -286,8 +287,8 @@ class Outlet:
             if call is None:
                 # A failed stream is left as it is: disconnecting one whose file writer
                 # died can abort the process (seen with rerun-sdk 0.41). It is kept alive
-                # here, so no destructor of it runs before the process ends.
-                _ABANDONED.append(self.stream)
+                # for good, so no destructor of it runs, not even at the process's end.
+                _keep_forever(self.stream)
                 return
             if self._error is not None:
                 continue
@@ -323,6 +324,18 @@ class Outlet:
     def _close(self):
         self.stream.flush(timeout_sec=FLUSH_TIMEOUT)
         self.stream.disconnect()
+
+
+def _keep_forever(stream):
+    """Keep the stream alive past the interpreter's teardown (one reference never given back).
+
+    When the interpreter ends, it clears module globals, so a list alone would let the stream
+    go: its __del__, and every other stream's, disconnects the SDK's orphaned recordings, and
+    disconnecting one whose file writer died waits forever (a test process, once in many
+    runs on a loaded machine, printed its last line and never exited).
+    """
+    _ABANDONED.append(stream)
+    ctypes.pythonapi.Py_IncRef(ctypes.py_object(stream))
 
 
 def _probe(address, reason):

@@ -10,7 +10,8 @@ import rerun as rr
 
 from ball_world.scans import hit_points
 
-#: Entity path of each agent's scan: arena/scans/<name>.
+#: Entity path of the scans: a file's each at arena/scans/<name>; a live view's all at
+#: arena/scans itself, one entity (one message per flush, whatever the number of robots).
 SCANS = 'arena/scans'
 #: Cyan: no ball has it; the hit points keep 3:1 on both viewer themes, the rays are faint.
 SCAN_COLOR = (0, 160, 220)
@@ -26,9 +27,10 @@ RAY_ORDER = 5.0
 HIT_ORDER = 35.0
 
 
-def scan_layers(scan, x, y, yaw, max_points=None):
-    """rr archetypes of one scan taken at (x, y) facing yaw: the rays and the hit points
-    (every return, or of every k-th beam so that at most max_points are drawn)."""
+def scan_geometry(scan, x, y, yaw, max_points=None):
+    """(rays (n, 2, 2), hits (m, 2)) float32 of one scan taken at (x, y) facing yaw: a ray
+    from the scanner along every k-th beam to its return (at most MAX_RAYS), and the hit
+    points (every return, or of every k-th beam so that at most max_points are drawn)."""
     every = 1 if max_points is None else max(1, -(-len(scan.ranges) // max_points))
     hits = hit_points(_every(scan, every), x, y, yaw).astype(np.float32)
     every = max(1, -(-len(scan.ranges) // MAX_RAYS))
@@ -36,10 +38,30 @@ def scan_layers(scan, x, y, yaw, max_points=None):
     rays = np.empty((len(ends), 2, 2), dtype=np.float32)
     rays[:, 0] = (x, y)
     rays[:, 1] = ends
+    return rays, hits
+
+
+def layers(rays, hits):
+    """rr archetypes of rays and hit points (of one scan or of several)."""
     return [rr.LineStrips2D(rays, radii=rr.Radius.ui_points(0.75),
                             colors=(*SCAN_COLOR, RAY_ALPHA), draw_order=RAY_ORDER),
             rr.Points2D(hits, radii=rr.Radius.ui_points(2.0), colors=SCAN_COLOR,
                         draw_order=HIT_ORDER)]
+
+
+def scan_layers(scan, x, y, yaw, max_points=None):
+    """rr archetypes of one scan (scan_geometry): the rays and the hit points."""
+    return layers(*scan_geometry(scan, x, y, yaw, max_points))
+
+
+def view_layers(geometries):
+    """rr archetypes of several scans' (rays, hits) drawn together (a live view's)."""
+    geometries = list(geometries)
+    rays = (np.concatenate([rays for rays, _ in geometries]) if geometries
+            else np.zeros((0, 2, 2), dtype=np.float32))
+    hits = (np.concatenate([hits for _, hits in geometries]) if geometries
+            else np.zeros((0, 2), dtype=np.float32))
+    return layers(rays, hits)
 
 
 def _every(scan, every):

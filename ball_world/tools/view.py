@@ -27,7 +27,7 @@ PROG = 'ball_world_view'
 DEFAULT_GRPC_PORT = 9876
 DEFAULT_WEB_PORT = 9090
 #: What the server keeps for pages opened later (see the module doc).
-SERVER_MEMORY = '128KiB'
+SERVER_MEMORY = '256KiB'
 #: Seconds of path drawn behind each ball.
 TRAIL_SECONDS = 1.0
 

@@ -20,7 +20,7 @@ import sys
 
 import numpy as np
 
-from ball_world.recording.rerun_log import APPLICATION_ID, SIM_TIME
+from ball_world.recording.rerun_log import APPLICATION_ID, SIM_TIME, VIEW_FLUSH_SECONDS
 
 PROG = 'ball_world_view_tracks'
 #: Where a tracker's tracks go in the view: under the arena's +y-up transform.
@@ -76,7 +76,7 @@ def _node_class():
             if not recording:
                 raise ValueError("parameter 'recording_id': give the world's view.recording_id")
             self.rr = rr
-            self.stream = new_stream(APPLICATION_ID, recording)
+            self.stream = new_stream(APPLICATION_ID, recording, flush_seconds=VIEW_FLUSH_SECONDS)
             self.view = view
             self.connected = False
             self.entity = f'{TRACKS}/{self.agent}'
