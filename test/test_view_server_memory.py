@@ -58,7 +58,8 @@ def world_parameters(name):
     return parameters
 
 
-@pytest.mark.parametrize('name', ['default', 'sandbox', 'depot'])
+@pytest.mark.parametrize('name', ['default'] + sorted(
+    path.stem for path in (ROOT / 'worlds').glob('*.yaml')))
 def test_a_views_statics_and_first_frame_fit_the_servers_memory(name, tmp_path):
     path = tmp_path / 'view.rrd'
 

@@ -8,8 +8,11 @@ program (tools/processes.py), so its ports are free again as soon as it has retu
 
 The server keeps only the last SERVER_MEMORY of what it relayed, for pages opened
 later: a web viewer rendering in software takes in a backlog slowly and shows nothing new
-meanwhile, so a page opened an hour in gets the last seconds, not the hour (the world logs
-the walls, the balls' looks and the layout static, which the server always keeps).
+meanwhile, so a page opened an hour in gets the last seconds, not the hour. The world logs
+the layout, the arena's flip, the map, the ruler and the balls' looks static; the server
+drops timed data first, but once none is left it drops the oldest static data too, so
+SERVER_MEMORY holds a world's statics (123-176 kB for the shipped worlds,
+test/test_view_server_memory.py) with room for the last second or two of frames.
 
     ball_world_view [--world FILE] [--steps N] [--ros-args -p NAME:=VALUE ...]
 """
@@ -86,7 +89,8 @@ def parser(prog=PROG, description=None):
     parser.add_argument('--grpc-port', type=int, default=DEFAULT_GRPC_PORT, metavar='PORT',
                         help=f'port of the stream the page reads (default {DEFAULT_GRPC_PORT})')
     parser.add_argument('--server-memory', default=SERVER_MEMORY, metavar='SIZE',
-                        help='what the server keeps for pages opened later '
+                        help='what the server keeps for pages opened later: the '
+                             "world's static data and the last frames "
                              f'(default {SERVER_MEMORY})')
     parser.add_argument('--log-dir', type=Path, default=Path('runs'), metavar='DIR',
                         help="where the server's log goes (default runs)")
