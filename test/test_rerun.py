@@ -1196,11 +1196,16 @@ class InterruptAt:
 #: Steps logged (and held in the sink's buffers) before the step that is interrupted, each
 #: with a push on screen: the file must keep them all.
 BUFFERED = 4
+#: The lines are interrupted in this many interleaved shares, each a test of its own, so that
+#: the suite's two workers share them (a few hundred runs of a sink, a minute in all).
+INTERRUPT_SHARES = 4
 
 
-def test_an_interrupt_anywhere_in_logging_a_step_loses_no_buffered_step(tmp_path):
-    """Every line of write_step (and what it calls in rerun_log) is interrupted in turn; the
-    buffered steps before it must all reach the file, in columns of one length."""
+@pytest.mark.parametrize('share', range(INTERRUPT_SHARES))
+def test_an_interrupt_anywhere_in_logging_a_step_loses_no_buffered_step(tmp_path, share):
+    """Every line of write_step (and what it calls in rerun_log) is interrupted in turn (this
+    test: every INTERRUPT_SHARES-th from line 1 + share); the buffered steps before it must
+    all reach the file, in columns of one length."""
 
     def logged_until_interrupt(n, path):
         simulation = Simulation({}, sinks=[RerunSink(path, velocities=True, trail_seconds=0.1)])
@@ -1222,7 +1227,7 @@ def test_an_interrupt_anywhere_in_logging_a_step_loses_no_buffered_step(tmp_path
 
     lines = logged_until_interrupt(None, tmp_path / 'whole.rrd')
     assert lines > 20
-    for n in range(1, lines + 1):
+    for n in range(1 + share, lines + 1, INTERRUPT_SHARES):
         path = tmp_path / f'cut_{n}.rrd'
         logged_until_interrupt(n, path)
         _, content, _, _ = read(path)
