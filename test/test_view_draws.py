@@ -293,3 +293,48 @@ def test_a_live_view_draws_every_robots_latest_scan_in_one_entity():
     assert both and alone  # both robots' fans, then ball_1's alone after ball_0 was deleted
     for origins, expected in logged:
         assert origins == {tuple(np.float32(v) for v in at) for at in expected}
+
+
+def test_a_live_view_keeps_a_push_on_screen_for_a_whole_flush_of_wall_time():
+    """A page is sent a chunk of frames every VIEW_FLUSH_SECONDS and draws its last frame: a
+    push whose half second of simulated time passes in a fifth of a second of wall time (a
+    world running fast) stays drawn until VIEW_EVENT_SECONDS of wall time have passed."""
+    feed, calls, clock = recorded_view_feed()
+    collector = Truth()
+    simulation = Simulation({'random.count': 4}, sinks=[collector])
+    simulation.queue_impulse('ball_1', 0.01, 0.0)
+    for _ in range(240):  # 2.4 s of wall time below
+        simulation.step()
+    simulation.close()
+    world, _ = collector.segments[0]
+    feed.start_segment(world, SimpleNamespace(parameters={}, log_offset_ns=0))
+    drawn_at = cleared_at = None
+    for record in collector.records[1:]:
+        clock.now += 0.01  # a step of 1/60 s in 0.01 s of wall time
+        before = len(calls)
+        feed.write_step(record)
+        for name, args, _ in calls[before:]:
+            if name != 'log' or args[0] != IMPULSES:
+                continue
+            if args[1] is rerun_log.IMPULSES_CLEARED[0]:
+                cleared_at = cleared_at if cleared_at is not None else clock.now
+            elif drawn_at is None:
+                drawn_at = clock.now
+    feed.close()
+    assert drawn_at is not None and cleared_at is not None
+    # Simulated time alone would have cleared it after 0.5 s / (1/60 s) steps = 0.3 s.
+    assert rerun_log.VIEW_EVENT_SECONDS <= cleared_at - drawn_at
+    assert cleared_at - drawn_at <= rerun_log.VIEW_EVENT_SECONDS + 0.1 + 1e-9  # a frame later
+
+
+def test_a_live_view_holds_a_bumper_hits_clear_for_a_whole_flush_of_wall_time():
+    feed, _, clock = recorded_view_feed()
+    arrows = object()
+    assert feed._view_bumpers(('log', arrows)) == ('log', arrows)
+    clock.now += 0.3
+    assert feed._view_bumpers(('clear', None)) is None  # held back
+    clock.now += rerun_log.VIEW_EVENT_SECONDS - 0.3 - 0.01
+    assert feed._view_bumpers(None) is None
+    clock.now += 0.02
+    assert feed._view_bumpers(None) == ('clear', None)
+    assert feed._view_bumpers(None) is None  # once

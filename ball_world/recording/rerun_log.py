@@ -178,6 +178,10 @@ VIEW_FPS = 10.0
 #: world, 10 from the tracks) left a page opened late further behind by 0.7 s every second;
 #: at 1 s it shows the present (docs/view.md, Screenshots and timings).
 VIEW_FLUSH_SECONDS = 1.0
+#: A live view keeps a push or a bumper hit on screen at least this long of wall time too: a
+#: page is sent a chunk of frames every VIEW_FLUSH_SECONDS and, following the present, draws
+#: the chunk's last frame, so an arrow shown for less could fall between two chunks' ends.
+VIEW_EVENT_SECONDS = VIEW_FLUSH_SECONDS + 0.25
 #: A view's plots show this much simulated time up to now...
 VIEW_PLOT_SECONDS = 30.0
 #: ...and are sent every this many seconds of wall time, as columns.
@@ -723,6 +727,8 @@ class _Feed:
         self._last_global = None  # step timeline of the last record seen (logged or not)
         self._unlogged = None  # the last record seen, when it was not logged
         self._bumpers = BumperView()
+        self._bumper_wall_until = -math.inf  # a view: a hit stays at least until then...
+        self._bumper_clear_due = False  # ...and its clear waits for it
         self._totals = np.zeros(2, dtype=np.int64)  # collisions since step 0 of the segment
         self._energy0 = None
         self._shown_names = None
@@ -740,7 +746,9 @@ class _Feed:
         self._clock_rows = []  # a file's clock lines not sent yet: (step, log ns, text)
         self._headroom = Headroom(VIEW_PLOT_SECONDS if self.live else None)
         self._headroom_rows = []  # (step, log ns, energy above, below, collisions above)
-        self._impulses = []  # (expires log ns, origin, vector, label, label point) on screen
+        # On screen: (expires log ns, origin, vector, label, label point, a view's wall-time
+        # expiry (VIEW_EVENT_SECONDS)).
+        self._impulses = []
         #                      or due
         self._impulses_changed = False
         self._trail = deque()  # (log ns, positions) of the trail's steps
@@ -873,7 +881,7 @@ class _Feed:
             self._unlogged = (record, rtf)
         if self._scans and not self.live:
             self._log_scans(self._segment_base + record.step, record.log_time_ns)
-        bumpers = self._bumpers.update(record)
+        bumpers = self._view_bumpers(self._bumpers.update(record))
         if bumpers is not None:
             self._set_time(self._segment_base + record.step, record.log_time_ns)
             if bumpers[1] is None:
@@ -1190,7 +1198,8 @@ class _Feed:
             vector = self._arrow(origin, impulse.jx / mass, impulse.jy / mass)
             self._impulses.append((now + round(IMPULSE_SECONDS * 1e9), origin, vector,
                                    f'{name}: J = ({impulse.jx:.3g}, {impulse.jy:.3g}) N s',
-                                   self._impulse_label_point(origin, vector, radius)))
+                                   self._impulse_label_point(origin, vector, radius),
+                                   self._wall_until()))
             self._impulses_changed = True
 
     def _impulse_label_point(self, origin, vector, radius):
@@ -1206,7 +1215,8 @@ class _Feed:
 
     def _show_impulses(self, step, now):
         """Re-log the arrows when one came or went since the last logged step."""
-        shown = [i for i in self._impulses if i[0] > now]
+        wall = self._frame_clock() if self.live else math.inf
+        shown = [i for i in self._impulses if i[0] > now or i[5] > wall]
         changed = self._impulses_changed or len(shown) != len(self._impulses)
         self._impulses = shown
         self._impulses_changed = False
@@ -1224,10 +1234,32 @@ class _Feed:
             [i[4] for i in shown], radii=0.0, labels=[i[3] for i in shown], show_labels=False,
             colors=IMPULSE_COLOR)
         tags = Tags()
-        for _, _, _, text, point in shown:
+        for _, _, _, text, point, _ in shown:
             rect, unit = tag_rect(point, text, self._labels.scale)
             tags.add(text, rect, unit, IMPULSE_TEXT_COLOR)
         self._emit('log', IMPULSES, arrows, labels, *tags.layers(order=IMPULSE_TAG_ORDER))
+
+    def _wall_until(self):
+        """When a view may take an arrow drawn now off the screen (VIEW_EVENT_SECONDS); a
+        file draws it for its simulated time only."""
+        return self._frame_clock() + VIEW_EVENT_SECONDS if self.live else -math.inf
+
+    def _view_bumpers(self, bumpers):
+        """What BUMPERS needs (BumperView.update), a clear held back in a view until its hit
+        has been on screen VIEW_EVENT_SECONDS of wall time."""
+        if not self.live:
+            return bumpers
+        if bumpers is not None and bumpers[1] is not None:
+            self._bumper_wall_until = self._wall_until()
+            self._bumper_clear_due = False
+            return bumpers
+        if bumpers is not None or self._bumper_clear_due:
+            if self._frame_clock() < self._bumper_wall_until:
+                self._bumper_clear_due = True
+                return None
+            self._bumper_clear_due = False
+            return 'clear', None
+        return None
 
     def _take_scans(self, record, agents):
         """Keep the step's scans, with where each was taken from, until they are logged (a
