@@ -746,10 +746,9 @@ class _Feed:
         self._clock_rows = []  # a file's clock lines not sent yet: (step, log ns, text)
         self._headroom = Headroom(VIEW_PLOT_SECONDS if self.live else None)
         self._headroom_rows = []  # (step, log ns, energy above, below, collisions above)
-        # On screen: (expires log ns, origin, vector, label, label point, a view's wall-time
-        # expiry (VIEW_EVENT_SECONDS)).
+        # On screen or due: (expires log ns, origin, vector, label, label point, a view's
+        # wall-time expiry (VIEW_EVENT_SECONDS)).
         self._impulses = []
-        #                      or due
         self._impulses_changed = False
         self._trail = deque()  # (log ns, positions) of the trail's steps
         self._map_files = None  # the files of the map logged (static), if any
