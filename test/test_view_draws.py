@@ -12,7 +12,7 @@ import rerun as rr
 from test_rerun import read, recorded_view_feed, shown_at
 
 from ball_world.core.lidar import hit_points
-from ball_world.recording import rerun_log
+from ball_world.recording import rerun_agents, rerun_log
 from ball_world.recording.rerun_agents import (AGENT_COLOR, AGENTS, BUMPER_TEXT_COLOR,
                                                BUMPER_VIEW_COLOR)
 from ball_world.recording.rerun_log import (CLOCK, COLLISIONS, COLLISIONS_HEADROOM, ENERGY,
@@ -327,14 +327,27 @@ def test_a_live_view_keeps_a_push_on_screen_for_a_whole_flush_of_wall_time():
     assert cleared_at - drawn_at <= rerun_log.VIEW_EVENT_SECONDS + 0.1 + 1e-9  # a frame later
 
 
-def test_a_live_view_holds_a_bumper_hits_clear_for_a_whole_flush_of_wall_time():
-    feed, _, clock = recorded_view_feed()
+def test_a_live_view_holds_a_bumper_hits_clear_for_a_whole_flush_of_wall_time(monkeypatch):
+    """A view's BumperView clears a hit once its simulated half second and VIEW_EVENT_SECONDS
+    of wall time have both passed (here the simulated time passes first)."""
     arrows = object()
-    assert feed._view_bumpers(('log', arrows)) == ('log', arrows)
+    monkeypatch.setattr(rerun_agents, 'bumper_arrows', lambda record: record.hit)
+    clock = SimpleNamespace(now=100.0)
+    bumpers = rerun_agents.BumperView(lambda: clock.now, rerun_log.VIEW_EVENT_SECONDS)
+
+    def at(seconds, hit=None, step=1):
+        return bumpers.update(SimpleNamespace(stamp_ns=round(seconds * 1e9), step=step, hit=hit))
+
+    assert at(0.0, arrows) == ('log', arrows)
     clock.now += 0.3
-    assert feed._view_bumpers(('clear', None)) is None  # held back
+    assert at(0.6) is None  # held back: BUMPER_SHOWN of simulated time is over, not the hold
     clock.now += rerun_log.VIEW_EVENT_SECONDS - 0.3 - 0.01
-    assert feed._view_bumpers(None) is None
+    assert at(0.7) is None
     clock.now += 0.02
-    assert feed._view_bumpers(None) == ('clear', None)
-    assert feed._view_bumpers(None) is None  # once
+    assert at(0.8) == ('clear', None)
+    assert at(0.9) is None  # once
+    # A reset (step 0, stamps from 0 again) ends a hit's simulated time; the hold still counts.
+    assert at(1.0, arrows) == ('log', arrows)
+    assert at(0.0, step=0) is None
+    clock.now += rerun_log.VIEW_EVENT_SECONDS
+    assert at(0.1) == ('clear', None)

@@ -81,19 +81,29 @@ def bumper_arrows(record):
 
 
 class BumperView:
-    """When to draw and clear the bumper arrows: a hit stays BUMPER_SHOWN simulated seconds."""
+    """When to draw and clear the bumper arrows: a hit stays BUMPER_SHOWN simulated seconds,
+    and, given a wall clock, `hold` seconds of its time too (a live view's page draws only the
+    last frame of each chunk it is sent)."""
 
-    def __init__(self):
+    def __init__(self, clock=None, hold=0.0):
         self.shown_until_ns = None
+        self.clock = clock
+        self.hold = hold
+        self.wall_until = None
 
     def update(self, record):
         """('log', Arrows2D), ('clear', None) or None: what BUMPERS needs at this record."""
         arrows = bumper_arrows(record)
         if arrows is not None:
             self.shown_until_ns = record.stamp_ns + round(BUMPER_SHOWN * 1e9)
+            self.wall_until = None if self.clock is None else self.clock() + self.hold
             return 'log', arrows
-        if self.shown_until_ns is not None and (record.stamp_ns >= self.shown_until_ns
-                                                or record.step == 0):
-            self.shown_until_ns = None
-            return 'clear', None
-        return None
+        if self.shown_until_ns is None:
+            return None
+        if record.step == 0:  # a reset: the hit's time is over, whatever the stamps say now
+            self.shown_until_ns = min(self.shown_until_ns, record.stamp_ns)
+        if record.stamp_ns < self.shown_until_ns or (
+                self.wall_until is not None and self.clock() < self.wall_until):
+            return None
+        self.shown_until_ns = self.wall_until = None
+        return 'clear', None

@@ -726,9 +726,8 @@ class _Feed:
         self._segment_base = 0  # value of the step timeline at step 0 of this segment
         self._last_global = None  # step timeline of the last record seen (logged or not)
         self._unlogged = None  # the last record seen, when it was not logged
-        self._bumpers = BumperView()
-        self._bumper_wall_until = -math.inf  # a view: a hit stays at least until then...
-        self._bumper_clear_due = False  # ...and its clear waits for it
+        self._bumpers = (BumperView(frame_clock, VIEW_EVENT_SECONDS) if self.live
+                         else BumperView())
         self._totals = np.zeros(2, dtype=np.int64)  # collisions since step 0 of the segment
         self._energy0 = None
         self._shown_names = None
@@ -864,8 +863,6 @@ class _Feed:
         if pushed:
             self._add_impulses(record)
         agents = getattr(record, 'agents', None)
-        if self.live:
-            self._forget_view_scans(() if agents is None else agents.names)
         if agents is not None and agents.scans:
             self._take_scans(record, agents)
         if self.live:
@@ -880,7 +877,7 @@ class _Feed:
             self._unlogged = (record, rtf)
         if self._scans and not self.live:
             self._log_scans(self._segment_base + record.step, record.log_time_ns)
-        bumpers = self._view_bumpers(self._bumpers.update(record))
+        bumpers = self._bumpers.update(record)
         if bumpers is not None:
             self._set_time(self._segment_base + record.step, record.log_time_ns)
             if bumpers[1] is None:
@@ -984,6 +981,8 @@ class _Feed:
         if self.live:
             self._log_frame(record, rtf, step)
             self._show_impulses(step, record.log_time_ns)
+            agents = getattr(record, 'agents', None)
+            self._forget_view_scans(() if agents is None else agents.names)
             if self._view_scans_new:
                 self._log_view_scans(step, record.log_time_ns)
             return
@@ -1242,23 +1241,6 @@ class _Feed:
         """When a view may take an arrow drawn now off the screen (VIEW_EVENT_SECONDS); a
         file draws it for its simulated time only."""
         return self._frame_clock() + VIEW_EVENT_SECONDS if self.live else -math.inf
-
-    def _view_bumpers(self, bumpers):
-        """What BUMPERS needs (BumperView.update), a clear held back in a view until its hit
-        has been on screen VIEW_EVENT_SECONDS of wall time."""
-        if not self.live:
-            return bumpers
-        if bumpers is not None and bumpers[1] is not None:
-            self._bumper_wall_until = self._wall_until()
-            self._bumper_clear_due = False
-            return bumpers
-        if bumpers is not None or self._bumper_clear_due:
-            if self._frame_clock() < self._bumper_wall_until:
-                self._bumper_clear_due = True
-                return None
-            self._bumper_clear_due = False
-            return 'clear', None
-        return None
 
     def _take_scans(self, record, agents):
         """Keep the step's scans, with where each was taken from, until they are logged (a
