@@ -786,6 +786,14 @@ class BallWorld(Node):
             f'recording to {type(sink).__name__} stopped: {failure.error}; the simulation '
             'goes on without it')
 
+    def destroy_node(self):
+        """Leave the graph now, the action server with the rest (see
+        SimulationInterfaces.destroy); a second call does nothing more."""
+        interfaces = getattr(self, 'interfaces', None)
+        if interfaces is not None:
+            interfaces.destroy()
+        super().destroy_node()
+
     def close(self):
         """Finish the recordings (called on every way out); say in all how far behind its
         schedule the node fell, if it did (the warnings while it ran are throttled).
