@@ -5,9 +5,10 @@ but not waitables such as the SimulateSteps action server, whose handle holds th
 through it, the context's. Until BallWorld.destroy_node destroyed the server itself, every
 world a process made and closed kept its Fast DDS participant (9 threads, discovering every
 later one) until a garbage collection found the cycle between server and node, and then it
-was torn down at that moment, on whatever thread ran the collection: a test worker crashed
-so (CI, 2026-12-02, in test_sim_interfaces). Counting the process's threads is how the
-participant is seen from here.
+was torn down at that moment, on whatever thread ran the collection. A CI test worker
+crashed (SIGSEGV) in test_sim_interfaces on 2026-12-02 with such participants alive; the
+crash was not reproduced here (24 runs of that file), and this is the fault found under it.
+Counting the process's threads is how a participant is seen from here.
 """
 import gc
 import os
