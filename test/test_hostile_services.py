@@ -5,6 +5,8 @@ counted from outside (its `stats` topic), so "the world kept stepping" means ste
 published while the request was being answered. Nothing here is timed: a loaded machine may
 make everything slow, never wrong.
 """
+import signal
+
 from ball_world_testing.harness import check_running, finish, node_command
 from geometry_msgs.msg import PoseStamped
 import pytest
@@ -209,6 +211,31 @@ def test_quitting_answers_the_goal_or_step_call_running(probe, node, how):
     assert 'the run ended after' in result.error_message
     code, _, err = finish(node)
     assert code == 0 and 'Traceback' not in err, err
+    client.destroy()
+
+
+@pytest.mark.parametrize('signal_number', [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize('how', ['goal', 'service'])
+def test_a_signal_during_a_goal_or_step_call_stops_the_node_quietly(probe, node, how,
+                                                                    signal_number):
+    """A signal shuts the context down while a call steps the world; the call's next step or
+    the goal's next feedback cannot be published. It used to print rclpy's traceback of the
+    goal's abort (itself a publication) and an ERROR line for the step call."""
+    assert probe.result(set_state(probe, SimulationState.STATE_PAUSED)).result.result == OK
+    client = ActionClient(probe.node, SimulateSteps, f'{NODE}/simulate_steps')
+    if how == 'goal':
+        probe.spin_until(client.server_is_ready, 'the action server')
+        assert probe.result(client.send_goal_async(SimulateSteps.Goal(steps=2**63))).accepted
+    else:
+        call_async(probe, StepSimulation, 'step_simulation',
+                   StepSimulation.Request(steps=2**63 - 1))
+    before = len(node.stats)
+    probe.spin_until(lambda: len(node.stats) > before + 20, 'the steps to run', process=node)
+    node.send_signal(signal_number)
+    code, out, err = finish(node)
+    assert code == 0, err
+    assert 'Traceback' not in err and '[ERROR]' not in err + out, err
+    assert 'Failed to publish' not in err, err
     client.destroy()
 
 

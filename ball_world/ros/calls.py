@@ -49,6 +49,20 @@ class _NextTurn:
         yield
 
 
+class Stranded:
+    """Awaiting it never ends (each turn of the executor it yields again).
+
+    For a goal whose node lost its context (Ctrl-C, SIGTERM, rclpy.shutdown) while it ran:
+    feedback, the result and every change of the goal's state are published, and nothing can
+    be published any more, so rclpy's own handling (abort, with a traceback) would fail too.
+    The goal is left where it is and ends with the process; its client sees the server go.
+    """
+
+    def __await__(self):
+        while True:
+            yield
+
+
 def describe(error):
     """One bounded line for an exception, even one whose str() itself fails."""
     try:
@@ -106,7 +120,8 @@ class Calls:
 
     def _crashed(self, name, response, error):
         line = f'{name}: the request failed with {describe(error)}'
-        self.node.get_logger().error(line)
+        if self.node.context.ok():  # else it failed because the node is going: no answer
+            self.node.get_logger().error(line)  # can be sent, and no log line published
         return self._failed(name, response, line)
 
     @staticmethod

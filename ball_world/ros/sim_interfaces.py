@@ -49,7 +49,7 @@ from std_msgs.msg import Header
 from ball_world.core import edits
 from ball_world.core.name_filter import FilterRefused, NameFilter
 from ball_world.core.parameters import number_text
-from ball_world.ros.calls import _NextTurn, Calls, describe, SERVICE_QOS
+from ball_world.ros.calls import _NextTurn, Calls, describe, SERVICE_QOS, Stranded
 from ball_world.simulation import SpawnRequest
 
 _F = SimulatorFeatures
@@ -649,7 +649,7 @@ class SimulationInterfaces:
         try:
             while done < steps:
                 for _ in range(min(STEPS_PER_TURN, steps - done)):
-                    if node.finished:
+                    if node.finished or not node.context.ok():  # quitting, or a signal
                         return done, _result(Result.RESULT_OPERATION_FAILED,
                                              f'the run ended after {done} of {steps} steps')
                     node.step_once()
@@ -685,6 +685,8 @@ class SimulationInterfaces:
         try:
             return await self._simulate_steps(goal_handle)
         except Exception as error:  # noqa: B902 - no goal may end the node
+            if not self.node.context.ok():  # it failed because nothing can be sent now
+                await Stranded()
             line = f'{ACTION}: the goal failed with {describe(error)}'
             self.node.get_logger().error(line)
             if goal_handle.is_active:
@@ -702,6 +704,8 @@ class SimulationInterfaces:
 
         done, result = await self._step(steps, feedback,
                                         lambda: goal_handle.is_cancel_requested)
+        if not self.node.context.ok():
+            await Stranded()
         answer = SimulateSteps.Result()
         if result is None:
             goal_handle.canceled()
