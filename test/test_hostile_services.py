@@ -262,12 +262,21 @@ class _Logger:
         self.lines.append(line)
 
 
-class _Node:
-    """What ros.calls needs of a node: a logger, `finished` and wake()."""
+class _Context:
+    def __init__(self, up):
+        self.up = up
 
-    def __init__(self):
+    def ok(self):
+        return self.up
+
+
+class _Node:
+    """What ros.calls needs of a node: a logger, `finished`, its context and wake()."""
+
+    def __init__(self, context_up=True):
         self.logger = _Logger()
         self.finished = False
+        self.context = _Context(context_up)
 
     def get_logger(self):
         return self.logger
@@ -310,3 +319,18 @@ def test_any_exception_of_a_callback_is_one_bounded_answer_and_one_log_line(erro
         assert len(answer.result.error_message) < 300
         assert node.logger.lines == [answer.result.error_message]
         calls.sender.close()
+
+
+def test_a_callback_failing_because_the_node_is_going_is_answered_without_a_log_line():
+    """After a signal the context is down: the answer cannot be sent and a log line cannot
+    be published (rcl would print an error of its own for it)."""
+    def publishes(request, response):
+        raise RuntimeError("Failed to publish: publisher's context is invalid")
+
+    node = _Node(context_up=False)
+    calls = Calls(node)
+    answer = calls.guarded('step_simulation', publishes)(StepSimulation.Request(),
+                                                         StepSimulation.Response())
+    assert answer.result.result == Result.RESULT_OPERATION_FAILED
+    assert node.logger.lines == []
+    calls.sender.close()
