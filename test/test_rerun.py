@@ -1204,7 +1204,7 @@ class InterruptAt:
 #: with a push on screen: the file must keep them all.
 BUFFERED = 4
 #: The lines are interrupted in this many interleaved shares, each a test of its own, so that
-#: the suite's two workers share them (a few hundred runs of a sink, a minute in all).
+#: the suite's workers share them (a few hundred runs of a sink, a minute in all).
 INTERRUPT_SHARES = 4
 
 
