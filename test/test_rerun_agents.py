@@ -1,4 +1,4 @@
-"""Rerun draws each agent's heading as an arrow from its centre, its name among the labels."""
+"""Rerun draws each agent's heading as an arrow out of its disc, its name among the labels."""
 import math
 
 import numpy as np
@@ -34,8 +34,11 @@ def test_an_agent_is_drawn_with_its_heading_and_name(tmp_path):
         [vector] = shown_at(vectors, step)
         assert vector == pytest.approx([HEADING_RADII * radius * math.cos(yaw),
                                         HEADING_RADII * radius * math.sin(yaw)], rel=1e-6)
-        assert shown_at(origins, step) == np.asarray(record.positions[2:3],
-                                                     dtype=np.float32).tolist()
+        # from the edge of the disc, never over it (where it had 1.5:1 against the disc)
+        [origin] = shown_at(origins, step)
+        edge = np.asarray(record.positions[2]) + radius * np.array([math.cos(yaw),
+                                                                    math.sin(yaw)])
+        assert origin == pytest.approx(edge.tolist(), rel=1e-6)
         assert shown_at(labels, step)[0] == 'ball_2'  # agents are named first
 
 

@@ -3,12 +3,14 @@ the balls' names, rerun_labels), and each bumper hit (<name>/bumper) as an arrow
 agent's centre along the impulse.
 
 A module of its own so rerun_log.py only calls it: an agent is a ball (drawn with the
-balls) plus its heading arrow, from its centre, HEADING_RADII of its radius long, so the
-heading reads at any zoom that shows the ball. A hit's arrow (BUMPERS) points along the
-impulse the agent took, in the world (the message holds it in base_link; turned back by the
-heading), its length the velocity change times BUMPER_SECONDS but at least BUMPER_MIN_RADII
-radii, labelled with the agent and the impulse in N s; BumperView keeps it on screen for
-BUMPER_SHOWN seconds of simulated time, since one step is too short to see.
+balls) plus its heading arrow, from the edge of its disc outwards, HEADING_RADII of its
+radius long, so the heading reads at any zoom that shows the ball. Not from the centre: over
+the robot's own disc the orange had 1.5:1 against it, off it 4.3-4.6:1 on both themes.
+A hit's arrow (BUMPERS) points along the impulse the agent took, in the world (the message
+holds it in base_link; turned back by the heading), its length the velocity change times
+BUMPER_SECONDS but at least BUMPER_MIN_RADII radii, labelled with the agent and the impulse
+in N s; BumperView keeps it on screen for BUMPER_SHOWN seconds of simulated time, since one
+step is too short to see.
 """
 import numpy as np
 import rerun as rr
@@ -40,12 +42,14 @@ def heading_arrows(record):
         return None
     indices = frame.indices
     radii = getattr(record, 'radii', None)
-    lengths = (np.asarray(radii, dtype=np.float64)[indices] * HEADING_RADII
-               if radii is not None else np.full(len(indices), DEFAULT_LENGTH))
-    vectors = np.stack((np.cos(frame.yaws), np.sin(frame.yaws)), axis=1) * lengths[:, None]
-    return rr.Arrows2D(origins=np.asarray(record.positions, dtype=np.float64)[indices],
-                       vectors=vectors, colors=AGENT_COLOR, radii=rr.Radius.ui_points(2.5),
-                       draw_order=35.0)
+    own = (np.asarray(radii, dtype=np.float64)[indices] if radii is not None
+           else np.zeros(len(indices)))  # without radii: from the centre
+    lengths = own * HEADING_RADII if radii is not None else np.full(len(indices),
+                                                                    DEFAULT_LENGTH)
+    headings = np.stack((np.cos(frame.yaws), np.sin(frame.yaws)), axis=1)
+    origins = np.asarray(record.positions, dtype=np.float64)[indices] + headings * own[:, None]
+    return rr.Arrows2D(origins=origins, vectors=headings * lengths[:, None], colors=AGENT_COLOR,
+                       radii=rr.Radius.ui_points(2.5), draw_order=35.0)
 
 
 def bumper_arrows(record):
