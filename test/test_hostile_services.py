@@ -7,7 +7,7 @@ make everything slow, never wrong.
 """
 import signal
 
-from ball_world_testing.harness import check_running, finish, node_command
+from ball_world_testing.harness import check_running, executable, finish, node_command, start
 from geometry_msgs.msg import PoseStamped
 import pytest
 from rclpy.action import ActionClient
@@ -237,6 +237,24 @@ def test_a_signal_during_a_goal_or_step_call_stops_the_node_quietly(probe, node,
     assert 'Traceback' not in err and '[ERROR]' not in err + out, err
     assert 'Failed to publish' not in err, err
     client.destroy()
+
+
+def test_simulate_says_how_far_it_got_when_the_world_stops_under_it(probe, node):
+    """ball_world_cli simulate, the world stopped by SIGINT mid-goal (a goal it cannot answer
+    any more): the CLI gives up after --timeout without a step, saying after how many (it
+    used to say the count of when it began waiting: 1)."""
+    assert probe.result(set_state(probe, SimulationState.STATE_PAUSED)).result.result == OK
+    client = start([executable('ball_world_cli'), '--timeout', '3', 'simulate', str(10**9)])
+    before = len(node.stats)
+    probe.spin_until(lambda: len(node.stats) > before + 250, 'the goal to step', process=node)
+    node.send_signal(signal.SIGINT)
+    assert finish(node)[0] == 0
+    code, out, err = finish(client)
+    assert code == 1 and 'Traceback' not in err, (out, err)
+    [line] = err.splitlines()
+    assert line.startswith('ball_world_cli: simulate: no step done for 3 s (after '), line
+    done = int(line.split('(after ')[1].split(' of ')[0])
+    assert done >= 200 and line.endswith(f'of {10**9}): did the world stop?'), line
 
 
 def test_spawnables_echo_a_bounded_remark_and_control_characters_are_no_names(probe, node):

@@ -641,8 +641,9 @@ def simulate(client, args):
                 print_report(f'{progress[0]} of {args.steps} steps')
             return finished.done()
 
-        client.wait(done, f'simulate: no step done for {client.timeout:g} s (after '
-                          f'{progress[0]} of {args.steps})', progress=lambda: progress[0])
+        client.wait(done, lambda: f'simulate: no step done for {client.timeout:g} s (after '
+                                  f'{progress[0]} of {args.steps}): did the world stop?',
+                    progress=lambda: progress[0])
         _checked(finished.result().result, 'simulate')
     except KeyboardInterrupt:
         # Cancel the goal, so the world does not go on stepping for nobody.

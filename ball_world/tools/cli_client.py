@@ -233,8 +233,9 @@ class Client:
 
     def wait(self, predicate, what, timeout=None, progress=None):
         """Spin until predicate() holds; Failure(what) after `timeout` s (default --timeout)
-        without it. progress(): a value that changes while the world works on the request
-        (steps done): each change gives the wait `timeout` s more."""
+        without it (`what` may be a function, called then: a message of the state at the
+        end). progress(): a value that changes while the world works on the request (steps
+        done): each change gives the wait `timeout` s more."""
         limit = self.timeout if timeout is None else timeout
         deadline = time.monotonic() + limit
         last = progress() if progress is not None else None
@@ -244,7 +245,7 @@ class Client:
                 if now != last:
                     last, deadline = now, time.monotonic() + limit
             if time.monotonic() > deadline:
-                raise Failure(what)
+                raise Failure(what() if callable(what) else what)
             self.spin(0.05)
 
     def no_world(self, name):
