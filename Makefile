@@ -38,11 +38,10 @@ view: setup-run
 demo: setup-run
 	@set -f; $(VENV)/bin/ball_world_demo $(if $(WORLD),--world '$(WORLD)') --ros-args $(ARGS)
 
-# Three pytest workers on two cores: most tests wait (for processes to start, DDS discovery,
-# simulated time), so two workers kept the cores about 60% busy (load 1.2): 563 s with two,
-# 453 s with three, measured one after the other on 2026-12-03 (docs/performance.md).
+# Two pytest workers: three were faster (453 s against 563 s) but, with DDS discovery slower
+# under the load, one run of three had two tests wait out their deadline (docs/performance.md).
 test: setup
-	$(VENV)/bin/python -m pytest -q -n 3 test
+	$(VENV)/bin/python -m pytest -q -n 2 test
 
 bench: setup
 	$(VENV)/bin/python -m benchmarks.bench $(ARGS)
