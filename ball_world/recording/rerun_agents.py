@@ -42,10 +42,12 @@ def heading_arrows(record):
         return None
     indices = frame.indices
     radii = getattr(record, 'radii', None)
-    own = (np.asarray(radii, dtype=np.float64)[indices] if radii is not None
-           else np.zeros(len(indices)))  # without radii: from the centre
-    lengths = own * HEADING_RADII if radii is not None else np.full(len(indices),
-                                                                    DEFAULT_LENGTH)
+    if radii is None:  # no disc to start from: from the centre, a fixed length
+        own = np.zeros(len(indices))
+        lengths = np.full(len(indices), DEFAULT_LENGTH)
+    else:
+        own = np.asarray(radii, dtype=np.float64)[indices]
+        lengths = own * HEADING_RADII
     headings = np.stack((np.cos(frame.yaws), np.sin(frame.yaws)), axis=1)
     origins = np.asarray(record.positions, dtype=np.float64)[indices] + headings * own[:, None]
     return rr.Arrows2D(origins=origins, vectors=headings * lengths[:, None], colors=AGENT_COLOR,
