@@ -216,7 +216,9 @@ def test_stalled_and_vanished_subscribers_never_block_stepping(probes, processes
     vanishing = probes('vanishing')  # destroyed mid-run, the orderly way
     vanishing_steps = listen(vanishing)
     control = probes('control')
+    control_steps = listen(control)  # matched now: a reader that joins later may wait long
     vanishing.spin_until(lambda: vanishing_steps, 'the first step', DISCOVERY_TIMEOUT, process)
+    control.spin_until(lambda: control_steps, 'the first step', DISCOVERY_TIMEOUT, process)
     deadline = time.monotonic() + DISCOVERY_TIMEOUT
     while min(stalled.subscription.get_publisher_count(),
               hoarding.subscription.get_publisher_count()) == 0:
@@ -225,13 +227,19 @@ def test_stalled_and_vanished_subscribers_never_block_stepping(probes, processes
     frozen.send_signal(signal.SIGSTOP)
     vanished.send_signal(signal.SIGKILL)
     try:
-        max_steps = vanishing_steps[-1] + 500
-        control.set_parameters('ball_world', {'max_steps': max_steps, 'rate_hz': 0.0})
+        # As fast as it can, with no end yet: the end is set once a reader has left mid-run (a
+        # max_steps set now could be reached before this process had heard a few steps).
+        control.set_parameters('ball_world', {'rate_hz': 0.0})
         seen = len(vanishing_steps)
         vanishing.spin_until(lambda: len(vanishing_steps) > seen + 5, f'step {seen + 5}',
                              DISCOVERY_TIMEOUT, process)
         vanishing.node.destroy_subscription(vanishing_steps.subscription)
         vanishing.close()
+        left_at = max(vanishing_steps)
+        control.spin_until(lambda: control_steps[-1] > left_at + 5,
+                           'five steps after a reader left', DISCOVERY_TIMEOUT, process)
+        max_steps = control_steps[-1] + 500  # the node may be past it: it stops at once then
+        control.set_parameters('ball_world', {'max_steps': max_steps})
         code, _, err = finish(process, EXIT_TIMEOUT)
     finally:
         frozen.send_signal(signal.SIGCONT)

@@ -35,3 +35,13 @@ def test_an_error_while_rclpy_finishes_a_signals_shutdown_is_a_stop(context):
     with stopped_by_signal():
         raise RuntimeError("Unable to convert call argument '0' to Python object")
     assert not rclpy.ok()
+
+
+def test_ctrl_c_waits_for_rclpy_to_take_the_context_down(context):
+    # Python raises KeyboardInterrupt in the main thread while rclpy's signal thread is still
+    # shutting the context down: what runs after the loop must see it down, or a line logged
+    # there goes to a /rosout publisher that is invalid by the time it publishes.
+    threading.Timer(0.2, rclpy.try_shutdown).start()
+    with stopped_by_signal():
+        raise KeyboardInterrupt()
+    assert not rclpy.ok()

@@ -7,7 +7,10 @@ RuntimeError ("Unable to convert call argument '0'") when the interrupt lands in
 message's Python constructor. rclpy shuts its contexts down on a thread of its own after the
 signal, so at that instant `rclpy.ok()` may still say True: such an error counts as a stop if
 the context goes down within a short grace; with the context still valid after it, it is a
-real error and goes on up.
+real error and goes on up. KeyboardInterrupt itself can come first, too: the loop waits for
+the shutdown before it lets the program go on, so that what runs after it (closing the
+recordings, a last word logged) sees the context as it will be and never logs through a
+/rosout publisher that goes invalid mid-call.
 """
 import contextlib
 import time
@@ -24,7 +27,9 @@ def stopped_by_signal():
     """Run the spin loop inside this: a stop by signal ends it quietly."""
     try:
         yield
-    except (KeyboardInterrupt, ExternalShutdownException):
+    except KeyboardInterrupt:
+        _shutting_down(SHUTDOWN_GRACE)  # rclpy's own thread may not have finished yet
+    except ExternalShutdownException:
         pass
     except Exception:  # noqa: B902 - whatever the interrupted call raises
         if not _shutting_down(SHUTDOWN_GRACE):
