@@ -230,7 +230,11 @@ class Probe:
         self.timeout = timeout
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=domain_id)
-        self.node = rclpy.create_node(name, namespace=namespace, context=self.context)
+        # No /rosout publisher: rcl keeps those in one table per process, keyed by node name
+        # and not thread-safe, and a test worker makes hundreds of nodes named alike, each in
+        # a context of its own; a probe logs nothing a test reads from /rosout.
+        self.node = rclpy.create_node(name, namespace=namespace, context=self.context,
+                                      enable_rosout=False)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._nodes = [self.node]
@@ -328,7 +332,8 @@ class InProcessWorld:
         self.probe = Probe()
         overrides = [Parameter(name, value=value) for name, value in parameters.items()]
         self.node = self.probe.add_node(BallWorld(context=self.probe.context,
-                                                  parameter_overrides=overrides))
+                                                  parameter_overrides=overrides,
+                                                  enable_rosout=False))  # as a probe's
         self.executor = self.probe.executor
         self.balls = self.probe.listen(PoseArray, 'balls')
         self.states = self.probe.listen(Float64MultiArray, 'state')
