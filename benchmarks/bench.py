@@ -28,7 +28,7 @@ import sys
 import tempfile
 import time
 
-from benchmarks import agents as agents_speed, exact_speed, lidar_speed
+from benchmarks import agents as agents_speed, exact_speed, lidar_speed, step_compare
 from benchmarks.scenes import (AREA_FRACTION, box_side, DT, escaped, FRAME_ID, many_walls_world,
                                MASS, OurEngine, RADIUS, radius_spread_world, Scene, SPEED)
 import numpy as np
@@ -467,6 +467,18 @@ def markdown(results, args, pymunk, allocator, command):
                   f'{exact_warm_up(args)} untimed steps. Equal disks of r = '
                   f'{exact_speed.RADIUS} m on a jittered lattice, all at one speed; targets '
                   'from issue 14.']
+    if results.get('compare'):
+        lines += ['', f'## The box step against the step before the static index '
+                  f'({step_compare.BEFORE})', '',
+                  '| N | before (steps/s) | now (steps/s) | now / before | trajectories |',
+                  '|---:|---:|---:|---:|---|',
+                  *[f'| {n:,} | {old:,.1f} | {new:,.1f} | {ratio:.3f} | '
+                    f'{"equal" if same else "DIFFER"} |'
+                    for n, old, new, ratio, same in results['compare']], '',
+                  f'Numba backend, the scene above; each package in a child process of its '
+                  f'own, {args.compare_rounds} alternating rounds of {args.seconds:g} s of CPU '
+                  'time, medians; trajectories: the SHA-256 of both after '
+                  f'{step_compare.CHECK_STEPS} steps (`benchmarks/step_compare.py`).']
     if results.get('scan'):
         lines += ['', '## Lidar: one 360-beam scan beside one physics step (median)', '',
                   lidar_speed.HEADER, *results['scan'], '', lidar_speed.NOTE]
@@ -612,6 +624,12 @@ def parse_args(argv):
     parser.add_argument('--agents-n', type=int, nargs='*', default=[10000],
                         help='N of the per-step cost of 0, 10 and 100 agents (default 10000; '
                              'none to skip)')
+    parser.add_argument('--compare-n', type=int, nargs='*', default=[1000, 10000, 100000],
+                        help='N of the box step against the step before the static index '
+                             f'({step_compare.BEFORE}, side by side: benchmarks/step_compare.py'
+                             '; default 1000 10000 100000; none to skip)')
+    parser.add_argument('--compare-rounds', type=int, default=7,
+                        help='alternating rounds of that comparison (default 7)')
     parser.add_argument('--no-exact', action='store_true',
                         help='do not time exact mode beside seed mode')
     parser.add_argument('--no-extras', action='store_true',
@@ -644,6 +662,7 @@ def parse_args(argv):
         args.n, args.repeats, args.seconds, args.warmup_steps = [100, 300], 2, 0.05, 20
         args.energy_n, args.energy_steps, args.cdr_poses, args.budget_n = 300, 500, 1000, [300]
         args.exact_n, args.scan_n, args.agents_n = [300], [300], [300]
+        args.compare_n = []  # it compiles a second package's kernels
     if (any(n < 1 for n in args.n) or args.repeats < 1 or args.seconds <= 0.0
             or args.warmup_steps < 0):
         parser.error('--n values and --repeats must be >= 1, --seconds > 0 and '
@@ -711,6 +730,11 @@ def main(argv=None):
         allocator = 'not tuned (not glibc, or mallopt refused)'
     pymunk = _import_pymunk()
     results = run_engines(args, pymunk)
+    if args.compare_n and numba_installed():
+        results['compare'] = step_compare.compare(
+            args.compare_n, args.compare_rounds, args.seconds,
+            out=lambda line: print(f'box step against {step_compare.BEFORE}: {line}',
+                                   flush=True))
     if not args.no_exact and numba_installed():
         results['exact'] = []
         for line in exact_speed.rows(args.exact_n, args.repeats, args.seconds / 2,

@@ -219,6 +219,49 @@ def test_many_oblique_walls_unequal_masses_and_impulses_stay_identical():
     assert totals[1] > 100 and totals[0] > 50
 
 
+# monkeypatch.context() undoes its change within each example.
+@settings(max_examples=10, deadline=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 50),
+       layout=st.sampled_from(['gas', 'cluster', 'fast']), extra_walls=st.integers(0, 10),
+       edit_every=st.sampled_from([0, 7]))
+def test_a_box_steps_the_same_by_its_direct_walls_and_by_the_static_index(
+        seed, n, layout, extra_walls, edit_every, monkeypatch):
+    """A world without a map finds its ball-wall candidates directly (DIRECT_WALLS: as the
+    step did before the static index); with the index's search instead, and in numpy, the
+    same contacts in the same order: the same bits."""
+    arrays = random_world(seed, n, layout, 3.0, 10.0, extra_walls)
+    direct = make_pair(arrays)
+    assert direct[1]._stepper._prepared[-2]  # the direct path, prepared with the World
+    with monkeypatch.context() as patch:
+        patch.setattr(numba_backend, 'DIRECT_WALLS', -1)
+        indexed = World(*arrays[:4], walls=arrays[4], backend='numba')
+    assert not indexed._stepper._prepared[-2]
+    worlds = [*direct, indexed]
+    rng = np.random.default_rng(seed)
+    for k in range(120):
+        if edit_every and k % edit_every == edit_every - 1:
+            edit_both(worlds, rng)  # the numpy world and both numba ones alike
+        stats = step_both(worlds[:2])
+        try:
+            stats.append(worlds[2].step(DT))
+        except SubstepLimitExceeded:
+            stats.append(None)
+        assert stats[2] == stats[1]
+        if stats[0] is None:
+            break
+        assert_identical(worlds[:2], stats[:2])
+        assert_identical(worlds[1:], stats[1:])
+
+
+def test_many_walls_take_the_static_index():
+    rng = np.random.default_rng(5)
+    starts = rng.uniform(1.0, 9.0, (numba_backend.DIRECT_WALLS, 2))
+    walls = BOX + np.concatenate((starts, starts + 0.5), axis=1).tolist()
+    world = World([[0.5, 0.5]], [[1.0, 0.0]], [0.1], [1.0], walls=walls, backend='numba')
+    assert not world._stepper._prepared[-2]
+
+
 def test_both_backends_refuse_the_same_step():
     # A heavy fast ball hits a light one: the re-split would pass MAX_SUBSTEPS.
     arrays = ([[0.0, 0.0], [0.25, 0.0]], [[3000.0, 0.0], [0.0, 0.0]], [0.1, 0.1],

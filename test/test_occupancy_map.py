@@ -332,6 +332,60 @@ def test_bad_images_are_one_line(data, words):
     assert words in str(refused.value) and '\n' not in str(refused.value)
 
 
+# Messages quote the input as written: a number read into a machine type (int64, double)
+# can saturate, overflow to inf or round at six digits, and the message would then state a
+# value the file does not hold.
+BIG = '1' + '2' * 22  # 23 digits: numpy reads it as int64's largest value
+TINY = '0.' + '0' * 60 + '1'  # a resolution of 1e-61, written long
+
+
+@pytest.mark.parametrize('data, words', [
+    (b'P2\n2 2\n255\n0 ' + BIG.encode() + b' 0 0\n', f'a pixel value {BIG} is above'),
+    (b'P3\n1 1\n255\n0 0 ' + b'9' * 80 + b'\n', '999999999999999999999999... (80 characters)'),
+    (b'P2\n2 2\n255\n0 0 256 0\n', 'a pixel value 256 is above the maxval 255'),
+    (b'P2\n2 2\n00255\n0 0 00256 0\n', 'a pixel value 00256 is above the maxval 255'),
+    (b'P5\n' + BIG.encode() + b' 2\n255\n', f'the PNM width is {BIG}: too large'),
+    (b'P5\n2 ' + BIG.encode() + b'\n255\n', f'the PNM height is {BIG}: too large'),
+    (b'P5\n2 2\n' + BIG.encode() + b'\n', f'the PNM maxval is {BIG}: too large'),
+    (b'P5\n2 2\n' + b'7' * 5000 + b'\n', 'the PNM maxval is 777777777777777777777777... '
+     '(5,000 characters)'),
+    (b'P5\n2 2\n0065536\n', 'PNM maxval 0065536; it must be'),
+    (b'P5\n000000000002 2\n255\n\0\0\0\0', None),  # leading zeros are no size
+])
+def test_pnm_messages_quote_the_numbers_as_written(data, words):
+    if words is None:
+        assert loaded(data).width == 2
+        return
+    with pytest.raises(MapError) as refused:
+        loaded(data)
+    assert words in str(refused.value) and '\n' not in str(refused.value)
+    assert '9223372036854775807' not in str(refused.value)
+
+
+@pytest.mark.parametrize('values, words', [
+    ({'resolution': '1e400'}, "'resolution' must be at least 0.001 m per cell, got 1e400"),
+    ({'resolution': '0.00099999999'}, 'got 0.00099999999'),
+    ({'origin': '[1e999, 0, 0]'}, "'origin' must be finite, got [1e999, 0, 0]"),
+    ({'origin': '[0, 0, 1e-7]'}, "'origin' yaw is 1e-7 rad"),
+    ({'occupied': '1.0000001'}, "'occupied_thresh' must be between 0 and 1, got 1.0000001"),
+    ({'free': '-1e-300'}, "'free_thresh' must be between 0 and 1, got -1e-300"),
+    ({'free': '0.6500001', 'occupied': '0.65'},
+     "'free_thresh' (0.6500001) must be at most 'occupied_thresh' (0.65)"),
+    ({'resolution': TINY}, f'got {TINY[:24]}... (63 characters)'),
+])
+def test_yaml_messages_quote_the_numbers_as_written(values, words):
+    with pytest.raises(MapError) as refused:
+        parse_map_yaml(map_yaml(**values), 'map.yaml')
+    assert words in str(refused.value) and '\n' not in str(refused.value)
+
+
+def test_the_coordinate_limit_message_states_the_origin_exactly():
+    origin = limits.COORDINATE_LIMIT - 0.4999999
+    with pytest.raises(MapError) as refused:
+        loaded(pgm(GREYS), origin=f'[{origin!r}, 0, 0]')
+    assert f'spans ({origin!r}, 0.0)' in str(refused.value)
+
+
 def test_a_map_reaching_past_the_coordinate_limit_is_refused():
     with pytest.raises(MapError, match='beyond the'):
         loaded(pgm(GREYS), origin=f'[{limits.COORDINATE_LIMIT - 0.5}, 0, 0]')

@@ -58,6 +58,14 @@ CLEARANCE_SLACK = 1e-9
 #: Entries of seed_step's `lists`: rows of candidate pairs and of ball-wall pairs in the
 #: buffers (or rows needed, when they outgrew them), and whether the buffers hold them.
 PAIRS, NEAR_WALLS, FRESH = range(3)
+#: A world with no map and at most this many walls finds its ball-wall candidates as the
+#: step did before the static index (commit 6c90059): each wall rasterised into the balls'
+#: grids when the pair lists are built, one lifetime for both lists, no per-ball wall
+#: anchors. The static index's search (a dilated bucket per ball, wall lists of their own
+#: lifetime, skipped while clear) pays for a map's runs; a plain box paid for it too, 11-16%
+#: of its step (issue 33). Both find every wall within reach: the contacts, and so the
+#: trajectories, are the same.
+DIRECT_WALLS = 64
 #: Columns of the packed wall array the kernels take.
 WALL_COLUMNS = ('start_x', 'start_y', 'end_x', 'end_y', 'w_x', 'w_y', 'length')
 
@@ -397,6 +405,68 @@ def build_pairs(x, radii, margin, members, level_starts, level_largest, order):
 
 
 @_compile
+def _rasterised_walls(x, radii, margin, walls, wall_scale, level_starts, level_largest, low,
+                      cell, shape, starts, cell_balls, scale):
+    """(ball, wall) with the ball closer than r + margin to the segment, unsorted: each
+    wall rasterised, column by column, into the cells of each level within reach of it (the
+    balls' own grids, build_grids'), so only balls beside a wall are tested."""
+    found = np.empty((64, 2), dtype=np.int64)
+    count = 0
+    for k in range(cell.shape[0]):
+        nx, ny, stride, base = shape[k, 0], shape[k, 1], shape[k, 2], shape[k, 3]
+        reach = widened(level_largest[k] + margin, max(scale, wall_scale))
+        size = cell[k]
+        for w in range(walls.shape[0]):
+            x0, y0, x1, y1 = walls[w, 0], walls[w, 1], walls[w, 2], walls[w, 3]
+            first_col, last_col = _cell_range(min(x0, x1), max(x0, x1), reach, low[k, 0], size,
+                                              nx)
+            dx = x1 - x0
+            dy = y1 - y0
+            for col in range(first_col, last_col + 1):
+                left = low[k, 0] + col * size - reach - x0
+                right = low[k, 0] + (col + 1) * size + reach - x0
+                if dx == 0.0:
+                    t_low = 0.0
+                    t_high = 1.0
+                else:
+                    t_low = min(max(min(left / dx, right / dx), 0.0), 1.0)
+                    t_high = min(max(max(left / dx, right / dx), 0.0), 1.0)
+                ya = y0 + t_low * dy
+                yb = y0 + t_high * dy
+                first_row, last_row = _cell_range(min(ya, yb), max(ya, yb), reach, low[k, 1],
+                                                  size, ny)
+                for row in range(first_row, last_row + 1):
+                    key = base + (col + PAD) * stride + row + PAD
+                    for s in range(starts[key], starts[key + 1]):
+                        i = cell_balls[s]
+                        sx, sy, _ = wall_offset(x[i, 0], x[i, 1], walls[w, 0], walls[w, 1],
+                                                walls[w, 4], walls[w, 5], walls[w, 6])
+                        reach_i = radii[i] + margin
+                        if sx * sx + sy * sy < reach_i * reach_i:
+                            if count == found.shape[0]:
+                                found = _doubled(found)
+                            found[count, 0] = i
+                            found[count, 1] = w
+                            count += 1
+    return found[:count]
+
+
+@_compile
+def build_direct(x, radii, walls, wall_scale, margin, members, level_starts, level_largest,
+                 order):
+    """build_pairs' pairs and the ball-wall pairs within `margin` of touching, from the same
+    grids, both in canonical order (DIRECT_WALLS: a world without a map)."""
+    low, cell, shape, starts, cell_balls, cell_keys, scale = build_grids(
+        x, members, level_starts, level_largest, margin)
+    order[:] = cell_balls
+    pairs = _candidate_pairs(x, radii, margin, level_starts, low, cell, shape, starts,
+                             cell_balls, cell_keys)
+    near_walls = _rasterised_walls(x, radii, margin, walls, wall_scale, level_starts,
+                                   level_largest, low, cell, shape, starts, cell_balls, scale)
+    return _canonical(pairs, x.shape[0]), _canonical(near_walls, x.shape[0])
+
+
+@_compile
 def wall_clearance(x, radii, walls, rows, i):
     """How far ball i may move from where it is before it could touch any wall of its list
     `rows` ((ball, wall) rows): its smallest gap to them, shrunk by LISTS_MARGIN and by far
@@ -478,12 +548,13 @@ def refresh_walls(x, radii, walls, index_grid, index_shape, index_first, index_i
 
 @_compile
 def find_contacts(x, radii, walls, candidates, near_walls, wall_anchor, wall_first,
-                  wall_clear):
+                  wall_clear, direct):
     """The touching contacts among the candidates, in their (canonical) order.
 
     Ball i's walls (rows wall_first[i] to wall_first[i + 1] of near_walls) are not tested
     while it lies less than wall_clear[i] from wall_anchor[i] (refresh_walls): none of them
-    can touch it. Returns pairs (P, 2) with a < b, rel (P, 2) = r_a - r_b, wall contacts
+    can touch it. `direct` (build_direct's lists): every row is tested, and the anchors are
+    not read. Returns pairs (P, 2) with a < b, rel (P, 2) = r_a - r_b, wall contacts
     (W, 2) as (ball, wall), offsets (W, 2) and interior (W,).
     """
     touching = np.empty(candidates.shape[0], dtype=np.bool_)
@@ -508,7 +579,14 @@ def find_contacts(x, radii, walls, candidates, near_walls, wall_anchor, wall_fir
             count += 1
     inside = np.zeros(near_walls.shape[0], dtype=np.bool_)
     count = 0
-    c = 0
+    c = near_walls.shape[0] if direct else 0
+    for d in range(near_walls.shape[0] if direct else 0):
+        i = near_walls[d, 0]
+        w = near_walls[d, 1]
+        sx, sy, _ = wall_offset(x[i, 0], x[i, 1], walls[w, 0], walls[w, 1], walls[w, 4],
+                                walls[w, 5], walls[w, 6])
+        inside[d] = wall_touching(sx, sy, radii[i])
+        count += inside[d]
     while c < near_walls.shape[0]:
         i = near_walls[c, 0]
         end = wall_first[i + 1]
@@ -643,9 +721,10 @@ def speed_and_energy(v, masses):
 
 
 @_compile
-def lists_stale(x, anchor, wall_anchor, skin):
+def lists_stale(x, anchor, wall_anchor, skin, direct):
     """Whether the pair lists (built with the balls at `anchor`) and the ball-wall lists
-    (built at `wall_anchor`) may have had their skin closed: (pairs, walls).
+    (built at `wall_anchor`) may have had their skin closed: (pairs, walls). `direct`
+    (build_direct's lists, which live as long as the pairs): walls is False, unread.
 
     A pair left out was r_a + r_b + skin apart; it can touch only once the two largest
     displacements since then add up to the skin. A ball-wall pair left out needs its ball
@@ -666,9 +745,10 @@ def lists_stale(x, anchor, wall_anchor, skin):
                 first = moved2
             else:
                 second = moved2
-        dx = x[i, 0] - wall_anchor[i, 0]
-        dy = x[i, 1] - wall_anchor[i, 1]
-        wall = max(wall, dx * dx + dy * dy)
+        if not direct:
+            dx = x[i, 0] - wall_anchor[i, 0]
+            dy = x[i, 1] - wall_anchor[i, 1]
+            wall = max(wall, dx * dx + dy * dy)
     limit = LISTS_MARGIN * skin
     return not np.sqrt(first) + np.sqrt(second) < limit, not np.sqrt(wall) < limit
 
@@ -677,7 +757,7 @@ def lists_stale(x, anchor, wall_anchor, skin):
 def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, index_grid, index_shape,
               index_first, index_items, members, level_starts, level_largest, skin,
               pair_rows, wall_rows, lists, anchor, wall_anchor, wall_first, wall_clear,
-              order, best, totals):
+              order, best, totals, direct, wall_scale):
     """One seed-mode step, planned and split exactly as numpy_backend.NumpyStepper.step.
 
     The candidates are Verlet lists with `skin`, built with the balls at `anchor` (pairs)
@@ -694,7 +774,9 @@ def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, index_grid, inde
 
     `walls` packs every static segment (walls, then map runs: pack_walls), and index_* is
     their bucket index dilated by at least the largest radius plus the skin
-    (core.static_geometry.StaticGeometry.dilated).
+    (core.static_geometry.StaticGeometry.dilated). With `direct` (DIRECT_WALLS: no map, a
+    few walls) the ball-wall lists are build_direct's instead, made with the pairs from the
+    same grids (walls reaching `wall_scale` m from the origin); the index is not read.
     """
     totals[:] = 0
     speed, energy = speed_and_energy(v, masses)
@@ -714,20 +796,26 @@ def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, index_grid, inde
         move(x, v, h)
         pairs_stale = walls_stale = not fresh
         if fresh:
-            pairs_stale, walls_stale = lists_stale(x, anchor, wall_anchor, skin)
-        if pairs_stale:
+            pairs_stale, walls_stale = lists_stale(x, anchor, wall_anchor, skin, direct)
+        if pairs_stale and direct:
+            candidates, near_walls = build_direct(x, radii, walls, wall_scale, skin, members,
+                                                  level_starts, level_largest, order)
+            anchor[:] = x
+            rebuilt = True
+        elif pairs_stale:
             candidates = build_pairs(x, radii, skin, members, level_starts, level_largest,
                                      order)
             anchor[:] = x
             rebuilt = True
-        if walls_stale:
+        if walls_stale and not direct:
             near_walls = refresh_walls(x, radii, walls, index_grid, index_shape, index_first,
                                        index_items, skin, order, wall_anchor, near_walls,
                                        wall_first, wall_clear, not fresh)
             rebuilt = True
         fresh = True
         pairs, rel, contacts, offsets, interior = find_contacts(
-            x, radii, walls, candidates, near_walls, wall_anchor, wall_first, wall_clear)
+            x, radii, walls, candidates, near_walls, wall_anchor, wall_first, wall_clear,
+            direct)
         fastest = resolve(v, masses, walls, pairs, rel, contacts, offsets, interior, best,
                           totals)
         done += 1
@@ -796,32 +884,46 @@ class NumbaStepper:
         """Forget everything derived from the balls (after the World was edited)."""
         self._prepared = None
 
-    def step(self, world, dt, travel, totals):
-        """One seed-mode step; counts into `totals` (zeroed first); STEP_DONE or STEP_REFUSED."""
-        if self._prepared is None:
-            static = world.static
-            n = len(world)
-            skin = SKIN_RADII * world.min_radius
+    def prepare(self, world):
+        """Build what the next step needs of the World's balls and static geometry (the
+        index dilated by their reach, the buffers), if it is not built: the World does this
+        when it is made, so a map's index is built before the node says it started, not on
+        the first step (issue 33)."""
+        if self._prepared is not None:
+            return
+        static = world.static
+        n = len(world)
+        skin = SKIN_RADII * world.min_radius
+        direct = static.run_count == 0 and len(static) <= DIRECT_WALLS
+        if direct:  # the index is not read (seed_step)
+            index = static.index
+        else:
             # The largest reach a ball-wall candidate needs, widened as the search widens it.
             index = static.dilated(widened(float(world.radii.max()) + skin, float(
                 max(static.index.grid[3], np.abs(world.positions).max()))))
-            if self._walls is None:
-                self._walls = pack_walls(static)
-            self._prepared = (float(world.masses.min()), self._walls, index.grid, index.shape,
-                              index.first, index.items, *radius_classes(world.radii), skin,
-                              np.empty((4 * n, 2), dtype=np.int64),
-                              np.empty((n, 2), dtype=np.int64), np.zeros(3, dtype=np.int64),
-                              np.empty((n, 2)), np.empty((n, 2)),
-                              np.zeros(n + 1, dtype=np.int64), np.zeros(n),
-                              np.arange(n, dtype=np.int64), np.full(n, -1, np.int64))
+        if self._walls is None:
+            self._walls = pack_walls(static)
+        self._prepared = (float(world.masses.min()), self._walls, index.grid, index.shape,
+                          index.first, index.items, *radius_classes(world.radii), skin,
+                          np.empty((4 * n, 2), dtype=np.int64),
+                          np.empty((n, 2), dtype=np.int64), np.zeros(3, dtype=np.int64),
+                          np.empty((n, 2)), np.empty((n, 2)),
+                          np.zeros(n + 1, dtype=np.int64), np.zeros(n),
+                          np.arange(n, dtype=np.int64), np.full(n, -1, np.int64), direct,
+                          float(static.index.grid[3]))
+
+    def step(self, world, dt, travel, totals):
+        """One seed-mode step; counts into `totals` (zeroed first); STEP_DONE or STEP_REFUSED."""
+        if self._prepared is None:
+            self.prepare(world)
         (min_mass, walls, index_grid, index_shape, index_first, index_items, members,
          level_starts, largest, skin, pair_rows, wall_rows, lists, anchor, wall_anchor,
-         wall_first, wall_clear, order, best) = self._prepared
+         wall_first, wall_clear, order, best, direct, wall_scale) = self._prepared
         status = seed_step(world.positions, world.velocities, world.radii, world.masses,
                            min_mass, dt, travel, walls, index_grid, index_shape, index_first,
                            index_items, members, level_starts, largest, skin, pair_rows,
                            wall_rows, lists, anchor, wall_anchor, wall_first, wall_clear,
-                           order, best, totals)
+                           order, best, totals, direct, wall_scale)
         if not lists[FRESH] and status == STEP_DONE:
             self._grow(pair_rows, wall_rows, lists)
         return status
@@ -829,14 +931,13 @@ class NumbaStepper:
     @property
     def buffers(self):
         """(pair_rows, wall_rows, lists) of seed_step, once a step has made them."""
-        return self._prepared[-9:-6]
+        return self._prepared[10:13]
 
     def _grow(self, pair_rows, wall_rows, lists):
         """Buffers for lists that outgrew them, with room to spare; the next step rebuilds."""
         rows = [max(2 * int(lists[PAIRS]), len(pair_rows)),
                 max(2 * int(lists[NEAR_WALLS]), len(wall_rows))]
-        (*head, _, _, lists, anchor, wall_anchor, wall_first, wall_clear, order,
-         best) = self._prepared
+        head = self._prepared[:10]
+        tail = self._prepared[12:]
         self._prepared = (*head, np.empty((rows[0], 2), dtype=np.int64),
-                          np.empty((rows[1], 2), dtype=np.int64), lists, anchor, wall_anchor,
-                          wall_first, wall_clear, order, best)
+                          np.empty((rows[1], 2), dtype=np.int64), *tail)

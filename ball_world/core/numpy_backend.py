@@ -167,6 +167,10 @@ class NumpyStepper:
         self.lists = None
         self.best = None
 
+    def prepare(self, world):
+        """Nothing to build ahead: the lists need the balls' first positions, and the index
+        they ask is the World's static one, built with it."""
+
     def step(self, world, dt, travel, totals):
         """One seed-mode step; counts into `totals` (zeroed first); STEP_DONE or STEP_REFUSED.
 

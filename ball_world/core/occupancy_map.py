@@ -72,6 +72,7 @@ _INTEGER = re.compile(r'([+-]?)(0[xX][0-9a-fA-F]+|0[0-7]*|[1-9][0-9]*)')
 _PNG_SIGNATURE = b'\x89PNG\r\n\x1a\n'
 _PNM_MAGICS = (b'P2', b'P3', b'P5', b'P6')
 _PNM_WHITESPACE = b' \t\r\n\v\f'
+_PNM_FIELDS = ('width', 'height', 'maxval')
 
 
 class MapError(ValueError):
@@ -207,14 +208,16 @@ def parse_map_yaml(text, where='the map YAML'):
                        f'{"list" if isinstance(image, list) else "mapping"}')
     if not image:
         raise MapError(f"{where}: 'image' is empty")
-    resolution = _double(required('resolution'), 'resolution', where)
-    origin = required('origin')
+    given = {key: required(key) for key in ('resolution', 'origin', 'free_thresh',
+                                            'occupied_thresh')}
+    resolution = _double(given['resolution'], 'resolution', where)
+    origin = given['origin']
     if not isinstance(origin, list) or len(origin) != 3:
         count = f'{len(origin)} values' if isinstance(origin, list) else 'not a list'
         raise MapError(f"{where}: 'origin' must be [x, y, yaw], got {count}")
     origin = tuple(_double(value, 'origin', where) for value in origin)
-    free = _double(required('free_thresh'), 'free_thresh', where)
-    occupied = _double(required('occupied_thresh'), 'occupied_thresh', where)
+    free = _double(given['free_thresh'], 'free_thresh', where)
+    occupied = _double(given['occupied_thresh'], 'occupied_thresh', where)
     mode = document.get('mode', 'trinary')
     if not isinstance(mode, str) or mode.lower() not in MODES:
         raise MapError(f"{where}: 'mode' must be trinary, scale or raw, got "
@@ -223,13 +226,26 @@ def parse_map_yaml(text, where='the map YAML'):
     negate = _negate(required('negate'), where)
     values = MapYaml(image=image, resolution=resolution, origin=origin, negate=negate,
                      occupied_thresh=occupied, free_thresh=free, mode=mode)
-    _check_values(values, where)
+    _check_values(values, given, where)
     return values
 
 
 def _shown(value):
     text = repr(value) if isinstance(value, str) else f'a {type(value).__name__}'
     return text if len(text) <= 40 else text[:37] + '...'
+
+
+def _as_given(text):
+    """A number's text as the file writes it, for a message: a value that overflows (1e400 is
+    inf once read) or rounds (0.00099999 is 0.001 at 6 digits) would misstate the input. Long
+    texts keep their start and say how long they are."""
+    text = str(text)
+    return text if len(text) <= 30 else f'{text[:24]}... ({len(text):,} characters)'
+
+
+def _number(value):
+    """A number computed from the input, exactly (the shortest text that reads back as it)."""
+    return repr(float(value))
 
 
 def _double(value, key, where):
@@ -265,28 +281,31 @@ def _integer(text):
     return value if -2 ** 31 <= value < 2 ** 31 else None
 
 
-def _check_values(values, where):
-    """ball_world's refusals of values the map server would take (see the module docstring)."""
+def _check_values(values, given, where):
+    """ball_world's refusals of values the map server would take (see the module docstring);
+    `given` holds the numbers' texts as written, which the messages quote."""
     if not (math.isfinite(values.resolution)
             and values.resolution >= limits.MIN_MAP_RESOLUTION):
         raise MapError(f"{where}: 'resolution' must be at least "
-                       f'{limits.MIN_MAP_RESOLUTION:g} m per cell, got {values.resolution:g}')
+                       f'{limits.MIN_MAP_RESOLUTION:g} m per cell, got '
+                       f"{_as_given(given['resolution'])}")
+    origin = ', '.join(_as_given(text) for text in given['origin'])
     if not all(math.isfinite(value) for value in values.origin):
-        raise MapError(f"{where}: 'origin' must be finite, got "
-                       f'[{", ".join(f"{v:g}" for v in values.origin)}]')
+        raise MapError(f"{where}: 'origin' must be finite, got [{origin}]")
     if values.origin[2] != 0.0:
-        raise MapError(f"{where}: 'origin' yaw is {values.origin[2]:g} rad; ball_world takes "
-                       'only maps with yaw 0 (cells are axis-aligned squares): rotate the '
-                       'image instead')
+        raise MapError(f"{where}: 'origin' yaw is {_as_given(given['origin'][2])} rad; "
+                       'ball_world takes only maps with yaw 0 (cells are axis-aligned '
+                       'squares): rotate the image instead')
     for key in ('free_thresh', 'occupied_thresh'):
         value = getattr(values, key)
         if not 0.0 <= value <= 1.0:
-            raise MapError(f"{where}: '{key}' must be between 0 and 1, got {value:g}")
+            raise MapError(f"{where}: '{key}' must be between 0 and 1, got "
+                           f'{_as_given(given[key])}')
     if values.free_thresh > values.occupied_thresh or (
             values.mode == 'scale' and values.free_thresh == values.occupied_thresh):
         relation = 'below' if values.mode == 'scale' else 'at most'
-        raise MapError(f"{where}: 'free_thresh' ({values.free_thresh:g}) must be {relation} "
-                       f"'occupied_thresh' ({values.occupied_thresh:g})")
+        raise MapError(f"{where}: 'free_thresh' ({_as_given(given['free_thresh'])}) must be "
+                       f"{relation} 'occupied_thresh' ({_as_given(given['occupied_thresh'])})")
 
 
 def _check_extent(values, shape, where):
@@ -296,9 +315,9 @@ def _check_extent(values, shape, where):
     resolution = float(np.float32(values.resolution))
     corners = (x, y, x + width * resolution, y + height * resolution)
     if max(abs(value) for value in corners) > limits.COORDINATE_LIMIT:
-        raise MapError(f'{where}: the map spans ({x:g}, {y:g}) to ({corners[2]:g}, '
-                       f'{corners[3]:g}) m, beyond the {limits.COORDINATE_LIMIT:g} m a world '
-                       'may reach')
+        raise MapError(f'{where}: the map spans ({_number(x)}, {_number(y)}) to '
+                       f'({_number(corners[2])}, {_number(corners[3])}) m, beyond the '
+                       f'{limits.COORDINATE_LIMIT:g} m a world may reach')
 
 
 # The image ---------------------------------------------------------------------------------
@@ -358,14 +377,17 @@ def _pnm_header(data, where):
             found = 'its end' if position >= size else repr(bytes(data[position:position + 1]))
             raise MapError(f'{where}: a PNM header needs width, height and maxval; found '
                            f'{found} instead of number {len(numbers) + 1}')
-        if position - start > 9:
-            raise MapError(f'{where}: a PNM header number is too large')
-        numbers.append(int(data[start:position]))
+        text = bytes(data[start:position]).decode('ascii')
+        if len(text.lstrip('0')) > 9:  # int() of a few thousand digits raises
+            name = _PNM_FIELDS[len(numbers)]
+            raise MapError(f'{where}: the PNM {name} is {_as_given(text)}: too large (a map '
+                           f'has at most {limits.MAX_MAP_CELLS:,} cells; maxval is 1 to 65535)')
+        numbers.append((int(text), text))
     if position >= size or data[position] not in _PNM_WHITESPACE:
         raise MapError(f'{where}: the PNM header does not end in whitespace after maxval')
-    width, height, maxval = numbers
+    (width, _), (height, _), (maxval, maxval_text) = numbers
     if not 1 <= maxval <= MAX_QUANTUM:
-        raise MapError(f'{where}: PNM maxval {maxval}; it must be 1 to 65535')
+        raise MapError(f'{where}: PNM maxval {maxval_text}; it must be 1 to 65535')
     _check_cells(width, height, where)
     return _PnmHeader(bytes(data[:2]), width, height, maxval, position + 1)
 
@@ -384,7 +406,7 @@ def _decode_pnm(data, where):
                            f'the file has {len(raster):,}')
         samples = np.frombuffer(raster, dtype='>u2' if wide else np.uint8)
     else:
-        samples = _ascii_samples(data, header.raster_at, count, where)
+        samples = _ascii_samples(data, header.raster_at, count, header.maxval, where)
     largest = int(samples.max())
     if largest > header.maxval:
         raise MapError(f'{where}: a pixel value {largest} is above the maxval {header.maxval}')
@@ -399,8 +421,10 @@ def _decode_pnm(data, where):
     return quanta.reshape(shape)
 
 
-def _ascii_samples(data, start, count, where):
-    """The first `count` whitespace-separated decimal samples of a P2/P3 raster."""
+def _ascii_samples(data, start, count, maxval, where):
+    """The first `count` whitespace-separated decimal samples of a P2/P3 raster; MapError
+    quoting the first one above `maxval` as written (numpy reads a number past int64 as
+    its largest value: a sample of 23 digits must not be reported as 9223372036854775807)."""
     text = bytes(data[start:])
     if b'#' in text:
         text = re.sub(rb'#[^\n]*', b' ', text)
@@ -416,9 +440,22 @@ def _ascii_samples(data, start, count, where):
         raise MapError(f'{where}: truncated: the image needs {count:,} pixel values, the file '
                        f'has {len(values):,}')
     values = values[:count]
-    if (values < 0).any():
-        raise MapError(f'{where}: a pixel value is too large')
+    above = values > maxval
+    if above.any():
+        written = _sample_text(text, int(np.argmax(above)))
+        raise MapError(f'{where}: a pixel value {_as_given(written)} is above the maxval '
+                       f'{maxval}')
     return values
+
+
+def _sample_text(text, index):
+    """The `index`-th whitespace-separated number of `text` (digits and whitespace only), as
+    written."""
+    digit = np.frombuffer(text, dtype=np.uint8)
+    digit = (digit >= 48) & (digit <= 57)
+    edges = np.flatnonzero(np.diff(digit.astype(np.int8), prepend=0, append=0))
+    begin, end = edges[0::2], edges[1::2]
+    return text[begin[index]:end[index]].decode('ascii')
 
 
 def _decode_png(data, where):

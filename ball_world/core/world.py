@@ -178,6 +178,10 @@ class World:
         self.backend = resolve_backend(backend)
         self._stepper = _stepper(self.backend)
         self._edited()
+        if mode == 'seed' and len(self):
+            # What the first step would build from the static geometry (a map's dilated
+            # index), built now: before a node says it started, not on its first step.
+            self._stepper.prepare(self)
 
     def __len__(self):
         return len(self.positions)
