@@ -6,6 +6,7 @@ TrackEval (PyPI `trackeval`, pinned in requirements/base.txt) evaluates a sequen
 per-frame ids and similarity matrices, the layout scoring.frames.prepare makes, after the
 don't-care rule; its CLEAR, Identity and HOTA classes are called directly.
 """
+from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
 from trackeval.metrics import CLEAR, HOTA, Identity
@@ -90,3 +91,81 @@ def test_empty_sides_answer_as_trackeval_does():
                 for t in range(3)]
     for frames in (no_tracks, no_balls):
         assert_equal_to_trackeval(prepare(frames, GATE))
+
+
+def frames_of(truth, tracks):
+    """Frames from per-frame lists: truth [(x, y, visible)] by ball, tracks [(id, x, y)]."""
+    return [Frame(t, tuple(f'ball_{b}' for b in range(len(balls))),
+                  np.array([(x, y) for x, y, _ in balls], dtype=float).reshape(-1, 2),
+                  np.array([seen for _, _, seen in balls], dtype=bool),
+                  tuple(i for i, _, _ in shown),
+                  np.array([(x, y) for _, x, y in shown], dtype=float).reshape(-1, 2))
+            for t, (balls, shown) in enumerate(zip(truth, tracks))]
+
+
+FAR = (9.0, 9.0)  # beyond twice the gate from every ball below: similarity 0
+EDGE_CASES = {
+    'no frames': ([], []),
+    'one frame, one match': ([[(0, 0, True)]], [[(1, 0, 0)]]),
+    'one frame, no match': ([[(0, 0, True)]], [[(1, *FAR)]]),
+    'no match anywhere': ([[(0, 0, True), (1, 1, True)]] * 3, [[(1, *FAR), (2, 8, 8)]] * 3),
+    'no truth': ([[]] * 3, [[(1, 0, 0)]] * 3),
+    'no tracks': ([[(0, 0, True)]] * 3, [[]] * 3),
+    'nothing at all': ([[]] * 3, [[]] * 3),
+    'every ball hidden': ([[(0, 0, False)]] * 3, [[(1, *FAR)]] * 3),
+    'near but beyond the gate': ([[(0, 0, True)]] * 3, [[(1, 1.5, 0)]] * 3),
+    'truth, then tracks, then neither matching': (
+        [[(0, 0, True)], [], [(0, 0, True)]], [[], [(1, 0, 0)], [(1, *FAR)]]),
+}
+
+
+@pytest.mark.parametrize('name', EDGE_CASES)
+def test_edge_cases_score_as_trackeval_scores_them(name):
+    truth, tracks = EDGE_CASES[name]
+    ours = assert_equal_to_trackeval(prepare(frames_of(truth, tracks), GATE))
+    if name in ('no match anywhere', 'one frame, no match', 'near but beyond the gate'):
+        assert np.all(ours['HOTA'] == 0.0) and ours['MOTA'] <= 0.0  # scored, not refused
+
+
+POINTS = [(0.0, 0.0), (0.3, 0.0), (0.6, 0.0), (1.0, 0.0), (9.0, 9.0)]
+ball = st.tuples(st.sampled_from(POINTS), st.booleans())
+frame_strategy = st.tuples(
+    st.lists(ball, max_size=3),
+    st.lists(st.tuples(st.integers(0, 4), st.sampled_from(POINTS)), max_size=3,
+             unique_by=lambda track: track[0]))
+
+
+def hypothesis_frames(drawn):
+    truth = [[(*xy, seen) for xy, seen in balls] for balls, _ in drawn]
+    tracks = [[(i, *xy) for i, xy in shown] for _, shown in drawn]
+    return frames_of(truth, tracks)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.lists(frame_strategy, max_size=5), min_size=1, max_size=3))
+def test_small_random_sequences_and_their_combination_score_as_trackeval(sequences):
+    """Any few frames (empty ones, one frame, no truth, no tracks, nothing near, ties on a
+    grid of points) and several of them combined, as TrackEval's combine_sequences."""
+    metrics = {'CLEAR': (CLEAR({'PRINT_CONFIG': False}), clear),
+               'Identity': (Identity({'PRINT_CONFIG': False}), identity), 'HOTA': (HOTA(), hota)}
+    ours_all = {name: [] for name in metrics}
+    theirs_all = {name: {} for name in metrics}
+    for position, drawn in enumerate(sequences):
+        sequence = prepare(hypothesis_frames(drawn), GATE)
+        data = trackeval_data(sequence)
+        for name, (metric, module) in metrics.items():
+            ours = module.evaluate(sequence)
+            ours = ours[0] if isinstance(ours, tuple) else ours
+            theirs = metric.eval_sequence(data)
+            _assert_same(ours, theirs, name)
+            ours_all[name].append(ours)
+            theirs_all[name][position] = theirs
+    for name, (metric, module) in metrics.items():
+        _assert_same(module.combine(ours_all[name]),
+                     metric.combine_sequences(theirs_all[name]), f'{name} combined')
+
+
+def _assert_same(ours, theirs, what):
+    for key, value in theirs.items():
+        assert np.allclose(np.asarray(ours[key], dtype=float), np.asarray(value, dtype=float),
+                           rtol=0.0, atol=1e-9), (what, key, ours[key], value)

@@ -40,6 +40,16 @@ def _overlaps(similarity):
     return overlap
 
 
+def _aligned(frame_keys, pair_keys, alignment):
+    """The alignment of each of a frame's pairs; 0 for a pair that never overlapped (no pair
+    overlaps anywhere when no track ever came near a ball: then every score is 0, and the
+    assignment below matches pairs of similarity 0, as TrackEval's does)."""
+    if len(pair_keys) == 0:
+        return np.zeros(frame_keys.shape)
+    where = np.searchsorted(pair_keys, frame_keys).clip(max=len(pair_keys) - 1)
+    return np.where(pair_keys[where] == frame_keys, alignment[where], 0.0)
+
+
 def evaluate(sequence):
     """HOTA and its parts for a Sequence: a dict of TrackEval's field names (arrays over
     ALPHAS for the per-alpha fields)."""
@@ -82,8 +92,7 @@ def evaluate(sequence):
             fn += len(gt_ids)
             continue
         frame_keys = _pair_keys(gt_ids, tracker_ids, width)
-        where = np.searchsorted(pair_keys, frame_keys).clip(max=len(pair_keys) - 1)
-        score = np.where(pair_keys[where] == frame_keys, alignment[where], 0.0) * similarity
+        score = _aligned(frame_keys, pair_keys, alignment) * similarity
         rows, columns = linear_sum_assignment(-score)
         sims = similarity[rows, columns]
         passed = sims[None, :] >= ALPHAS[:, None] - EPS  # (alphas, matches)
