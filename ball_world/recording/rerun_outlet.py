@@ -16,7 +16,11 @@ the stepping thread never waits on, and every wait on that thread is bounded:
   stream, and the SDK's at-exit hook, which would wait on that stream for good, is dropped;
 - a view is also failed when its viewer's port stops accepting connections: the SDK drops
   data silently once a viewer is gone, so only a probe can tell (a stalled viewer still
-  accepts connections and is kept: the SDK drops what it cannot send, never blocking).
+  accepts connections and is kept: the SDK drops what it cannot send, never blocking);
+- closing a view waits at most VIEW_CLOSE_TIMEOUT, and not at all for a viewer that is
+  gone: the SDK's flush and disconnect wait seconds on a peer that died (the viewer of
+  `ball_world_view` ends with its launcher, when the world is told to stop too), and a view
+  holds nothing that outlives the run, so the world's exit never waits on one.
 
 Each outlet has its own RecordingStream with the same application and recording id, so the
 file and the viewer hold one recording with the same content, and one can fail alone.
@@ -41,8 +45,11 @@ FLUSH_TIMEOUT = 2.0
 #: A viewer may be too slow to take the data (its flushes time out) for this long before
 #: the view is dropped; meanwhile the SDK holds what it could not send.
 VIEW_PATIENCE = 10.0
-#: Longest wait of close() for an outlet to finish its file or connection.
+#: Longest wait of close() for an outlet to finish its file.
 CLOSE_TIMEOUT = 10.0
+#: Longest wait of close() for a view to send what is left: its viewer keeps nothing the run
+#: needs, and a process told to stop must not wait on a peer (see the module doc).
+VIEW_CLOSE_TIMEOUT = 1.0
 #: Calls that may wait for the worker (a logged step makes a few per 64 steps).
 MAX_QUEUED_CALLS = 256
 #: How often a step held back by a file's full queue looks whether its worker is stuck.
@@ -141,6 +148,7 @@ class Outlet:
         self._busy_since = None
         self._progress = time.monotonic()  # when the worker last began or ended a call
         self._queue = queue.Queue(maxsize=MAX_QUEUED_CALLS)
+        self._close_ended = threading.Event()  # the worker ran _close, well or not
         self._thread = threading.Thread(target=self._work, daemon=True,
                                         name=f'rerun-{description.split()[0]}')
         self._thread.start()
@@ -204,16 +212,18 @@ class Outlet:
         self.check()
         self._put(self._flush, ())
 
-    def close(self, timeout=CLOSE_TIMEOUT):
-        """Flush, finish the file or connection, and wait for it at most `timeout` s.
+    def close(self, timeout=None):
+        """Flush, finish the file or connection, and wait for it at most `timeout` s
+        (CLOSE_TIMEOUT for a file, VIEW_CLOSE_TIMEOUT for a view).
 
         Raises OutletFailed if the outlet failed before or during the close and that was
         not reported yet.
         """
+        if timeout is None:
+            timeout = CLOSE_TIMEOUT if self._probe is None else VIEW_CLOSE_TIMEOUT
         if self.failed is None and self._error is None:
             self._put(self._close, ())
-            self._thread.join(timeout)
-            if self._thread.is_alive():
+            if not self._close_ended.wait(timeout):
                 self._fail(f'did not finish within {timeout:g} s')
         self._check()
 
@@ -291,6 +301,8 @@ class Outlet:
                 _keep_forever(self.stream)
                 return
             if self._error is not None:
+                if call == self._close:
+                    self._close_ended.set()  # failed before: nothing more to wait for
                 continue
             self._busy_since = self._progress = time.monotonic()
             try:
@@ -300,8 +312,10 @@ class Outlet:
             finally:
                 self._busy_since = None
                 self._progress = time.monotonic()
-            if call == self._close and self._error is None:
-                return
+            if call == self._close:
+                self._close_ended.set()
+                if self._error is None:
+                    return
 
     def _flush(self):
         if self._probe is None:
@@ -322,8 +336,38 @@ class Outlet:
         self._probe()
 
     def _close(self):
-        self.stream.flush(timeout_sec=FLUSH_TIMEOUT)
+        if self._probe is not None:
+            # A view: a viewer that is gone is not waited for (the flush would time out
+            # and the disconnect wait on it); the stream is left as a failed one is.
+            self._probe()
+            self.stream.flush(timeout_sec=VIEW_CLOSE_TIMEOUT)
+        else:
+            self.stream.flush(timeout_sec=FLUSH_TIMEOUT)
         self.stream.disconnect()
+
+
+def finish_view(stream, target, timeout=VIEW_CLOSE_TIMEOUT):
+    """End a live view's stream made on this thread (a tool's own view, not an Outlet):
+    what is left is sent if the viewer at `target` is still there, waiting at most `timeout`
+    s; a viewer that is gone, or a stream that fails or does not finish in time, is left as
+    a failed outlet's is (never disconnected, never destroyed). Returns whether it finished."""
+    def finish():
+        try:
+            _probe(parse_view(target), 'the viewer is gone')
+            stream.flush(timeout_sec=timeout)
+            stream.disconnect()
+            done.set()
+        except Exception:  # noqa: B902 - a view that fails at its end is simply left
+            pass
+
+    done = threading.Event()
+    worker = threading.Thread(target=finish, daemon=True, name='rerun-view-end')
+    worker.start()
+    worker.join(timeout)
+    if not done.is_set():
+        rr.unregister_shutdown()  # the SDK's at-exit disconnect would wait on the viewer
+        _keep_forever(stream)
+    return done.is_set()
 
 
 def _keep_forever(stream):

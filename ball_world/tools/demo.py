@@ -1,6 +1,6 @@
 """ball_world_demo: robots among balls, live in the browser, in one command (`make demo`).
 
-Starts, in this order, and stops in the reverse order on Ctrl-C (tools/processes.py):
+Starts, in this order, and stops on Ctrl-C, the server last (tools/processes.py):
 the Rerun web viewer server; a world with two agents (robots) among balls; ball_world_wander
 driving ball_0 on its own (Stage's wander, reading its lidar); ball_world_tracker following
 the balls that ball_1's lidar sees; ball_world_view_tracks drawing those tracks into the

@@ -4,9 +4,13 @@ A launcher that dies must not leave a Rerun server holding its ports (killing `.
 a Python wrapper that runs the viewer binary as its child, did). So each child:
 
 - runs in a session of its own: the terminal's Ctrl-C reaches the launcher alone, which stops
-  the children in order (the world first, so it closes its recordings; the server last);
+  the children in two waves: every program but the first started (the world and its
+  clients, together, so the world closes its recordings and its view while the server
+  still takes it), then the first (the Rerun server the others stream to);
 - gets SIGTERM from the kernel the moment the launcher ends, however it ends (SIGKILL
-  included: Linux's PR_SET_PDEATHSIG, set in the child between fork and exec);
+  included: Linux's PR_SET_PDEATHSIG, set in the child between fork and exec); every
+  program started here ends within a bounded time of SIGTERM, whatever its peers do (the
+  world does not wait for a view whose server is gone: recording/rerun_outlet.py);
 - is stopped with SIGINT (what Ctrl-C would send), then SIGTERM, then SIGKILL, each after
   a bounded wait, so stop() always returns.
 """
@@ -75,7 +79,8 @@ class Child:
 
 
 class Children:
-    """Programs started in order and stopped in the reverse order (see the module doc)."""
+    """Programs started in order and stopped in two waves, the first started last (see the
+    module doc)."""
 
     def __init__(self, log_dir=None):
         self.log_dir = None if log_dir is None else Path(log_dir)
@@ -101,27 +106,34 @@ class Children:
         return next((child for child in self.started if not child.running), None)
 
     def stop(self, seconds=STOP_SECONDS):
-        """Stop every child, the last started first: SIGINT, then SIGTERM, then SIGKILL."""
-        for child in reversed(self.started):
-            _stop(child.process, seconds)
+        """Stop every child: all but the first started together, then the first; each with
+        SIGINT, then SIGTERM, then SIGKILL, `seconds` apart (see the module doc)."""
+        _stop([child.process for child in self.started[1:]], seconds)
+        _stop([child.process for child in self.started[:1]], seconds)
+        for child in self.started:
             if child.log is not None:
                 child.log.close()
         self.started = []
 
 
-def _stop(process, seconds):
+def _stop(processes, seconds):
+    """Signal every process still running, wait for them all at most `seconds`, and go on
+    to the next signal with those left."""
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
-        if process.poll() is not None:
+        running = [process for process in processes if process.poll() is None]
+        if not running:
             return
-        try:
-            process.send_signal(sig)
-        except ProcessLookupError:
-            return
-        try:
-            process.wait(timeout=seconds)
-            return
-        except subprocess.TimeoutExpired:
-            continue
+        for process in running:
+            try:
+                process.send_signal(sig)
+            except ProcessLookupError:
+                pass
+        deadline = time.monotonic() + seconds
+        for process in running:
+            try:
+                process.wait(timeout=max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                continue
 
 
 def wait_for_port(port, child, seconds=PORT_SECONDS):

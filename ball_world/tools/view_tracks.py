@@ -59,7 +59,7 @@ def _node_class():
     import rerun as rr
     from visualization_msgs.msg import Marker, MarkerArray
 
-    from ball_world.recording.rerun_outlet import new_stream, parse_view
+    from ball_world.recording.rerun_outlet import finish_view, new_stream, parse_view
 
     class ViewTracks(Node):
         """<agent>/tracks in, rings in the Rerun view out."""
@@ -112,9 +112,8 @@ def _node_class():
                 colors=TRACK_COLOR, draw_order=40.0))
 
         def close(self):
-            if self.connected:
-                self.stream.flush(timeout_sec=2.0)
-                self.stream.disconnect()
+            if self.connected:  # bounded: the viewer may have gone first (rerun_outlet)
+                finish_view(self.stream, self.view)
 
     return ViewTracks
 
