@@ -31,11 +31,12 @@ def test_an_agent_is_drawn_with_its_heading_and_name(tmp_path):
         record = records[step]
         yaw = float(record.agents.yaws[0])
         assert yaw == pytest.approx(1.5 * step * simulation.dt_ns * 1e-9, abs=1e-12)
-        [vector] = shown_at(vectors, step)
+        casing, vector = shown_at(vectors, step)  # drawn twice: casing, then the arrow
+        assert casing == vector
         assert vector == pytest.approx([HEADING_RADII * radius * math.cos(yaw),
                                         HEADING_RADII * radius * math.sin(yaw)], rel=1e-6)
         # from the edge of the disc, never over it (where it had 1.5:1 against the disc)
-        [origin] = shown_at(origins, step)
+        origin = shown_at(origins, step)[1]
         edge = np.asarray(record.positions[2]) + radius * np.array([math.cos(yaw),
                                                                     math.sin(yaw)])
         assert origin == pytest.approx(edge.tolist(), rel=1e-6)
