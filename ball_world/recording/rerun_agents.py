@@ -14,7 +14,6 @@ in N s; BumperView keeps it on screen for BUMPER_SHOWN seconds of simulated time
 step is too short to see.
 """
 import numpy as np
-import rerun as rr
 
 from ball_world.msgs.bumper_markers import BUMPER_MIN_RADII, BUMPER_SECONDS, BUMPER_SHOWN
 from ball_world.recording.rerun_casing import cased_arrows
@@ -32,9 +31,9 @@ AGENT_COLOR = (255, 150, 40)
 AGENT_RADIUS = 2.0
 #: Entity path of the bumper hits, under the arena's +y-up transform.
 BUMPERS = 'arena/bumpers'
-#: Violet: no ball has it, apart from the heading's orange and the pushes' pink, and over 4:1
-#: on both viewer themes (the markers' orange, (255, 80, 0), has 3.3:1 on the light one).
-BUMPER_VIEW_COLOR = (160, 80, 235)
+#: Light violet over its casing (rerun_casing: 7.5:1 on it): no ball has it. Alone, the violet
+#: (160, 80, 235) had 1.55:1 on a robot's rays (screenshot of the dark theme).
+BUMPER_VIEW_COLOR = (200, 160, 255)
 #: The text of a hit's tag (rerun_text): a light violet.
 BUMPER_TEXT_COLOR = (226, 208, 255)
 
@@ -81,12 +80,11 @@ def bumper_arrows(record):
               else size)
     length = np.maximum(change * BUMPER_SECONDS, BUMPER_MIN_RADII * radius)
     vectors = world / np.where(size > 0.0, size, 1.0)[:, None] * length[:, None]
-    return rr.Arrows2D(
-        origins=np.asarray(record.positions, dtype=np.float64)[indices], vectors=vectors,
-        labels=[f'{bumper.name} hit {value:.3g} N s' for bumper, value in zip(frame.bumpers,
-                                                                              size)],
-        show_labels=False, colors=BUMPER_VIEW_COLOR, radii=rr.Radius.ui_points(3.0),
-        draw_order=36.0)
+    return cased_arrows(
+        np.asarray(record.positions, dtype=np.float64)[indices], vectors, BUMPER_VIEW_COLOR,
+        2.5, 36.0, labels=[f'{bumper.name} hit {value:.3g} N s'
+                           for bumper, value in zip(frame.bumpers, size)],
+        show_labels=[False] * len(rows))
 
 
 class BumperView:

@@ -28,12 +28,14 @@ CASING_POINTS = 1.5
 
 def cased_arrows(origins, vectors, color, radius, draw_order, **fields):
     """rr.Arrows2D of each arrow twice: its casing (radius + CASING_POINTS, CASING_COLOR),
-    then the arrow itself (radius in UI points, `color`). Extra fields (labels ...) are
-    given per arrow and repeated for the casing."""
+    then the arrow itself (radius in UI points, `color`). Extra fields are given per arrow
+    and repeated for the casing; labels are the arrows' (the casings' are empty)."""
     origins = np.asarray(origins, dtype=np.float64).reshape(-1, 2)
     vectors = np.asarray(vectors, dtype=np.float64).reshape(-1, 2)
     count = len(origins)
     doubled = {name: list(value) * 2 for name, value in fields.items()}
+    if 'labels' in fields:  # a label once, on the arrow itself
+        doubled['labels'] = [''] * count + list(fields['labels'])
     return rr.Arrows2D(
         origins=np.concatenate((origins, origins)), vectors=np.concatenate((vectors, vectors)),
         colors=[CASING_COLOR] * count + [tuple(color)] * count,

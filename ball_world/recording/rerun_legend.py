@@ -41,12 +41,13 @@ def legend_text(parameters, impulse_seconds, plot_period):
         "- **grey lines**: the arena's walls; ticks and numbers: a ruler in metres",
         f'- **pink arrow and tag**: a push, an impulse from outside ({impulse_seconds:g} s)',
         '',
-        '**Plots**: kinetic energy change since step 0' + (
-            ", with the robots' drives' part and the rest's (collisions keep energy)"
-            if agents else ' (collisions keep it: flat unless something pushes)')
-        + '; collisions since step 0 (0 until the first); the real-time factor'
-        + (f' (a live view gets the plots every {plot_period:g} s: empty until then)'
-           if plot_period else '') + '.']
+        '**Plots**: energy change since step 0' + (
+            " (the robots' drives put energy in and take it out; collisions keep it, so "
+            'the rest stays 0 unless something pushes)' if agents else
+            ' (collisions keep it: flat unless something pushes)')
+        + '; collisions since step 0 (flat at 0 until the first); real-time factor'
+        + (f'. A live view gets them every {plot_period:g} s: empty until then.'
+           if plot_period else '.')]
     return '\n'.join(lines)
 
 

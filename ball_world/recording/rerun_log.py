@@ -105,7 +105,7 @@ from ball_world.recording.files import claim_output, OutputClaim
 from ball_world.recording.rerun_agents import (AGENTS, BUMPER_TEXT_COLOR, BUMPERS, BumperView,
                                                heading_arrows)
 from ball_world.recording.rerun_energy import EnergyAccount
-from ball_world.recording.rerun_labels import LabelPlacer, tag_rect
+from ball_world.recording.rerun_labels import boxes_overlap, LabelPlacer, tag_rect
 from ball_world.recording.rerun_legend import LEGEND, legend_document
 from ball_world.recording.rerun_map import map_bounds, map_entities
 from ball_world.recording.rerun_outlet import new_stream, Outlet, OutletFailed, parse_view
@@ -228,8 +228,15 @@ RTF_WINDOW = 1.0
 #: both).
 WALL_COLOR = (128, 128, 128)
 ENERGY_COLOR = (200, 130, 0)
-#: With robots: the total (ENERGY_COLOR), the drives' part (teal), the rest's (grey).
-ENERGY_COLORS = (ENERGY_COLOR, (0, 150, 140), (128, 128, 128))
+#: With robots: the total (ENERGY_COLOR), the drives' part (blue), the rest's (grey). The
+#: drives' part is all of the total but for pushes: drawn after it, it hides it.
+ENERGY_COLORS = (ENERGY_COLOR, (40, 110, 230), (128, 128, 128))
+#: The energy plot's titles, without robots and with: the series by colour.
+ENERGY_TITLES = ('kinetic energy change since step 0 [%]',
+                 'energy change [%]: orange all, blue drives, grey rest')
+#: Ball-ball blue, ball-wall brown: the walls' grey ran along the plot's grey zero line.
+COLLISION_COLORS = ((90, 150, 240), (190, 110, 40))
+COLLISIONS_TITLE = 'collisions since step 0: blue ball-ball, brown ball-wall'
 GOLDEN_RATIO_CONJUGATE = (math.sqrt(5.0) - 1.0) / 2.0
 #: Perceived lightness (OKLCH L) and the most chroma of the balls' colours (ball_color).
 BALL_LIGHTNESS = 0.565
@@ -381,8 +388,8 @@ def blueprint(world, parameters=None, plot_seconds=None):
     """The arena large on the left (+y up, bounds fitted), the plots stacked on the right.
 
     The 2D view's origin is the root, above the `arena` flip, so its visual bounds are in the
-    flipped frame: world y in [ymin, ymax] is view y in [-ymax, -ymin]. The legends of the
-    rising plots sit top left, where their curves (starting at 0) do not go. plot_seconds:
+    flipped frame: world y in [ymin, ymax] is view y in [-ymax, -ymin]. The plots' legends
+    are hidden, their titles name the series' colours. plot_seconds:
     the plots show only that much simulated time up to the time shown (a live view: what a
     viewer draws each frame stays bounded however long the run), else the whole run.
     """
@@ -398,18 +405,23 @@ def blueprint(world, parameters=None, plot_seconds=None):
     window = {} if plot_seconds is None else {'time_ranges': rrb.VisibleTimeRange(
         SIM_TIME, start=rrb.TimeRangeBoundary.cursor_relative(seconds=-plot_seconds),
         end=rrb.TimeRangeBoundary.cursor_relative())}
+    # The plots' legends are hidden: a legend box lay over the curves (three rows of the
+    # energy's covered a third of its plot); each title names its series' colours instead.
+    hidden = rrb.PlotLegend(visible=False)
+    robots = bool((parameters or {}).get('agents'))
     plots = rrb.Vertical(
         # What each mark is (rerun_legend), in the theme's text colour.
         rrb.TextDocumentView(origin=f'/{LEGEND}', name='legend'),
-        rrb.TimeSeriesView(origin=f'/{ENERGY}', name='kinetic energy change since step 0 [%]',
-                           plot_legend=rrb.PlotLegend(corner='LeftTop'), **window),
+        rrb.TimeSeriesView(origin=f'/{ENERGY}', name=ENERGY_TITLES[robots],
+                           plot_legend=hidden, **window),
         # Momentum is logged (it is part of the recording) but, in a walled box, mostly
         # the walls' doing: it sits in a tab behind the collisions.
-        rrb.Tabs(rrb.TimeSeriesView(origin=f'/{COLLISIONS}', name='collisions since step 0',
-                                    plot_legend=rrb.PlotLegend(corner='LeftTop'), **window),
-                 rrb.TimeSeriesView(origin=f'/{MOMENTUM}', name='momentum [kg m/s]', **window)),
+        rrb.Tabs(rrb.TimeSeriesView(origin=f'/{COLLISIONS}', name=COLLISIONS_TITLE,
+                                    plot_legend=hidden, **window),
+                 rrb.TimeSeriesView(origin=f'/{MOMENTUM}', name='momentum [kg m/s]: red x, '
+                                    'green y', plot_legend=hidden, **window)),
         rrb.TimeSeriesView(origin=f'/{REAL_TIME_FACTOR}',
-                           name=f'real-time factor (last {RTF_WINDOW:g} s)',
+                           name=f'real-time factor (last {RTF_WINDOW:g} s)', plot_legend=hidden,
                            axis_y=real_time_factor_axis(parameters or {}), **window),
         row_shares=[3, 2, 2, 2])
     return rrb.Blueprint(
@@ -773,6 +785,7 @@ class _Feed:
         self._account = EnergyAccount()
         self._masses = (None, None)  # (names, masses in their order), for the account
         self._shown_names = None
+        self._name_rects = []  # a view's name tags last drawn, (xmin, ymin, xmax, ymax) m
         self._labels = None  # the segment's LabelPlacer
         self._label_colors = None  # (n, 3) uint8: each ball's colour, for its label
         self._labelled = False  # every ball is named (else only the agents)
@@ -974,7 +987,7 @@ class _Feed:
         # The energy series' colours come with their names (energy_series): a static colour
         # would win over the three of a world with robots.
         self._emit('log', COLLISIONS, rr.SeriesLines(
-            names=['ball-ball', 'ball-wall'], colors=[(90, 150, 240), WALL_COLOR],
+            names=['ball-ball', 'ball-wall'], colors=list(COLLISION_COLORS),
             aggregation_policy='Max', interpolation_mode='StepAfter'), static=True)
         self._emit('log', REAL_TIME_FACTOR, rr.SeriesLines(
             names='real-time factor', colors=(180, 120, 230)), static=True)
@@ -1196,13 +1209,24 @@ class _Feed:
                 radii=0.0, show_labels=not self.live), static=self.live)
 
     def _bumper_tags(self, arrows):
-        """Each hit's label as a tag below its arrow's middle (rerun_text)."""
+        """Each hit's label as a tag below its arrow's middle (rerun_text), or a tag's height
+        lower, or higher, when that would cover a name ("ball_5 hit 0.47 N s" lay over
+        two)."""
         origins = np.asarray(arrows.origins.as_arrow_array().to_pylist(), dtype=np.float64)
         vectors = np.asarray(arrows.vectors.as_arrow_array().to_pylist(), dtype=np.float64)
+        taken = list(self._name_rects)
         tags = Tags()
-        for point, text in zip((origins + 0.5 * vectors).tolist(),
-                               arrows.labels.as_arrow_array().to_pylist()):
-            rect, unit = tag_rect(point, text, self._labels.scale)
+        for origin, vector, text in zip(origins, vectors,
+                                        arrows.labels.as_arrow_array().to_pylist()):
+            if not text:  # a casing (rerun_casing)
+                continue
+            middle = origin + 0.5 * vector
+            step = np.array([0.0, self._labels.scale.size(text)[1] + self._labels.scale.gap])
+            candidates = [tag_rect(point, text, self._labels.scale) for point in (
+                middle, middle - step, middle + step, middle - 2.0 * step, middle + 2.0 * step)]
+            rect, unit = next((c for c in candidates if not taken or not boxes_overlap(
+                np.asarray(c[0]), np.asarray(taken)).any()), candidates[0])
+            taken.append(rect)
             tags.add(text, rect, unit, BUMPER_TEXT_COLOR)
         return tags.layers(order=IMPULSE_TAG_ORDER)
 
@@ -1210,8 +1234,10 @@ class _Feed:
         """A view's names as tags (rerun_text) in their labels' boxes (rerun_labels)."""
         tags = Tags()
         scale = self._labels.scale
+        self._name_rects = []
         for point, text in zip(np.asarray(points, dtype=np.float64).tolist(), texts):
             rect, unit = tag_rect(point, text, scale)
+            self._name_rects.append(rect)
             tags.add(text, rect, unit, name_color(text))
         return tags.layers(order=NAME_ORDER)
 
