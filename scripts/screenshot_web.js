@@ -40,6 +40,16 @@ async function main() {
       await page.emulateMediaFeatures([{name: 'prefers-color-scheme', value: process.env.THEME}]);
     }
     page.on('pageerror', (error) => console.error(`page error: ${error.message}`));
+    // Every request that leaves this machine: what an offline lab would see fail.
+    page.on('request', (request) => {
+      const host = new URL(request.url()).hostname;
+      if (!['127.0.0.1', 'localhost'].includes(host) && !request.url().startsWith('data:')) {
+        console.log(`off-machine request: ${request.method()} ${request.url()}`);
+      }
+    });
+    page.on('requestfailed', (request) => {
+      console.log(`failed request: ${request.url()} (${request.failure().errorText})`);
+    });
     await page.goto(url, {waitUntil: 'load', timeout: 60000});
     const loaded = Date.now();
     console.log(`loaded ${loaded / 1000}`);

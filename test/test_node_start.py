@@ -43,3 +43,18 @@ def test_a_start_cut_after_the_first_segment_closes_complete_recordings(tmp_path
     assert len(Recording(tmp_path / 'run.mcap').segments) == 1
     assert run_rerun('rrd', 'verify', tmp_path / 'run.rrd').returncode == 0
     assert open_rrd(tmp_path / 'run.rrd').recordings()
+
+
+def test_a_recording_run_says_where_its_files_go():
+    """A recording run printed no line saying where its files went: one line, absolute."""
+    from pathlib import Path
+    values = {'record.mcap': 'runs/scan.mcap', 'record.rerun': '', 'record.max_bytes': 0,
+              'record.max_seconds': 0.0}
+    assert node_module.recording_line(values) == \
+        f"recording to {Path('runs/scan.mcap').resolve()}"
+    values.update({'record.rerun': 'runs/scan.rrd', 'record.max_seconds': 60.0})
+    line = node_module.recording_line(values)
+    assert line.startswith(f"recording to {Path('runs/scan.mcap').resolve()} and "
+                           f"{Path('runs/scan.rrd').resolve()} (split")
+    assert node_module.recording_line({**values, 'record.mcap': '', 'record.rerun': ''}) \
+        is None

@@ -31,11 +31,12 @@ def test_an_agent_is_drawn_with_its_heading_and_name(tmp_path):
         record = records[step]
         yaw = float(record.agents.yaws[0])
         assert yaw == pytest.approx(1.5 * step * simulation.dt_ns * 1e-9, abs=1e-12)
-        [vector] = shown_at(vectors, step)
+        casing, vector = shown_at(vectors, step)  # drawn twice: casing, then the arrow
+        assert casing == vector
         assert vector == pytest.approx([HEADING_RADII * radius * math.cos(yaw),
                                         HEADING_RADII * radius * math.sin(yaw)], rel=1e-6)
         # from the edge of the disc, never over it (where it had 1.5:1 against the disc)
-        [origin] = shown_at(origins, step)
+        origin = shown_at(origins, step)[1]
         edge = np.asarray(record.positions[2]) + radius * np.array([math.cos(yaw),
                                                                     math.sin(yaw)])
         assert origin == pytest.approx(edge.tolist(), rel=1e-6)
@@ -92,13 +93,14 @@ def test_a_bumper_hit_is_drawn_along_the_impulse_then_cleared(tmp_path):
     _, content, _, _ = read(path)
     vectors = content[(f'/{BUMPERS}', 'Arrows2D:vectors')]
     labels = content[(f'/{BUMPERS}', 'Arrows2D:labels')]
-    [vector] = shown_at(vectors, hit)
+    casing, vector = shown_at(vectors, hit)  # cased (rerun_casing): casing, then arrow
+    assert casing == vector
     assert vector[1] == pytest.approx(0.0, abs=1e-6) and vector[0] < 0.0  # pushed along -x
-    assert shown_at(labels, hit) == ['ball_0 hit 4 N s']  # 2 m1 m2 / (m1 + m2) x 3 m/s
+    assert shown_at(labels, hit) == ['', 'ball_0 hit 4 N s']  # 2 m1 m2 / (m1 + m2) x 3 m/s
     assert shown_at(vectors, hit + round(BUMPER_SHOWN * 100) + 1) in ([], None)
     # The label is kept, not shown: a tag under the arrow's middle draws it (rerun_text).
-    assert content[(f'/{BUMPERS}', 'Arrows2D:show_labels')][hit] == [False]
-    [origin] = shown_at(content[(f'/{BUMPERS}', 'Arrows2D:origins')], hit)
+    assert content[(f'/{BUMPERS}', 'Arrows2D:show_labels')][hit] == [False, False]
+    origin = shown_at(content[(f'/{BUMPERS}', 'Arrows2D:origins')], hit)[1]
     [centre] = shown_at(content[(f'/{BUMPERS}', 'Boxes2D:centers')], hit)
     assert centre[0] == pytest.approx(origin[0] + 0.5 * vector[0], abs=1e-5)
     assert centre[1] < origin[1] + 0.5 * vector[1]  # the tag hangs below the middle

@@ -1,8 +1,7 @@
 """The blueprint a recording opens with, read back from the .rrd as the viewer gets it: the
-real-time factor on an honest scale, and legends placed where the curves do not go."""
+real-time factor on an honest scale, and no legend over the curves."""
 from ball_world_testing.harness import open_rrd
 import pytest
-import rerun.blueprint as rrb
 
 from ball_world.recording.rerun_log import RerunSink
 from ball_world.simulation import Simulation
@@ -41,6 +40,12 @@ def test_a_run_as_fast_as_it_can_gets_an_automatic_scale(tmp_path):
     assert blueprint_values(recorded(tmp_path, rate_hz=0.0, dt=0.01), 'ScalarAxis:range') == []
 
 
-def test_legends_of_the_rising_plots_sit_top_left(tmp_path):
-    corner = rrb.components.Corner2D.LeftTop.value
-    assert blueprint_values(recorded(tmp_path), 'PlotLegend:corner') == [[corner], [corner]]
+def test_no_plot_legend_lies_on_the_data_the_titles_name_the_colours(tmp_path):
+    """The energy plot's three legend rows covered a third of its curves: every plot's
+    legend is hidden, and each title names its series by colour."""
+    path = recorded(tmp_path, agents=['ball_0'])
+    assert blueprint_values(path, 'PlotLegend:visible') == [[False]] * 4
+    names = [name for [name] in blueprint_values(path, 'ViewBlueprint:display_name')]
+    assert 'energy change [%]: orange all, blue drives, grey rest' in names
+    assert 'collisions since step 0: blue ball-ball, brown ball-wall' in names
+    assert 'legend' in names

@@ -100,6 +100,57 @@ def test_the_scan_tracker_takes_a_scan_and_a_pose():
         assert min(math.dist(centre, row[1:3]) for row in rows) < 0.02
 
 
+def pillar_map():
+    """A 10 m square map of 0.05 m cells, free but for a round pillar of radius 0.25 (a
+    ball's size) at (3, 7) and a 0.4 m square block at (7.5, 2.5): int8 as /map has it."""
+    resolution = 0.05
+    centres = (np.arange(200) + 0.5) * resolution
+    x, y = np.meshgrid(centres, centres)  # row = y, column = x
+    data = np.zeros((200, 200), dtype=np.int8)
+    data[np.hypot(x - 3.0, y - 7.0) <= 0.25] = 100
+    data[(abs(x - 7.5) <= 0.2) & (abs(y - 2.5) <= 0.2)] = 100
+    return tracker.MapGrid(resolution, 0.0, 0.0, data)
+
+
+def test_with_the_map_the_tracker_follows_balls_not_pillars():
+    # The pillar is as round as a ball and the block's corner fits one: without the map
+    # both are tracked (and the ball beside the block is lost in it); with the map, only
+    # the two balls are, one of them 0.05 m from the block.
+    from ball_world.core.solid_cells import SolidCells
+    from ball_world.core.static_geometry import ScanGrid
+    grid = pillar_map()
+    cells = ScanGrid(SolidCells(0.0, 0.0, grid.resolution, grid.data == 100).checked())
+    balls = np.array([[7.5, 7.5], [7.5, 2.0]])
+    radii = np.array([0.2, 0.25])
+    ranges = lidar.scan(balls, radii, BOX, (5.0, 5.0), 0.3, FAN._replace(noise_stddev=0.0),
+                        grid=cells)
+    scan = tracker.Scan(0, 'ball_0/base_link', FAN.angle_min, FAN.angle_increment,
+                        FAN.range_min, FAN.range_max, ranges.astype(np.float32))
+    pose = (5.0, 5.0, 0.3)
+    blind = tracker.ScanTracker().update(scan, pose)
+    assert min(math.dist((3.0, 7.0), row[1:3]) for row in blind) < 0.05  # the pillar
+    assert min(math.dist((7.5, 2.5), row[1:3]) for row in blind) < 0.1  # the block's corner
+    mapped = tracker.ScanTracker()
+    mapped.use_map(grid)
+    rows = mapped.update(scan, pose)
+    assert len(rows) == 2
+    for centre in balls:
+        assert min(math.dist(centre, row[1:3]) for row in rows) < 0.02
+
+
+def test_the_map_mask_takes_solid_cells_and_what_lies_near_them_not_off_the_map():
+    data = np.zeros((4, 5), dtype=np.int8)
+    data[1, 2] = 100  # the cell x in [0.2, 0.3), y in [0.1, 0.2) (origin 0, 0.1 m cells)
+    data[3, 4] = -1  # unknown: solid, as the world makes it by default
+    mask = tracker.MapMask(tracker.MapGrid(0.1, 0.0, 0.0, data), near=0.03)
+    # In the cell; 0.02 left of it and 0.02 below it (within `near`); 0.02 off a corner
+    # each way; 0.05 left of it (not within); the unknown cell; off the map; not a number.
+    points = [(0.25, 0.15), (0.18, 0.15), (0.25, 0.08), (0.32, 0.22), (0.15, 0.15),
+              (0.45, 0.35), (0.25, -0.5), (9.0, 9.0), (np.nan, 0.0)]
+    assert mask(points).tolist() == [True, True, True, True, False, True, False, False,
+                                     False]
+
+
 def test_kalman_track_learns_a_constant_velocity():
     options = tracker.Options()
     track = tracker.Track(0, (0.0, 0.0), 0.0, options)

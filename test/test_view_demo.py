@@ -6,6 +6,7 @@ Ctrl-C is SIGINT to the launcher, as a terminal sends it. A launcher killed outr
 (SIGKILL: nothing of it runs any more) must not leave the Rerun server holding its ports.
 """
 import os
+from pathlib import Path
 import signal
 import socket
 import subprocess
@@ -92,9 +93,18 @@ def test_ctrl_c_stops_everything_it_started_and_frees_the_ports(tmp_path, tool, 
     assert not [pid for pid in descendants if alive(pid)]
     assert port_free(web) and port_free(grpc)
     if tool == 'ball_world_demo':
+        # Its last line says that everything stopped, not only that it is stopping.
+        assert out.rstrip().splitlines()[-1].strip().startswith(
+            'ball_world_demo: stopped; every program it started has ended'), out
         # The world counted its robots' drive apart from pushes, and closed cleanly.
         log = (tmp_path / 'logs' / 'world.log').read_text()
         assert 'impulses applied 0 (and ' in log and "by the agents' drives)" in log
+
+
+def test_make_views_logs_go_in_a_folder_of_their_own():
+    """`make view` left runs/rerun_server.log loose at the top of runs/."""
+    from ball_world.tools import view
+    assert view.parser().parse_args([]).log_dir == Path('runs/view')
 
 
 @pytest.mark.parametrize('tool, started', [('ball_world_view', 2), ('ball_world_demo', 5)])

@@ -172,14 +172,64 @@ def test_a_live_view_draws_no_text_in_rerun_label_boxes():
     assert colors <= set(hue) and {hue[c] for c in colors} >= {0, 1} and len(colors) >= 6
 
 
-@pytest.mark.parametrize('color', [AGENT_COLOR, IMPULSE_COLOR, TRACK_COLOR, BUMPER_VIEW_COLOR],
-                         ids=['heading', 'push', 'track', 'bumper'])
+@pytest.mark.parametrize('color', [IMPULSE_COLOR], ids=['push'])
 def test_arrows_keep_4_to_1_on_both_themes(color):
-    """The heading was yellow (1.3:1 on the light theme), the bumper hit orange (3.3:1).
-    Every arrow and ring keeps at least 4:1 against the view's background, light theme
-    and dark."""
+    """A push's arrow keeps at least 4:1 against the view's background, light theme and
+    dark."""
     for where, background in VIEW.items():
         assert contrast(color, background) >= 4.0, where
+
+
+def backgrounds_of_marks():
+    """What a heading or a ring lies on: both themes' views, a map's occupied and unknown
+    cells (drawn over either theme), the scans' rays and hit points, every ball's colour."""
+    from ball_world.recording.rerun_map import UNKNOWN_COLOR
+    from ball_world.recording.rerun_scans import RAY_ALPHA, SCAN_COLOR
+
+    def over(color, alpha, under):
+        return tuple(round((alpha * c + (255 - alpha) * u) / 255) for c, u in zip(color, under))
+    found = dict(VIEW)
+    for theme, view in VIEW.items():
+        found[f'unknown cell on the {theme}'] = over(UNKNOWN_COLOR[:3], UNKNOWN_COLOR[3], view)
+        found[f'ray on the {theme}'] = over(SCAN_COLOR, RAY_ALPHA, view)
+    found['occupied cell'] = rerun_log.WALL_COLOR
+    found['hit point'] = SCAN_COLOR
+    found.update({f'ball_{i}': rerun_log.ball_color(f'ball_{i}') for i in range(40)})
+    return found
+
+
+@pytest.mark.parametrize('color', [AGENT_COLOR, TRACK_COLOR, BUMPER_VIEW_COLOR],
+                         ids=['heading', 'track ring', 'bumper hit'])
+def test_headings_and_rings_keep_3_to_1_on_whatever_they_lie_on(color):
+    """The orange heading had 1.19:1 on a pink robot, the green ring 1.13:1 on the map's
+    cells: no one colour has 3:1 on every disc, ray, cell and theme. Cased, the mark's light
+    core keeps 7:1 on its dark casing, and on anything it lies on the casing or the core
+    keeps 3:1 (the casing on light things, the core on dark ones)."""
+    from ball_world.recording.rerun_casing import CASING_COLOR, CORE_CONTRAST
+    assert contrast(color, CASING_COLOR) >= CORE_CONTRAST
+    for where, background in backgrounds_of_marks().items():
+        assert max(contrast(color, background), contrast(CASING_COLOR, background)) >= 3.0, \
+            where
+
+
+def test_headings_and_rings_are_drawn_cased_core_over_casing(robot_run):
+    """Each heading twice in one batch: the casing first (wider, dark), then the arrow."""
+    from ball_world.recording.rerun_casing import CASING_COLOR, CASING_POINTS
+    from ball_world.recording.rerun_agents import AGENT_RADIUS
+    from ball_world.tools.view_tracks import ring_strips
+    _, _, content = robot_run
+    colors = content[(f'/{AGENTS}', 'Arrows2D:colors')][0]
+    radii = content[(f'/{AGENTS}', 'Arrows2D:radii')][0]
+    vectors = content[(f'/{AGENTS}', 'Arrows2D:vectors')][5]
+    rgba = [int.from_bytes(bytes((*c, 255)), 'big') for c in (CASING_COLOR, AGENT_COLOR)]
+    assert colors == [rgba[0]] * 2 + [rgba[1]] * 2  # two robots: casings, then cores
+    assert radii == pytest.approx([-(AGENT_RADIUS + CASING_POINTS)] * 2 + [-AGENT_RADIUS] * 2)
+    assert vectors[:2] == vectors[2:]
+    rings = ring_strips(np.array([[1.0, 2.0]]), np.array([0.3]))
+    strips = rings.strips.as_arrow_array().to_pylist()
+    assert len(strips) == 2 and strips[0] == strips[1]
+    assert [c for c in rings.colors.as_arrow_array().to_pylist()] == [
+        int.from_bytes(bytes((*c, 255)), 'big') for c in (CASING_COLOR, TRACK_COLOR)]
 
 
 def test_no_one_text_colour_reads_on_both_themes_label_boxes():
@@ -230,9 +280,9 @@ def test_plots_keep_room_above_and_below_their_data(robot_run):
     energy_room = content[(f'/{ENERGY_HEADROOM}', 'Scalars:scalars')]
     collisions_room = content[(f'/{COLLISIONS_HEADROOM}', 'Scalars:scalars')]
     assert sorted(energy_room) == sorted(collisions_room) == sorted(energy)
-    assert max(abs(v) for (v,) in energy.values()) > 1.0  # the drives changed the energy
+    assert max(abs(row[0]) for row in energy.values()) > 1.0  # the drives changed the energy
     for step in energy:
-        seen = [v for k, (v,) in energy.items() if k <= step]
+        seen = [v for k, row in energy.items() if k <= step for v in row]
         above, below = energy_room[step]
         room = max(0.08 * (max(seen) - min(seen)), 0.5)
         assert above == pytest.approx(max(seen) + room) and below == pytest.approx(
@@ -242,6 +292,43 @@ def test_plots_keep_room_above_and_below_their_data(robot_run):
     # Drawn in no colour, at no width.
     assert content[(f'/{ENERGY_HEADROOM}', 'SeriesLines:colors')][None] == [0, 0]
     assert content[(f'/{COLLISIONS_HEADROOM}', 'SeriesLines:widths')][None] == [0.0]
+
+
+def test_with_robots_the_energy_plot_shows_the_drives_part_and_the_rests(robot_run):
+    """The total swung by tens of percent with robots driving, and nothing said why. Now
+    beside it: what the drives put in minus what they took out, and the rest, which is
+    0 until ball_3 is pushed at step 20 (collisions keep energy), then that push's work,
+    m/2 (|v + J/m|^2 - |v|^2) with v its velocity before (the record of step 19)."""
+    simulation, records, content = robot_run
+    energy = content[(f'/{ENERGY}', 'Scalars:scalars')]
+    names = content[(f'/{ENERGY}', 'SeriesLines:names')][0]
+    assert len(names) == 3 and names[1].startswith("robots' drives") and \
+        names[2].startswith('the rest')
+    energy0 = records[0].kinetic_energy
+    ball = records[19].names.index('ball_3') if records[19].names else 3
+    mass = float(simulation.world.masses[ball])
+    vx, vy = records[19].velocities[ball]
+    push = 0.5 * mass * ((vx + 0.02 / mass) ** 2 + vy ** 2 - vx ** 2 - vy ** 2)
+    for record in records[1:]:
+        total, drives, rest = energy[record.step]
+        assert total == pytest.approx(
+            (record.kinetic_energy - energy0) / energy0 * 100.0, abs=1e-9)
+        assert total == pytest.approx(drives + rest, abs=1e-9)
+        expected = 0.0 if record.step < 20 else push / energy0 * 100.0
+        assert rest == pytest.approx(expected, abs=1e-9)
+    assert max(abs(energy[r.step][1]) for r in records) > 1.0
+
+
+def test_without_robots_the_energy_plot_is_one_series(tmp_path):
+    path = tmp_path / 'balls.rrd'
+    simulation = Simulation({'random.count': 5}, sinks=[RerunSink(path)])
+    for _ in range(3):
+        simulation.step()
+    simulation.close()
+    content = read(path)[1]
+    assert all(len(row) == 1 for row in content[(f'/{ENERGY}', 'Scalars:scalars')].values())
+    [name] = content[(f'/{ENERGY}', 'SeriesLines:names')][0]
+    assert name.startswith('change from')
 
 
 def test_a_views_headroom_follows_the_last_seconds_it_shows():
@@ -351,3 +438,66 @@ def test_a_live_view_holds_a_bumper_hits_clear_for_a_whole_flush_of_wall_time(mo
     assert at(0.0, step=0) is None
     clock.now += rerun_log.VIEW_EVENT_SECONDS
     assert at(0.1) == ('clear', None)
+
+
+def test_a_live_view_thins_the_rays_as_robots_multiply():
+    """Twenty robots' 72 rays each were a mesh over the depot: a view shares out
+    VIEW_RAY_BUDGET rays, none below MIN_RAYS a robot; the hit points are always drawn."""
+    from ball_world.recording.rerun_scans import MIN_RAYS, VIEW_RAY_BUDGET, view_rays
+    assert [view_rays(n) for n in (1, 2, 3, 4, 12, 13, 20)] == [72, 72, 48, 36, 12, 0, 0]
+    for robots in range(1, 40):
+        rays = view_rays(robots)
+        assert rays * robots <= VIEW_RAY_BUDGET and (rays == 0 or rays >= MIN_RAYS)
+
+
+def test_the_legend_names_every_mark_of_the_world_it_shows():
+    """A newcomer sees discs, lines, dots, arrows, rings and grey cells: the page's legend
+    names each one this world draws, and no mark it does not draw."""
+    from ball_world.recording.rerun_legend import legend_text
+    sandbox = {'agents': ['ball_0', 'ball_1'], 'map': 'maps/tb3_sandbox.yaml',
+               'map.unknown_solid': True, 'rerun.trail_seconds': 2.0}
+    text = legend_text(sandbox, 0.5, 5.0)
+    for mark in ('discs', 'its path over the last 2 s (trail)', "robot's heading",
+                 'blue dots', 'faint blue lines', 'bumper hit', 'green rings',
+                 "map's walls", 'unknown cells (solid)', 'push', 'ruler',
+                 "robots' drives", 'the rest stays 0', 'every 5 s: empty until then'):
+        assert mark in text, mark
+    plain = legend_text({}, 0.5, None)
+    for mark in ('trail', 'heading', 'blue dots', 'rings', 'unknown', 'drives', 'every'):
+        assert mark not in plain, mark
+    assert 'push' in plain and 'flat unless something pushes' in plain
+
+
+def test_the_page_lays_the_legend_out_above_the_plots(robot_run):
+    """The legend is a text document (the theme's text colour) in the plots' column."""
+    from ball_world.recording.rerun_legend import LEGEND
+    _, _, content = robot_run
+    [text] = content[(f'/{LEGEND}', 'TextDocument:text')][None]
+    assert text.startswith('**What the view draws**')
+
+
+def test_a_bumper_tag_moves_off_a_name_it_would_cover():
+    """"ball_5 hit 0.47 N s" lay over two names: a hit's tag goes below the arrow's middle,
+    else a tag's height lower (or higher), where it covers no name tag."""
+    from ball_world.recording.rerun_casing import cased_arrows
+    from ball_world.recording.rerun_labels import boxes_overlap, tag_rect
+    feed, _, _ = recorded_view_feed()
+    collector = Truth()
+    simulation = Simulation(ROBOTS, sinks=[collector])
+    simulation.close()
+    world, _ = collector.segments[0]
+    feed.start_segment(world, SimpleNamespace(parameters={}, log_offset_ns=0))
+    scale = feed._labels.scale
+    text = 'ball_0 hit 0.47 N s'
+    origin, vector = np.array([5.0, 5.0]), np.array([1.0, 0.0])
+    middle, _ = tag_rect(origin + 0.5 * vector, text, scale)
+    feed._name_rects = [middle]  # a name where the tag would go
+    arrows = cased_arrows([origin], [vector], BUMPER_VIEW_COLOR, 2.5, 36.0, labels=[text])
+    pills = feed._bumper_tags(arrows)[0]
+    [centre] = pills.centers.as_arrow_array().to_pylist()
+    [half] = pills.half_sizes.as_arrow_array().to_pylist()
+    rect = (centre[0] - half[0], centre[1] - half[1], centre[0] + half[0], centre[1] + half[1])
+    assert not boxes_overlap(np.asarray(rect), np.asarray(middle))
+    assert centre[0] == pytest.approx(0.5 * (middle[0] + middle[2]), abs=1e-5)
+    assert rect[3] < middle[1]  # a tag's height lower
+    feed.close()

@@ -4,8 +4,9 @@ agent's centre along the impulse.
 
 A module of its own so rerun_log.py only calls it: an agent is a ball (drawn with the
 balls) plus its heading arrow, from the edge of its disc outwards, HEADING_RADII of its
-radius long, so the heading reads at any zoom that shows the ball. Not from the centre: over
-the robot's own disc the orange had 1.5:1 against it, off it 4.3-4.6:1 on both themes.
+radius long, so the heading reads at any zoom that shows the ball. Off the disc it still lies
+on the robot's rays, on map cells, on other balls: it is cased (rerun_casing), a light orange
+over a dark slate arrow, so it reads on any of them (1.19:1 on a pink robot before).
 A hit's arrow (BUMPERS) points along the impulse the agent took, in the world (the message
 holds it in base_link; turned back by the heading), its length the velocity change times
 BUMPER_SECONDS but at least BUMPER_MIN_RADII radii, labelled with the agent and the impulse
@@ -13,9 +14,9 @@ in N s; BumperView keeps it on screen for BUMPER_SHOWN seconds of simulated time
 step is too short to see.
 """
 import numpy as np
-import rerun as rr
 
 from ball_world.msgs.bumper_markers import BUMPER_MIN_RADII, BUMPER_SECONDS, BUMPER_SHOWN
+from ball_world.recording.rerun_casing import cased_arrows
 
 #: Entity path of the arrows, under the arena's +y-up transform.
 AGENTS = 'arena/agents'
@@ -23,14 +24,16 @@ AGENTS = 'arena/agents'
 HEADING_RADII = 2.0
 #: Arrow length where a record carries no radii, m.
 DEFAULT_LENGTH = 0.5
-#: Burnt orange: no ball has it, and it keeps a contrast of at least 4:1 on the viewer's
-#: light theme and on its dark one (yellow was 1.3:1 on the light one).
-AGENT_COLOR = (200, 80, 0)
+#: Light orange, over its casing (rerun_casing: 7.3:1 on it): no ball is as light and as
+#: orange. Alone it had no colour with 3:1 on every robot disc, ray and theme.
+AGENT_COLOR = (255, 150, 40)
+#: The heading's radius, UI points (its casing is CASING_POINTS wider).
+AGENT_RADIUS = 2.0
 #: Entity path of the bumper hits, under the arena's +y-up transform.
 BUMPERS = 'arena/bumpers'
-#: Violet: no ball has it, apart from the heading's orange and the pushes' pink, and over 4:1
-#: on both viewer themes (the markers' orange, (255, 80, 0), has 3.3:1 on the light one).
-BUMPER_VIEW_COLOR = (160, 80, 235)
+#: Light violet over its casing (rerun_casing: 7.5:1 on it): no ball has it. Alone, the violet
+#: (160, 80, 235) had 1.55:1 on a robot's rays (screenshot of the dark theme).
+BUMPER_VIEW_COLOR = (200, 160, 255)
 #: The text of a hit's tag (rerun_text): a light violet.
 BUMPER_TEXT_COLOR = (226, 208, 255)
 
@@ -50,8 +53,7 @@ def heading_arrows(record):
         lengths = own * HEADING_RADII
     headings = np.stack((np.cos(frame.yaws), np.sin(frame.yaws)), axis=1)
     origins = np.asarray(record.positions, dtype=np.float64)[indices] + headings * own[:, None]
-    return rr.Arrows2D(origins=origins, vectors=headings * lengths[:, None], colors=AGENT_COLOR,
-                       radii=rr.Radius.ui_points(2.5), draw_order=35.0)
+    return cased_arrows(origins, headings * lengths[:, None], AGENT_COLOR, AGENT_RADIUS, 35.0)
 
 
 def bumper_arrows(record):
@@ -78,12 +80,11 @@ def bumper_arrows(record):
               else size)
     length = np.maximum(change * BUMPER_SECONDS, BUMPER_MIN_RADII * radius)
     vectors = world / np.where(size > 0.0, size, 1.0)[:, None] * length[:, None]
-    return rr.Arrows2D(
-        origins=np.asarray(record.positions, dtype=np.float64)[indices], vectors=vectors,
-        labels=[f'{bumper.name} hit {value:.3g} N s' for bumper, value in zip(frame.bumpers,
-                                                                              size)],
-        show_labels=False, colors=BUMPER_VIEW_COLOR, radii=rr.Radius.ui_points(3.0),
-        draw_order=36.0)
+    return cased_arrows(
+        np.asarray(record.positions, dtype=np.float64)[indices], vectors, BUMPER_VIEW_COLOR,
+        2.5, 36.0, labels=[f'{bumper.name} hit {value:.3g} N s'
+                           for bumper, value in zip(frame.bumpers, size)],
+        show_labels=[False] * len(rows))
 
 
 class BumperView:

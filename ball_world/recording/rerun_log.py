@@ -104,12 +104,14 @@ from ball_world.core.parameters import BY_NAME
 from ball_world.recording.files import claim_output, OutputClaim
 from ball_world.recording.rerun_agents import (AGENTS, BUMPER_TEXT_COLOR, BUMPERS, BumperView,
                                                heading_arrows)
-from ball_world.recording.rerun_labels import LabelPlacer, tag_rect
+from ball_world.recording.rerun_energy import EnergyAccount
+from ball_world.recording.rerun_labels import boxes_overlap, LabelPlacer, tag_rect
+from ball_world.recording.rerun_legend import LEGEND, legend_document
 from ball_world.recording.rerun_map import map_bounds, map_entities
 from ball_world.recording.rerun_outlet import new_stream, Outlet, OutletFailed, parse_view
 from ball_world.recording.rerun_scale import padded, ruler
 from ball_world.recording.rerun_scans import (scan_geometry, scan_layers, SCANS, view_layers,
-                                              VIEW_MAX_POINTS)
+                                              VIEW_MAX_POINTS, view_rays)
 from ball_world.recording.rerun_text import Tags
 from ball_world.step_record import PACKAGE_NAME
 
@@ -226,6 +228,15 @@ RTF_WINDOW = 1.0
 #: both).
 WALL_COLOR = (128, 128, 128)
 ENERGY_COLOR = (200, 130, 0)
+#: With robots: the total (ENERGY_COLOR), the drives' part (blue), the rest's (grey). The
+#: drives' part is all of the total but for pushes: drawn after it, it hides it.
+ENERGY_COLORS = (ENERGY_COLOR, (40, 110, 230), (128, 128, 128))
+#: The energy plot's titles, without robots and with: the series by colour.
+ENERGY_TITLES = ('kinetic energy change since step 0 [%]',
+                 'energy change [%]: orange all, blue drives, grey rest')
+#: Ball-ball blue, ball-wall brown: the walls' grey ran along the plot's grey zero line.
+COLLISION_COLORS = ((90, 150, 240), (190, 110, 40))
+COLLISIONS_TITLE = 'collisions since step 0: blue ball-ball, brown ball-wall'
 GOLDEN_RATIO_CONJUGATE = (math.sqrt(5.0) - 1.0) / 2.0
 #: Perceived lightness (OKLCH L) and the most chroma of the balls' colours (ball_color).
 BALL_LIGHTNESS = 0.565
@@ -377,8 +388,8 @@ def blueprint(world, parameters=None, plot_seconds=None):
     """The arena large on the left (+y up, bounds fitted), the plots stacked on the right.
 
     The 2D view's origin is the root, above the `arena` flip, so its visual bounds are in the
-    flipped frame: world y in [ymin, ymax] is view y in [-ymax, -ymin]. The legends of the
-    rising plots sit top left, where their curves (starting at 0) do not go. plot_seconds:
+    flipped frame: world y in [ymin, ymax] is view y in [-ymax, -ymin]. The plots' legends
+    are hidden, their titles name the series' colours. plot_seconds:
     the plots show only that much simulated time up to the time shown (a live view: what a
     viewer draws each frame stays bounded however long the run), else the whole run.
     """
@@ -394,17 +405,25 @@ def blueprint(world, parameters=None, plot_seconds=None):
     window = {} if plot_seconds is None else {'time_ranges': rrb.VisibleTimeRange(
         SIM_TIME, start=rrb.TimeRangeBoundary.cursor_relative(seconds=-plot_seconds),
         end=rrb.TimeRangeBoundary.cursor_relative())}
+    # The plots' legends are hidden: a legend box lay over the curves (three rows of the
+    # energy's covered a third of its plot); each title names its series' colours instead.
+    hidden = rrb.PlotLegend(visible=False)
+    robots = bool((parameters or {}).get('agents'))
     plots = rrb.Vertical(
-        rrb.TimeSeriesView(origin=f'/{ENERGY}', name='kinetic energy change since step 0 [%]',
-                           plot_legend=rrb.PlotLegend(corner='LeftTop'), **window),
+        # What each mark is (rerun_legend), in the theme's text colour.
+        rrb.TextDocumentView(origin=f'/{LEGEND}', name='legend'),
+        rrb.TimeSeriesView(origin=f'/{ENERGY}', name=ENERGY_TITLES[robots],
+                           plot_legend=hidden, **window),
         # Momentum is logged (it is part of the recording) but, in a walled box, mostly
         # the walls' doing: it sits in a tab behind the collisions.
-        rrb.Tabs(rrb.TimeSeriesView(origin=f'/{COLLISIONS}', name='collisions since step 0',
-                                    plot_legend=rrb.PlotLegend(corner='LeftTop'), **window),
-                 rrb.TimeSeriesView(origin=f'/{MOMENTUM}', name='momentum [kg m/s]', **window)),
+        rrb.Tabs(rrb.TimeSeriesView(origin=f'/{COLLISIONS}', name=COLLISIONS_TITLE,
+                                    plot_legend=hidden, **window),
+                 rrb.TimeSeriesView(origin=f'/{MOMENTUM}', name='momentum [kg m/s]: red x, '
+                                    'green y', plot_legend=hidden, **window)),
         rrb.TimeSeriesView(origin=f'/{REAL_TIME_FACTOR}',
-                           name=f'real-time factor (last {RTF_WINDOW:g} s)',
-                           axis_y=real_time_factor_axis(parameters or {}), **window))
+                           name=f'real-time factor (last {RTF_WINDOW:g} s)', plot_legend=hidden,
+                           axis_y=real_time_factor_axis(parameters or {}), **window),
+        row_shares=[3, 2, 2, 2])
     return rrb.Blueprint(
         rrb.Horizontal(arena, plots, column_shares=[2, 1]),
         rrb.TimePanel(timeline=SIM_TIME, state='collapsed', play_state='following'),
@@ -436,10 +455,24 @@ def energy_change(energy, energy0):
     return round((energy - energy0) / energy0 / ENERGY_RESOLUTION) * ENERGY_RESOLUTION * 100.0
 
 
-def energy_legend(energy0):
-    if energy0 <= 0.0:
-        return 'kinetic energy [J] (0 J at step 0)'
-    return f'change from {energy0:.6g} J at step 0'
+def energy_legend(energy0, split=False):
+    """The energy series' names: the total's, and with robots (split) the drives' and the
+    rest's (rerun_energy)."""
+    total = ('kinetic energy [J] (0 J at step 0)' if energy0 <= 0.0 else
+             f'all: change from {energy0:.6g} J at step 0' if split else
+             f'change from {energy0:.6g} J at step 0')
+    if not split:
+        return total
+    return [total, "robots' drives: energy put in minus taken out",
+            'the rest: pushes, edits (collisions keep energy: 0)']
+
+
+def energy_series(energy0, split=False):
+    """rr.SeriesLines of the energy plot: names and colours (ENERGY_COLORS)."""
+    names = energy_legend(energy0, split)
+    if not split:
+        return rr.SeriesLines(names=names, colors=ENERGY_COLOR)
+    return rr.SeriesLines(names=names, colors=list(ENERGY_COLORS))
 
 
 class Headroom:
@@ -454,7 +487,7 @@ class Headroom:
 
     def __init__(self, window=None):
         self.window_ns = None if window is None else round(window * 1e9)
-        self.rows = deque()  # (log ns, energy, collisions)
+        self.rows = deque()  # (log ns, energy low, energy high, collisions)
         self.extremes = None  # without a window: (energy low, high, collisions high)
 
     def clear(self):
@@ -462,19 +495,25 @@ class Headroom:
         self.extremes = None
 
     def add(self, time_ns, energy, collisions):
-        """(energy above, energy below, collisions above) for a new row."""
+        """(energy above, energy below, collisions above) for a new row; energy: a value or
+        the values of the row (all of them kept in view)."""
+        if isinstance(energy, tuple):
+            return self._add(time_ns, min(energy), max(energy), collisions)
+        return self._add(time_ns, energy, energy, collisions)
+
+    def _add(self, time_ns, energy_low, energy_high, collisions):
         if self.window_ns is None:
-            low, high, most = self.extremes or (energy, energy, collisions)
-            self.extremes = low, high, most = min(low, energy), max(high, energy), max(
-                most, collisions)
+            low, high, most = self.extremes or (energy_low, energy_high, collisions)
+            self.extremes = low, high, most = min(low, energy_low), max(
+                high, energy_high), max(most, collisions)
         else:
             rows = self.rows
-            rows.append((time_ns, energy, collisions))
+            rows.append((time_ns, energy_low, energy_high, collisions))
             while rows[0][0] < time_ns - self.window_ns:
                 rows.popleft()
-            energies = [row[1] for row in rows]
-            low, high = min(energies), max(energies)
-            most = max(row[2] for row in rows)
+            low = min(row[1] for row in rows)
+            high = max(row[2] for row in rows)
+            most = max(row[3] for row in rows)
         room = max(HEADROOM * (high - low), ENERGY_HEADROOM_MIN)
         return high + room, low - room, most * (1.0 + HEADROOM) + 1.0
 
@@ -547,6 +586,18 @@ class _Pending:
 
     def __len__(self):
         return len(self.rows)
+
+
+def _energy_columns(rows):
+    """(n,) or (n, k) float64 of the energy rows (tuples of 1 or 3 values; rows of a segment
+    with fewer, before a reset, padded with NaN: no point drawn)."""
+    width = max(len(row) for row in rows)
+    if width == 1:
+        return np.array([row[0] for row in rows], dtype=np.float64)
+    out = np.full((len(rows), width), np.nan)
+    for i, row in enumerate(rows):
+        out[i, :len(row)] = row
+    return out
 
 
 def _where_known(steps, times, values):
@@ -730,7 +781,11 @@ class _Feed:
                          else BumperView())
         self._totals = np.zeros(2, dtype=np.int64)  # collisions since step 0 of the segment
         self._energy0 = None
+        self._energy_split = False  # the segment has robots: drives and rest apart
+        self._account = EnergyAccount()
+        self._masses = (None, None)  # (names, masses in their order), for the account
         self._shown_names = None
+        self._name_rects = []  # a view's name tags last drawn, (xmin, ymin, xmax, ymax) m
         self._labels = None  # the segment's LabelPlacer
         self._label_colors = None  # (n, 3) uint8: each ball's colour, for its label
         self._labelled = False  # every ball is named (else only the agents)
@@ -751,6 +806,7 @@ class _Feed:
         self._impulses_changed = False
         self._trail = deque()  # (log ns, positions) of the trail's steps
         self._map_files = None  # the files of the map logged (static), if any
+        self._legend = None  # rerun_legend's TextDocument, logged with the statics
         self._closed = False
         self._plan = None  # the blueprint the file was opened with
         self._start = None  # (world, info) of the segment: what a new part logs again
@@ -778,6 +834,7 @@ class _Feed:
             self._headroom.clear()
             self._totals[:] = 0
             self._energy0 = None
+            self._account.clear()
         self._shown_names = None
         self._impulses = []
         self._impulses_changed = False
@@ -820,7 +877,7 @@ class _Feed:
         if self._start is not None:
             self._log_segment(*self._start)
             if self._energy0 is not None:
-                self._emit('log', ENERGY, rr.SeriesLines(names=energy_legend(self._energy0)),
+                self._emit('log', ENERGY, energy_series(self._energy0, self._energy_split),
                            static=self.live)
         self._shown_names = None  # the looks, at the part's first step
         self._impulses_changed = bool(self._impulses)
@@ -851,9 +908,12 @@ class _Feed:
         self._totals += (record.ball_ball, record.ball_wall)
         if self._energy0 is None:
             self._energy0 = float(record.kinetic_energy)
+            self._energy_split = getattr(record, 'agents', None) is not None
             self._set_time(self._last_global, record.log_time_ns)
-            self._emit('log', ENERGY, rr.SeriesLines(names=energy_legend(self._energy0)),
+            self._emit('log', ENERGY, energy_series(self._energy0, self._energy_split),
                        static=self.live)
+        if self._energy_split:
+            self._account.add(record, self._masses_of(record))
         rtf = record.real_time_factor
         if self._rtf is not None:
             # Step 0 is the initial state, written when the world is built, not a step: the
@@ -916,20 +976,25 @@ class _Feed:
         stream = self._new_stream(APPLICATION_ID, self._recording_id or recording_id(parameters),
                                   VIEW_FLUSH_SECONDS if self.live else None)
         self.outlet = self._open_outlet(stream, plan)
+        self._legend = legend_document(parameters, IMPULSE_SECONDS,
+                                       VIEW_PLOT_PERIOD if self.live else None)
         self._log_statics()
 
     def _log_statics(self):
         """What every file and view holds static: the arena's flip and the plots' styles."""
         self._emit('log', ARENA, rr.Transform3D(
             rotation=rr.RotationAxisAngle(axis=(1.0, 0.0, 0.0), degrees=180.0)), static=True)
-        self._emit('log', ENERGY, rr.SeriesLines(colors=ENERGY_COLOR), static=True)
+        # The energy series' colours come with their names (energy_series): a static colour
+        # would win over the three of a world with robots.
         self._emit('log', COLLISIONS, rr.SeriesLines(
-            names=['ball-ball', 'ball-wall'], colors=[(90, 150, 240), WALL_COLOR],
+            names=['ball-ball', 'ball-wall'], colors=list(COLLISION_COLORS),
             aggregation_policy='Max', interpolation_mode='StepAfter'), static=True)
         self._emit('log', REAL_TIME_FACTOR, rr.SeriesLines(
             names='real-time factor', colors=(180, 120, 230)), static=True)
         self._emit('log', MOMENTUM, rr.SeriesLines(
             names=['x', 'y'], colors=[(230, 80, 80), (80, 200, 90)]), static=True)
+        if self._legend is not None:
+            self._emit('log', LEGEND, self._legend, static=True)
         for entity, count in ((ENERGY_HEADROOM, 2), (COLLISIONS_HEADROOM, 1)):
             self._emit('log', entity, rr.SeriesLines(
                 names=[' '] * count, colors=[(0, 0, 0, 0)] * count, widths=[0.0] * count),
@@ -999,6 +1064,28 @@ class _Feed:
                 or pending.position_count >= MAX_PENDING_POSITIONS):
             self._send()
 
+    def _masses_of(self, record):
+        """The balls' masses in pose order (the record's, or the segment's by name)."""
+        masses = getattr(record, 'masses', None)
+        if masses is not None:
+            return masses
+        names = names_of(record)
+        if self._masses[0] != names:
+            self._masses = (names, np.array([self._segment.mass[name] for name in names],
+                                            dtype=np.float64))
+        return self._masses[1]
+
+    def _energy_row(self, record):
+        """The energy plot's values of a step: the change since step 0 (percent of the
+        energy then, rounded: energy_change), and with robots the drives' and the rest's
+        parts of it (rerun_energy)."""
+        total = energy_change(record.kinetic_energy, self._energy0)
+        if not self._energy_split:
+            return (total,)
+        energy0 = self._energy0
+        return (total, energy_change(energy0 + self._account.drives, energy0),
+                energy_change(energy0 + self._account.rest, energy0))
+
     def _buffer(self, record, rtf, step):
         """A file's step, sent later with others as columns (_send)."""
         positions = np.asarray(record.positions, dtype=np.float32)
@@ -1038,7 +1125,7 @@ class _Feed:
     def _buffer_plots(self, record, rtf, step, positions=None, velocities=None, labels=None):
         """The step's row (with its balls for a file; a view sends those in frames), added in
         one operation (_Pending), and the plots' headroom."""
-        energy = energy_change(record.kinetic_energy, self._energy0)
+        energy = self._energy_row(record)
         self._headroom_rows.append((step, record.log_time_ns, *self._headroom.add(
             record.log_time_ns, energy, float(self._totals.max(initial=0)))))
         self._pending.add((
@@ -1122,13 +1209,24 @@ class _Feed:
                 radii=0.0, show_labels=not self.live), static=self.live)
 
     def _bumper_tags(self, arrows):
-        """Each hit's label as a tag below its arrow's middle (rerun_text)."""
+        """Each hit's label as a tag below its arrow's middle (rerun_text), or a tag's height
+        lower, or higher, when that would cover a name ("ball_5 hit 0.47 N s" lay over
+        two)."""
         origins = np.asarray(arrows.origins.as_arrow_array().to_pylist(), dtype=np.float64)
         vectors = np.asarray(arrows.vectors.as_arrow_array().to_pylist(), dtype=np.float64)
+        taken = list(self._name_rects)
         tags = Tags()
-        for point, text in zip((origins + 0.5 * vectors).tolist(),
-                               arrows.labels.as_arrow_array().to_pylist()):
-            rect, unit = tag_rect(point, text, self._labels.scale)
+        for origin, vector, text in zip(origins, vectors,
+                                        arrows.labels.as_arrow_array().to_pylist()):
+            if not text:  # a casing (rerun_casing)
+                continue
+            middle = origin + 0.5 * vector
+            step = np.array([0.0, self._labels.scale.size(text)[1] + self._labels.scale.gap])
+            candidates = [tag_rect(point, text, self._labels.scale) for point in (
+                middle, middle - step, middle + step, middle - 2.0 * step, middle + 2.0 * step)]
+            rect, unit = next((c for c in candidates if not taken or not boxes_overlap(
+                np.asarray(c[0]), np.asarray(taken)).any()), candidates[0])
+            taken.append(rect)
             tags.add(text, rect, unit, BUMPER_TEXT_COLOR)
         return tags.layers(order=IMPULSE_TAG_ORDER)
 
@@ -1136,8 +1234,10 @@ class _Feed:
         """A view's names as tags (rerun_text) in their labels' boxes (rerun_labels)."""
         tags = Tags()
         scale = self._labels.scale
+        self._name_rects = []
         for point, text in zip(np.asarray(points, dtype=np.float64).tolist(), texts):
             rect, unit = tag_rect(point, text, scale)
+            self._name_rects.append(rect)
             tags.add(text, rect, unit, name_color(text))
         return tags.layers(order=NAME_ORDER)
 
@@ -1250,8 +1350,9 @@ class _Feed:
             index, yaw = rows[scan.name]
             x, y = record.positions[index]
             if self.live:
-                self._view_scans[scan.name] = scan_geometry(scan, float(x), float(y),
-                                                            float(yaw), VIEW_MAX_POINTS)
+                self._view_scans[scan.name] = scan_geometry(
+                    scan, float(x), float(y), float(yaw), VIEW_MAX_POINTS,
+                    view_rays(len(agents.names)))
                 self._view_scans_new = True
             else:
                 self._scans[scan.name] = (scan, float(x), float(y), float(yaw))
@@ -1349,7 +1450,7 @@ class _Feed:
                                    rr.components.ColorBatch(np.concatenate(colors)),
                                    lengths=sizes)])
         self._emit('send_columns', ENERGY, index, rr.Scalars.columns(
-            scalars=np.array(energy, dtype=np.float64)))
+            scalars=_energy_columns(energy)))
         self._emit('send_columns', COLLISIONS, index, rr.Scalars.columns(
             scalars=np.array(collisions, dtype=np.float64).reshape(-1, 2)))
         self._emit('send_columns', MOMENTUM, index, rr.Scalars.columns(

@@ -22,18 +22,35 @@ MAX_RAYS = 72
 #: A live view's hit points per scan at most: a view is sent what it can show (two robots'
 #: full scans were 80% of what a view got, ten times a second).
 VIEW_MAX_POINTS = 180
+#: A live view's rays per frame, all robots together: each robot gets its share (at most
+#: MAX_RAYS), and none below MIN_RAYS. Twenty robots' 72 rays each were a blue mesh over the
+#: whole depot in which robots, balls and racks could not be told apart; its hit points
+#: alone outline what each robot sees.
+VIEW_RAY_BUDGET = 144
+MIN_RAYS = 12
+
+
+def view_rays(robots):
+    """Rays a live view draws per scan with this many robots (VIEW_RAY_BUDGET): 72 for one
+    or two, 48 for three, none from thirteen on (hit points only)."""
+    share = VIEW_RAY_BUDGET // max(robots, 1)
+    return min(MAX_RAYS, share) if share >= MIN_RAYS else 0
+
+
 #: Under the balls (30) and the trails (10); the hit points over the balls.
 RAY_ORDER = 5.0
 HIT_ORDER = 35.0
 
 
-def scan_geometry(scan, x, y, yaw, max_points=None):
+def scan_geometry(scan, x, y, yaw, max_points=None, max_rays=MAX_RAYS):
     """(rays (n, 2, 2), hits (m, 2)) float32 of one scan taken at (x, y) facing yaw: a ray
-    from the scanner along every k-th beam to its return (at most MAX_RAYS), and the hit
+    from the scanner along every k-th beam to its return (at most max_rays), and the hit
     points (every return, or of every k-th beam so that at most max_points are drawn)."""
     every = 1 if max_points is None else max(1, -(-len(scan.ranges) // max_points))
     hits = hit_points(_every(scan, every), x, y, yaw).astype(np.float32)
-    every = max(1, -(-len(scan.ranges) // MAX_RAYS))
+    if max_rays <= 0:
+        return np.zeros((0, 2, 2), dtype=np.float32), hits
+    every = max(1, -(-len(scan.ranges) // max_rays))
     ends = hit_points(_every(scan, every), x, y, yaw).astype(np.float32)
     rays = np.empty((len(ends), 2, 2), dtype=np.float32)
     rays[:, 0] = (x, y)

@@ -8,6 +8,7 @@ messages into queued impulses (or counted rejections), serves ~/reset, ~/pause a
 import difflib
 import math
 import os
+from pathlib import Path
 import signal
 import sys
 import threading
@@ -164,6 +165,18 @@ def open_sinks(values):
         _abandon_sinks(sinks, claims)
         raise StartupError(f"parameter '{name}': cannot record to {error}") from None
     return sinks
+
+
+def recording_line(values):
+    """'recording to /abs/runs/scan.mcap and /abs/runs/scan.rrd' (where a run's files go,
+    absolute: a newcomer finds them whatever the working directory), or None."""
+    paths = [str(Path(values[name]).resolve()) for name in ('record.mcap', 'record.rerun')
+             if values[name]]
+    if not paths:
+        return None
+    from ball_world.recording.split_writer import splits
+    split = ' (split: a bag directory and .rrd parts beside it)' if splits(values) else ''
+    return f"recording to {' and '.join(paths)}{split}"
 
 
 def _rerun_options(values):
@@ -323,6 +336,9 @@ class BallWorld(Node):
         self._publish_map()
         summary, names = self._startup_lines(values)
         self.get_logger().info(summary)
+        recorded = recording_line(values)
+        if recorded:
+            self.get_logger().info(recorded)
         self.get_logger().debug(names)
 
     def _startup_lines(self, values):

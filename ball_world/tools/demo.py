@@ -131,6 +131,8 @@ def main(argv=None):
         hold_signals()
         print(f'  {PROG}: stopping', flush=True)
         children.stop()
+        print(f'  {PROG}: stopped; every program it started has ended (logs in '
+              f'{args.log_dir}/)', flush=True)
     return code
 
 

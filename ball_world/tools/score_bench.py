@@ -10,7 +10,7 @@ the balls that scan could see from the agent's true pose (past walls and a map's
 drifts with agent.odom.noise), exactly as a recording of that scene would be scored
 (tools.score_recording and tools.score_frames do both). A tracker is the example one or any
 class `update(scan, pose) -> rows (id, x, y, ...)` (tools.tracker.ScanTracker), made anew
-for each scene with no arguments.
+for each scene with no arguments (and given the scene's map first when it has `use_map(grid)`).
 
 Scenes run in worker processes (one per core by default), each scene alone in one and all
 of its numbers its own, and results are gathered in scene order: the report is the same
@@ -297,6 +297,14 @@ def simulated_scans(scene):
     return scans
 
 
+def _scene_map(scene):
+    """The scene's map (core.occupancy_map), for a tracker's use_map, or None."""
+    if not scene.parameters.get('map'):
+        return None
+    from ball_world.simulation import load_map
+    return load_map(scene.parameters)
+
+
 def run_scene(job):
     """Score one scene: (position, label, SequenceScore without its frames) or the one-line
     error of a tracker that failed. Runs in a worker process."""
@@ -308,7 +316,7 @@ def run_scene(job):
         tracker = _new_tracker(load_tracker_class(spec), spec or EXAMPLE)
         scans = simulated_scans(scene)
         try:
-            frames = frames_with_tracker(scans, tracker, spec or EXAMPLE)
+            frames = frames_with_tracker(scans, tracker, spec or EXAMPLE, _scene_map(scene))
         except FramesError:
             raise
         except Exception as error:  # noqa: B902 - a user's tracker may raise anything

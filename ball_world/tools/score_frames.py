@@ -50,8 +50,17 @@ def tracker_rows(rows, who):
     return ids, xy
 
 
-def frames_with_tracker(scans, tracker, who='the tracker'):
-    """Frames of scans (RecordedScan) with `tracker` (update(scan, pose)) run on them."""
+def map_grid(occupancy_map):
+    """The tracker's MapGrid (what /map carries) of a core.occupancy_map.OccupancyMap."""
+    return example.MapGrid(occupancy_map.resolution, *occupancy_map.origin,
+                           occupancy_map.data)
+
+
+def frames_with_tracker(scans, tracker, who='the tracker', occupancy_map=None):
+    """Frames of scans (RecordedScan) with `tracker` (update(scan, pose)) run on them; a
+    tracker with a `use_map(grid)` method is first given the world's map, if it has one."""
+    if occupancy_map is not None and callable(getattr(tracker, 'use_map', None)):
+        tracker.use_map(map_grid(occupancy_map))
     out = []
     for recorded in scans:
         ids, xy = tracker_rows(tracker.update(scan_of(recorded.message), recorded.pose), who)

@@ -31,7 +31,8 @@ def score_files(recording, agent, gate, tracks_source=None, tolerance=0.0):
     for segment in segments:
         if tracks is None:
             frames = score_frames.frames_with_tracker(segment.scans, example.ScanTracker(),
-                                                      'the example tracker')
+                                                      'the example tracker',
+                                                      segment.occupancy_map)
         else:
             paired = score_frames.frames_with_tracks(segment, tracks.sets,
                                                      round(tolerance * 1e9))

@@ -5,7 +5,8 @@ multi-target tracker for a 2D lidar, and `ball_world_score` tells you how good i
 yours, on the same recording). Read it top to bottom. For each scan it does four things:
 
   1. segments the scan: consecutive beams whose end points lie close together form a
-     cluster (one object seen, or a piece of wall);
+     cluster (one object seen, or a piece of wall); with the world's map (`/map`), beams
+     that end on or next to a solid cell are left out first: the map says what is building;
   2. fits a circle to each cluster (centre and radius, least squares on the distances to
      the circle); a cluster is kept as a ball when the circle fits, its radius is plausible
      and the cluster stands in front of what lies beside it (a wall piece does not);
@@ -437,23 +438,105 @@ class Scan(NamedTuple):
     ranges: np.ndarray
 
 
+class MapGrid(NamedTuple):
+    """A map as a tracker gets it: nav_msgs/OccupancyGrid's fields (what `/map` carries).
+
+    data: int8 (height, width), the message's data in rows of `width`: row 0 starts at the
+    origin (the grid's lower-left corner, m), 100 occupied, 0 free, -1 unknown.
+    """
+
+    resolution: float
+    origin_x: float
+    origin_y: float
+    data: np.ndarray
+
+
+#: A map cell with this value or more is solid (nav2's maps: 100; scale mode: 1..99); an
+#: unknown cell (-1) is solid too, as the world makes it by default (map.unknown_solid).
+SOLID_FROM = 50
+
+
+#: A return this close (m) to a solid cell is the cell's: three times the lidar's default
+#: noise (0.01 m), as a return on a cell's edge lands either side of it.
+NEAR_MAP = 0.03
+
+
+class MapMask:
+    """Which points lie on or next to a solid map cell: a wall, a pillar, a shelf.
+
+    The lidar sees a map's cells as it sees balls, and a pillar is as round as a ball: the
+    map says what is building, so its points are no objects. A point counts when it lies in
+    a solid cell or within `near` of one (x and y each; the lidar's return lies on the
+    cell's edge, its noise either side). A ball touching a wall keeps the rest of its
+    points. Points off the map are free.
+    """
+
+    def __init__(self, grid, near=NEAR_MAP):
+        data = np.asarray(grid.data)
+        self.solid = (data >= SOLID_FROM) | (data == -1)
+        self.resolution = float(grid.resolution)
+        self.origin = (float(grid.origin_x), float(grid.origin_y))
+        self.near = float(near)
+
+    def __call__(self, points):
+        """Bool (K,): whether each world point (K, 2) is on or next to a solid cell."""
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        out = np.zeros(len(points), dtype=bool)
+        for dx in (-self.near, 0.0, self.near):
+            for dy in (-self.near, 0.0, self.near):
+                out |= self._solid_at(points[:, 0] + dx, points[:, 1] + dy)
+        return out
+
+    def _solid_at(self, x, y):
+        with np.errstate(invalid='ignore'):
+            col = np.floor((x - self.origin[0]) / self.resolution)
+            row = np.floor((y - self.origin[1]) / self.resolution)
+        height, width = self.solid.shape
+        inside = (col >= 0) & (col < width) & (row >= 0) & (row < height)
+        out = np.zeros(len(x), dtype=bool)
+        out[inside] = self.solid[row[inside].astype(np.intp), col[inside].astype(np.intp)]
+        return out
+
+
+def without_map(ranges, scan, pose, mask):
+    """The ranges with every beam whose return lies on or next to a solid map cell made
+    +inf (REP 117's "nothing seen"): the detector then sees no wall there, and a ball in
+    front of a wall stands in front of nothing."""
+    ranges = np.array(ranges, dtype=np.float64)
+    hits = np.isfinite(ranges)
+    on_map = mask(to_world(scan_points(ranges, scan), *pose)) & hits
+    ranges[on_map] = math.inf
+    return ranges
+
+
 class ScanTracker:
     """The example tracker as ball_world_score runs any tracker: one `update(scan, pose)`
     per scan, pose the scanner's (x, y, yaw) in the world frame at the scan's stamp (what
     /tf gives), returning the tracks seen in that scan as rows (id, x, y, ...) in the world
     frame. A tracker of your own with this interface is scored by
     `ball_world_score --seeds 0:100 --tracker my_module:MyTracker` on many scenes; the node
-    below runs this one on live scans."""
+    below runs this one on live scans.
+
+    `use_map(grid)` (a MapGrid, what /map carries) gives it the world's map: returns on or
+    next to solid cells are then no objects. ball_world_score calls it, before the first
+    scan, on any tracker class that has it, when the world has a map.
+    """
 
     def __init__(self, options=Options()):
         self.options = options
         self.tracker = Tracker(options)
+        self.mask = None
+
+    def use_map(self, grid):
+        self.mask = None if grid is None else MapMask(grid)
 
     def update(self, scan, pose):
         geometry = ScanGeometry(scan.angle_min, scan.angle_increment, scan.range_min,
                                 scan.range_max)
-        centres = to_world(detect(np.asarray(scan.ranges, dtype=np.float64), geometry,
-                                  self.options), *pose)
+        ranges = np.asarray(scan.ranges, dtype=np.float64)
+        if self.mask is not None:
+            ranges = without_map(ranges, geometry, pose, self.mask)
+        centres = to_world(detect(ranges, geometry, self.options), *pose)
         return self.tracker.update(scan.stamp_ns * 1e-9, centres)
 
 
@@ -533,9 +616,10 @@ WAITING_SCANS = 10
 def _node_class():
     """The ROS node, made on first use so that the algorithm above imports without ROS."""
     from geometry_msgs.msg import Pose, PoseArray
+    from nav_msgs.msg import OccupancyGrid
     from rcl_interfaces.msg import ParameterDescriptor
     from rclpy.node import Node
-    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import LaserScan
     from tf2_msgs.msg import TFMessage
     from visualization_msgs.msg import Marker, MarkerArray
@@ -571,12 +655,24 @@ def _node_class():
             self.create_subscription(
                 TFMessage, '/tf_static', lambda msg: self.on_tf(msg, static=True),
                 QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+            # The world latches its map (transient local): a tracker started late gets it.
+            self.create_subscription(OccupancyGrid, 'map', self.on_map, QoSProfile(
+                depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                durability=DurabilityPolicy.TRANSIENT_LOCAL))
             self.markers = self.create_publisher(MarkerArray, f'{agent}/tracks', 10)
             self.pose_array = self.create_publisher(PoseArray, f'{agent}/tracks/poses', 10)
             self.Marker, self.MarkerArray, self.Pose, self.PoseArray = (
                 Marker, MarkerArray, Pose, PoseArray)
             self.get_logger().info(f'tracking the balls {agent}/scan sees, in '
                                    f'{self.world_frame}')
+
+        def on_map(self, msg):
+            info = msg.info
+            data = np.array(msg.data, dtype=np.int8).reshape(info.height, info.width)
+            self.tracker.use_map(MapGrid(info.resolution, info.origin.position.x,
+                                         info.origin.position.y, data))
+            self.get_logger().info(f'using the map: {info.width} x {info.height} cells; '
+                                   'returns on its solid cells are no objects')
 
         def on_tf(self, msg, static=False):
             for transform in msg.transforms:

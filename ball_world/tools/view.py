@@ -92,8 +92,8 @@ def parser(prog=PROG, description=None):
                         help='what the server keeps for pages opened later: the '
                              "world's static data and the last frames "
                              f'(default {SERVER_MEMORY})')
-    parser.add_argument('--log-dir', type=Path, default=Path('runs'), metavar='DIR',
-                        help="where the server's log goes (default runs)")
+    parser.add_argument('--log-dir', type=Path, default=Path('runs/view'), metavar='DIR',
+                        help="where the server's log goes (default runs/view)")
     parser.error = lambda message: usage_exit(parser, message)
     return parser
 
