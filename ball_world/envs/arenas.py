@@ -167,35 +167,43 @@ class Arenas:
 
     def advance(self, worlds):
         """Step the worlds `worlds` (a list of indices) by one environment step; returns
-        the collision impulse (N s, summed over the physics steps) of every robot row."""
+        the collision impulse (N s, summed over the physics steps) of every robot row.
+
+        The drive's impulses are applied to the gathered velocities as World.apply_impulse
+        applies them (v += J / m, one division and one addition a component: the same bits),
+        and written back to each world before its step.
+        """
         robots = self.robots
         agents = self.agents
-        rows = self._rows
         dt_ns = self.dt_ns
-        states = self.worlds
-        active = [states[world] for world in worlds]
-        impulses = np.zeros(self.count * robots)
-        stepping = np.zeros(self.count, dtype=bool)
-        stepping[worlds] = True
-        masses = self._robot_masses
+        dt = self.dt
+        active = [self.worlds[world] for world in worlds]
+        rows = np.concatenate([np.arange(world * robots, (world + 1) * robots)
+                               for world in worlds]) if worlds else np.zeros(0, np.int64)
+        names = self.names
+        slots = {names[row]: slot for slot, row in enumerate(rows.tolist())}
+        masses = self._robot_masses[rows]
+        impulses = np.zeros(len(rows))
         for substep in range(self.substeps):
             end_ns = (substep + 1) * dt_ns
-            velocities = np.concatenate([state.velocities[:robots] for state in states])
-            for name, jx, jy in agents.impulses(velocities, masses, rows, dt_ns, end_ns):
-                row = rows[name]
-                world, robot = divmod(row, robots)
-                if stepping[world]:
-                    states[world].apply_impulse(robot, jx, jy)
-            for world, state in zip(worlds, active):
-                before = state.velocities[:robots].copy()
-                state.step(self.dt)
-                change = state.velocities[:robots] - before
-                first = world * robots
-                impulses[first:first + robots] += masses[first:first + robots] * np.hypot(
-                    change[:, 0], change[:, 1])
+            driven = np.concatenate([state.velocities[:robots] for state in active])
+            for name, jx, jy in agents.impulses(driven, masses, slots, dt_ns, end_ns):
+                slot = slots[name]
+                mass = masses[slot]
+                driven[slot, 0] += jx / mass
+                driven[slot, 1] += jy / mass
+            first = 0
+            for state in active:
+                state.velocities[:robots] = driven[first:first + robots]
+                first += robots
+                state.step(dt)
+            change = np.concatenate([state.velocities[:robots] for state in active]) - driven
+            impulses += masses * np.hypot(change[:, 0], change[:, 1])
             agents.turn(dt_ns, end_ns)
         self.steps[worlds] += self.substeps
-        return impulses
+        out = np.zeros(self.count * robots)
+        out[rows] = impulses
+        return out
 
     # Observations -----------------------------------------------------------------------
 
