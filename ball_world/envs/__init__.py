@@ -7,6 +7,8 @@ Importing this package registers `ball_world/Navigate-v0` with Gymnasium:
     vec = gymnasium.make_vec('ball_world/Navigate-v0', num_envs=64,
                              vectorization_mode='vector_entry_point')
 
+`parallel_env(agents=N, **options)` is a PettingZoo ParallelEnv of N robots in one world.
+
 The environments are a thin layer: they build observations and rewards from the World's
 arrays, with the node's drive (core.agents) and lidar (core.lidar); no ROS, no files at step
 time.
@@ -21,3 +23,10 @@ if NAVIGATE not in gymnasium.registry:
     gymnasium.register(id=NAVIGATE, entry_point='ball_world.envs.navigate:NavigateEnv',
                        vector_entry_point='ball_world.envs.vector:NavigateVectorEnv',
                        max_episode_steps=MAX_EPISODE_STEPS)
+
+
+def parallel_env(agents=2, **options):
+    """A PettingZoo ParallelEnv: `agents` robots in one world, each with its own goal, lidar
+    and reward (ball_world.envs.parallel; the options are Navigate-v0's)."""
+    from ball_world.envs.parallel import NavigateParallelEnv
+    return NavigateParallelEnv(agents=agents, **options)
