@@ -170,8 +170,8 @@ class Arenas:
         the collision impulse (N s, summed over the physics steps) of every robot row.
 
         The drive's impulses are applied to the gathered velocities as World.apply_impulse
-        applies them (v += J / m, one division and one addition a component: the same bits),
-        and written back to each world before its step.
+        applies them (v += J / m, one division and one addition a component, each robot's
+        alone: the same bits), and written back to each world before its step.
         """
         robots = self.robots
         agents = self.agents
@@ -187,11 +187,13 @@ class Arenas:
         for substep in range(self.substeps):
             end_ns = (substep + 1) * dt_ns
             driven = np.concatenate([state.velocities[:robots] for state in active])
-            for name, jx, jy in agents.impulses(driven, masses, slots, dt_ns, end_ns):
-                slot = slots[name]
-                mass = masses[slot]
-                driven[slot, 0] += jx / mass
-                driven[slot, 1] += jy / mass
+            due = agents.impulses(driven, masses, slots, dt_ns, end_ns)
+            if due:
+                names_due, jx, jy = zip(*due)
+                where = [slots[name] for name in names_due]
+                mass = masses[where]
+                driven[where, 0] += np.array(jx) / mass
+                driven[where, 1] += np.array(jy) / mass
             first = 0
             for state in active:
                 state.velocities[:robots] = driven[first:first + robots]
