@@ -7,11 +7,12 @@ import warnings
 
 import gymnasium
 from gymnasium.utils.env_checker import check_env
+from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
 
 import ball_world.envs  # noqa: F401 - registers Navigate-v0
-from ball_world.envs import rewards
+from ball_world.envs import layout, rewards
 from ball_world.envs.navigate import NavigateEnv
 from ball_world.envs.runs import episode_parameters, initial_headings
 from ball_world.simulation import Simulation
@@ -26,6 +27,8 @@ BOX = {'arena': [-2.0, -1.5, 2.0, 1.5], 'balls.x': [1.2], 'balls.y': [0.9],
 #: The only warning Gymnasium's checker gives: the action is (m/s, rad/s) within the
 #: robot's limits, as the interface fixes it, not a normalised [-1, 1].
 ACTION_WARNING = 'symmetric and normalized space'
+#: One environment the property test reuses across its examples (a reset per example).
+SHARED = {}
 
 
 def actions(env, count, seed):
@@ -86,11 +89,13 @@ def test_the_same_seed_gives_the_same_episodes_bit_for_bit():
     assert not same(run(second, 12, moves), reference)
 
 
-def test_an_episode_is_a_ball_world_run():
+@pytest.mark.parametrize('mode, seed', [('seed', 5), ('exact', 6)])
+def test_an_episode_is_a_ball_world_run(mode, seed):
     """A Simulation of the episode's parameters, driven by the same commands, passes through
-    the episode's states bit for bit and its agent scans the observed ranges."""
-    env = NavigateEnv(world=BOX, beams=30, control_hz=10.0)
-    observed, _ = env.reset(seed=5)
+    the episode's states bit for bit and its agent scans the observed ranges (seed-mode and
+    exact physics)."""
+    env = NavigateEnv(world={**BOX, 'physics.mode': mode}, beams=30, control_hz=10.0)
+    observed, _ = env.reset(seed=seed)
     task = env.task
     arenas = task.arenas
     simulation = Simulation(episode_parameters(task))
@@ -113,6 +118,28 @@ def test_an_episode_is_a_ball_world_run():
         assert ranges.astype(np.float32).tobytes() == observed['scan'].tobytes()
         if terminated:
             break
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2 ** 32 - 1))
+def test_every_episode_starts_clear_and_observes_within_its_space(seed):
+    """Whatever the seed: the robot starts clear of walls and balls, its goal at least
+    MIN_GOAL_DISTANCE away and clear of the walls, and the observation lies in the space."""
+    env = SHARED.setdefault('env', NavigateEnv(world=BOX, beams=12))
+    observed, _ = env.reset(seed=seed)
+    assert env.observation_space.contains(observed)
+    arenas = env.task.arenas
+    world = arenas.worlds[0]
+    robot, others = world.positions[0], world.positions[1:]
+    gaps = np.hypot(*(others - robot).T) - world.radii[1:] - world.radii[0]
+    assert gaps.min() >= layout.CLEARANCE
+    xmin, ymin, xmax, ymax = BOX['arena']
+    for x, y in (robot, arenas.goals[0]):
+        reach = world.radii[0] + layout.CLEARANCE
+        assert xmin + reach <= x <= xmax - reach and ymin + reach <= y <= ymax - reach
+    assert np.hypot(*(arenas.goals[0] - robot)) >= layout.MIN_GOAL_DISTANCE
+    observed, *_ = env.step(env.action_space.sample())
+    assert env.observation_space.contains(observed)
 
 
 def test_reward_closed_forms():
