@@ -1,0 +1,234 @@
+"""K worlds of one EnvWorld with R robots each, stepped together: the environments' engine.
+
+Navigate-v0 is one world with one robot, the vector env K worlds with one each, the
+PettingZoo env one world with R: the same code steps them all, so a world steps bit for bit
+alike whichever environment holds it (what the tests check).
+
+An environment step is `substeps` physics steps of the world's dt, each as the node's
+Simulation.step takes it (ball_world/simulation.py):
+
+1. the drive (core.agents.Agents, agent.drive diff): each robot's last command turned into
+   an impulse J = m dv, applied to its ball as the Simulation applies it (v += J / m);
+2. World.step(dt) (seed or exact mode, as the file says);
+3. the headings turn by the commanded yaw rate; the collision impulse each robot took in
+   the step is m (v after - v before) (the node's bumper).
+
+A command takes effect at the first physics step of the environment step, as a cmd_vel
+received just before it: the Agents' clock here counts from there (since = one dt, the end
+of physics step j at (j + 1) dt), which gives the drive the same differences of times as
+the node's absolute clock, so the same bits, whatever time each world is at. One Agents
+holds the robots of all K worlds: its rule works row by row, so a batch computes each row
+as it would alone.
+
+After the physics steps, each robot's observation: its lidar (core.lidar, the node's scan,
+noise seeded by the episode's noise seed, the robot's name and the physics step), the goal
+in its base_link (distance, bearing) and its twist (forward speed, yaw rate), as the node's
+odometry reports them. Rewards and ends are in rewards.py.
+"""
+import math
+
+import numpy as np
+
+from ball_world.core import lidar
+from ball_world.core.agents import Agents
+from ball_world.core.stepping import speed_limit, travel_per_substep
+from ball_world.core.world import World
+from ball_world.envs.layout import EpisodeLayout
+from ball_world.envs.world_file import fixed_balls, random_sizes
+from ball_world.scans import fan_from
+
+#: The yaw of beam 0 (body frame): beams go counter-clockwise from straight behind, as the
+#: node's default fan (agent.scan.angle_min -pi).
+ANGLE_MIN = -math.pi
+
+
+def substeps_per_step(dt_ns, control_hz):
+    """Physics steps per environment step: the control period in whole steps of dt
+    (ValueError when 1 / control_hz is not a whole number of them)."""
+    if not (isinstance(control_hz, (int, float)) and math.isfinite(control_hz)
+            and control_hz > 0):
+        raise ValueError(f'control_hz must be a number > 0, got {control_hz!r}')
+    ratio = 1e9 / (control_hz * dt_ns)
+    count = round(ratio)
+    if count < 1 or abs(ratio - count) > 1e-3 * count:
+        raise ValueError(f'control_hz {control_hz:g}: the control period must be a whole '
+                         f'number of the world steps of {dt_ns * 1e-9:.9g} s (a divisor of '
+                         f'{1e9 / dt_ns:.6g} Hz)')
+    return count
+
+
+def scan_fan(env_world, beams):
+    """The robots' lidar: the node's fan (scans.fan_from) with `beams` beams over a turn."""
+    if not isinstance(beams, (int, np.integer)) or isinstance(beams, bool) or beams < 1:
+        raise ValueError(f'beams must be a whole number >= 1, got {beams!r}')
+    beams = int(beams)
+    angle_min, angle_max = scan_angles(beams)
+    parameters = {**env_world.parameters, 'agent.scan.samples': beams,
+                  'agent.scan.angle_min': angle_min, 'agent.scan.angle_max': angle_max}
+    return fan_from(parameters, env_world.robot_radius)
+
+
+def scan_angles(beams):
+    """(agent.scan.angle_min, agent.scan.angle_max) of `beams` beams over a whole turn."""
+    return ANGLE_MIN, ANGLE_MIN + (beams - 1) * (2.0 * math.pi / beams)
+
+
+def robot_name(robot):
+    """The entity name of robot `robot` in an episode's world (its ball's): ball_<robot>."""
+    return f'ball_{robot}'
+
+
+class Arenas:
+    """`count` worlds of `env_world`, `robots` robots each (balls 0 to robots - 1)."""
+
+    def __init__(self, env_world, count, robots, beams, control_hz):
+        self.env_world = env_world
+        self.count = int(count)
+        self.robots = int(robots)
+        if self.count < 1 or self.robots < 1:
+            raise ValueError(f'need at least one world and one robot, got {count} and {robots}')
+        self.dt_ns = env_world.dt_ns
+        self.dt = self.dt_ns * 1e-9
+        self.substeps = substeps_per_step(self.dt_ns, control_hz)
+        self.fan = scan_fan(env_world, beams)
+        self.limits = env_world.limits
+        fixed = fixed_balls(env_world)
+        radii, masses = random_sizes(env_world)
+        self.layout = EpisodeLayout(env_world.scene, env_world.parameters['arena'], fixed,
+                                    radii, env_world.random_speed, env_world.robot_radius)
+        base = env_world.scene.world
+        self.radii = np.concatenate((np.full(self.robots, env_world.robot_radius), fixed[2],
+                                     radii))
+        self.masses = np.concatenate((np.full(self.robots, env_world.robot_mass), fixed[3],
+                                      masses))
+        self.worlds = [World(np.zeros((0, 2)), np.zeros((0, 2)), [], [],
+                             walls=base.walls.segments, backend=base.backend, mode=base.mode,
+                             solid_cells=base.solid_cells) for _ in range(self.count)]
+        #: No ball of these worlds is ever faster (the episodes' balls are checked against it).
+        self.speed_limit = speed_limit(travel_per_substep(float(self.radii.min())), self.dt)
+        rows = self.count * self.robots
+        self.names = [f'{world}/{robot}' for world in range(self.count)
+                      for robot in range(self.robots)]
+        self.agents = Agents(self.names, self.limits)
+        self._rows = {name: row for row, name in enumerate(self.names)}
+        self._robot_masses = np.full(rows, env_world.robot_mass)
+        self.goals = np.zeros((rows, 2))
+        self.commands = np.zeros((rows, 2))  # the last (forward, yaw rate) each robot took
+        self.steps = np.zeros(self.count, dtype=np.int64)  # physics steps since reset
+        self.scanners = [None] * rows
+        self.noise_seeds = np.zeros(self.count, dtype=np.int64)
+        self.layouts = [None] * self.count  # what each episode started from (recording)
+
+    # Episodes ---------------------------------------------------------------------------
+
+    def reset_world(self, world, rng):
+        """Start a new episode in world `world`, its layout drawn from `rng`."""
+        noise_seed, starts, yaws, goals, positions, velocities = self.layout.draw(
+            rng, self.robots)
+        state = self.worlds[world]
+        state.remove_balls(np.arange(len(state)))
+        robots = self.robots
+        state.add_balls(np.concatenate((starts, positions)),
+                        np.concatenate((np.zeros((robots, 2)), velocities)),
+                        self.radii, self.masses)
+        if not state.reachable_speed() <= self.speed_limit:
+            raise ValueError('the balls of the episode carry more energy than the world can step; '
+                             'lower random.speed')
+        first = world * robots
+        for robot in range(robots):
+            name = self.names[first + robot]
+            self.agents.set_yaw(name, yaws[robot])
+            self.agents.command(name, 0.0, 0.0, 0.0, 0)
+            self.scanners[first + robot] = lidar.Scanner(self.fan, 'auto', noise_seed,
+                                                         robot_name(robot))
+        self.goals[first:first + robots] = goals
+        self.commands[first:first + robots] = 0.0
+        self.steps[world] = 0
+        self.noise_seeds[world] = noise_seed
+        self.layouts[world] = (noise_seed, starts, self.agents.yaws()[first:first + robots],
+                               goals, positions, velocities)
+
+    # Stepping ---------------------------------------------------------------------------
+
+    def command(self, rows, actions):
+        """Give each robot row in `rows` its action (forward m/s, yaw rate rad/s), clipped to
+        the robot's limits, in force from the next physics step."""
+        limits = self.limits
+        forward = np.clip(actions[:, 0], -limits.max_speed, limits.max_speed)
+        turn = np.clip(actions[:, 1], -limits.max_yaw_rate, limits.max_yaw_rate)
+        self.commands[rows, 0] = forward
+        self.commands[rows, 1] = turn
+        forward, turn = forward.tolist(), turn.tolist()
+        names = self.names
+        command = self.agents.command
+        since = self.dt_ns
+        for row, vx, wz in zip(rows, forward, turn):
+            command(names[row], vx, 0.0, wz, since)
+
+    def advance(self, worlds):
+        """Step the worlds `worlds` (a list of indices) by one environment step; returns
+        the collision impulse (N s, summed over the physics steps) of every robot row.
+
+        The drive's impulses are applied to the gathered velocities as World.apply_impulse
+        applies them (v += J / m, one division and one addition a component, each robot's
+        alone: the same bits), and written back to each world before its step.
+        """
+        robots = self.robots
+        agents = self.agents
+        dt_ns = self.dt_ns
+        dt = self.dt
+        active = [self.worlds[world] for world in worlds]
+        rows = np.concatenate([np.arange(world * robots, (world + 1) * robots)
+                               for world in worlds]) if worlds else np.zeros(0, np.int64)
+        names = self.names
+        slots = {names[row]: slot for slot, row in enumerate(rows.tolist())}
+        masses = self._robot_masses[rows]
+        impulses = np.zeros(len(rows))
+        for substep in range(self.substeps):
+            end_ns = (substep + 1) * dt_ns
+            driven = np.concatenate([state.velocities[:robots] for state in active])
+            due = agents.impulses(driven, masses, slots, dt_ns, end_ns)
+            if due:
+                names_due, jx, jy = zip(*due)
+                where = [slots[name] for name in names_due]
+                mass = masses[where]
+                driven[where, 0] += np.array(jx) / mass
+                driven[where, 1] += np.array(jy) / mass
+            first = 0
+            for state in active:
+                state.velocities[:robots] = driven[first:first + robots]
+                first += robots
+                state.step(dt)
+            change = np.concatenate([state.velocities[:robots] for state in active]) - driven
+            impulses += masses * np.hypot(change[:, 0], change[:, 1])
+            agents.turn(dt_ns, end_ns)
+        self.steps[worlds] += self.substeps
+        out = np.zeros(self.count * robots)
+        out[rows] = impulses
+        return out
+
+    # Observations -----------------------------------------------------------------------
+
+    def robot_state(self):
+        """(positions (rows, 2), headings (rows,), world velocities (rows, 2))."""
+        robots = self.robots
+        positions = np.concatenate([state.positions[:robots] for state in self.worlds])
+        velocities = np.concatenate([state.velocities[:robots] for state in self.worlds])
+        return positions, self.agents.yaws(), velocities
+
+    def scans(self, rows):
+        """The lidar ranges (len(rows), beams) of robot rows `rows`, REP 117 with noise."""
+        robots = self.robots
+        out = np.empty((len(rows), self.fan.samples))
+        yaws = self.agents.yaws()
+        for slot, row in enumerate(rows):
+            world, robot = divmod(row, robots)
+            state = self.worlds[world]
+            out[slot] = self.scanners[row].scan(
+                state.positions, state.radii, state.walls, state.positions[robot],
+                float(yaws[row]), robot, int(self.steps[world]), state.static.scan_grid)
+        return out
+
+    def yaw_rates(self):
+        """The yaw rate each robot turned at in its last physics step, rad/s."""
+        return self.agents.yaw_rates(self.substeps * self.dt_ns)
