@@ -141,7 +141,7 @@ def hypothesis_frames(drawn):
     return frames_of(truth, tracks)
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(st.lists(frame_strategy, max_size=5), min_size=1, max_size=3))
 def test_small_random_sequences_and_their_combination_score_as_trackeval(sequences):
     """Any few frames (empty ones, one frame, no truth, no tracks, nothing near, ties on a
