@@ -33,6 +33,7 @@ from ball_world.core import lidar
 from ball_world.core.agents import Agents
 from ball_world.core.stepping import speed_limit, travel_per_substep
 from ball_world.core.world import World
+from ball_world.envs.batch_scan import BatchScanner, scan_worlds
 from ball_world.envs.layout import EpisodeLayout
 from ball_world.envs.world_file import fixed_balls, random_sizes
 from ball_world.scans import fan_from
@@ -118,6 +119,11 @@ class Arenas:
         self.scanners = [None] * rows
         self.noise_seeds = np.zeros(self.count, dtype=np.int64)
         self.layouts = [None] * self.count  # what each episode started from (recording)
+        grid = self.worlds[0].static.scan_grid  # every world's map cells are these
+        self._batch = (BatchScanner(self.fan, base.walls.segments, grid)
+                       if scan_worlds is not None else None)
+        self._radii_rows = np.ascontiguousarray(np.broadcast_to(self.radii,
+                                                                (rows, len(self.radii))))
 
     # Episodes ---------------------------------------------------------------------------
 
@@ -184,9 +190,12 @@ class Arenas:
         slots = {names[row]: slot for slot, row in enumerate(rows.tolist())}
         masses = self._robot_masses[rows]
         impulses = np.zeros(len(rows))
+        # The velocities as the next physics step takes them (then after the drive): nothing
+        # changes them between one physics step's end and the next one's drive.
+        moving = np.concatenate([state.velocities[:robots] for state in active])
         for substep in range(self.substeps):
             end_ns = (substep + 1) * dt_ns
-            driven = np.concatenate([state.velocities[:robots] for state in active])
+            driven = moving
             due = agents.impulses(driven, masses, slots, dt_ns, end_ns)
             if due:
                 names_due, jx, jy = zip(*due)
@@ -199,7 +208,8 @@ class Arenas:
                 state.velocities[:robots] = driven[first:first + robots]
                 first += robots
                 state.step(dt)
-            change = np.concatenate([state.velocities[:robots] for state in active]) - driven
+            moving = np.concatenate([state.velocities[:robots] for state in active])
+            change = moving - driven
             impulses += masses * np.hypot(change[:, 0], change[:, 1])
             agents.turn(dt_ns, end_ns)
         self.steps[worlds] += self.substeps
@@ -217,16 +227,34 @@ class Arenas:
         return positions, self.agents.yaws(), velocities
 
     def scans(self, rows):
-        """The lidar ranges (len(rows), beams) of robot rows `rows`, REP 117 with noise."""
+        """The lidar ranges (len(rows), beams) of robot rows `rows`, REP 117 with noise:
+        the node's scan (core.lidar.Scanner.scan), all rows in one compiled call where
+        numba is installed (envs.batch_scan: the same bits)."""
         robots = self.robots
-        out = np.empty((len(rows), self.fan.samples))
         yaws = self.agents.yaws()
-        for slot, row in enumerate(rows):
-            world, robot = divmod(row, robots)
-            state = self.worlds[world]
-            out[slot] = self.scanners[row].scan(
-                state.positions, state.radii, state.walls, state.positions[robot],
-                float(yaws[row]), robot, int(self.steps[world]), state.static.scan_grid)
+        steps = self.steps
+        if self._batch is None:
+            out = np.empty((len(rows), self.fan.samples))
+            for slot, row in enumerate(rows):
+                world, robot = divmod(row, robots)
+                state = self.worlds[world]
+                out[slot] = self.scanners[row].scan(
+                    state.positions, state.radii, state.walls, state.positions[robot],
+                    float(yaws[row]), robot, int(steps[world]), state.static.scan_grid)
+            return out
+        rows = np.asarray(rows, dtype=np.int64)
+        worlds, excludes = np.divmod(rows, robots)
+        states = self.worlds
+        positions = np.stack([states[world].positions for world in worlds.tolist()])
+        origins = positions[np.arange(len(rows)), excludes]
+        out = self._batch.ranges(positions, self._radii_rows[:len(rows)], origins, yaws[rows],
+                                 excludes)
+        stddev = self.fan.noise_stddev
+        if stddev > 0.0:
+            scanners = self.scanners
+            for slot, (row, world) in enumerate(zip(rows.tolist(), worlds.tolist())):
+                lidar.add_noise(out[slot], stddev,
+                                scanners[row].noise.generator(int(steps[world])))
         return out
 
     def yaw_rates(self):
