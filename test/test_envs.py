@@ -64,7 +64,7 @@ def same(first, second):
 
 
 def test_gymnasium_checker_passes_on_the_sandbox():
-    env = gymnasium.make(NAVIGATE)
+    env = gymnasium.make('ball_world.envs:' + NAVIGATE)  # the default world: the sandbox
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter('always')
         check_env(env.unwrapped)
