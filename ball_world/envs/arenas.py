@@ -31,7 +31,7 @@ import numpy as np
 
 from ball_world.core import lidar
 from ball_world.core.agents import Agents
-from ball_world.core.stepping import speed_limit, travel_per_substep
+from ball_world.core.stepping import reachable_speed, speed_limit, travel_per_substep
 from ball_world.core.world import World
 from ball_world.envs.batch_scan import BatchScanner, scan_worlds
 from ball_world.envs.layout import EpisodeLayout
@@ -105,19 +105,26 @@ class Arenas:
         self.worlds = [World(np.zeros((0, 2)), np.zeros((0, 2)), [], [],
                              walls=base.walls.segments, backend=base.backend, mode=base.mode,
                              solid_cells=base.solid_cells) for _ in range(self.count)]
-        #: No ball of these worlds is ever faster (the episodes' balls are checked against it).
+        #: No ball of these worlds is ever faster: the energy an episode can start with (the
+        #: fixed balls', the random ones' at random.speed and the robots' at max_speed) could
+        #: not make one so.
         self.speed_limit = speed_limit(travel_per_substep(float(self.radii.min())), self.dt)
+        energy = 0.5 * (float(np.dot(fixed[3], (fixed[1] ** 2).sum(axis=1)))
+                        + float(masses.sum()) * env_world.random_speed ** 2
+                        + self.robots * env_world.robot_mass * self.limits.max_speed ** 2)
+        if not reachable_speed(energy, float(self.masses.min())) <= self.speed_limit:
+            raise ValueError(f'the balls of an episode could carry a ball past the '
+                             f'{self.speed_limit:.3g} m/s the world can step: lower '
+                             'random.speed, the speeds of the balls or agent.max_speed')
         rows = self.count * self.robots
         self.names = [f'{world}/{robot}' for world in range(self.count)
                       for robot in range(self.robots)]
         self.agents = Agents(self.names, self.limits)
-        self._rows = {name: row for row, name in enumerate(self.names)}
         self._robot_masses = np.full(rows, env_world.robot_mass)
         self.goals = np.zeros((rows, 2))
         self.commands = np.zeros((rows, 2))  # the last (forward, yaw rate) each robot took
         self.steps = np.zeros(self.count, dtype=np.int64)  # physics steps since reset
         self.scanners = [None] * rows
-        self.noise_seeds = np.zeros(self.count, dtype=np.int64)
         self.layouts = [None] * self.count  # what each episode started from (recording)
         grid = self.worlds[0].static.scan_grid  # every world's map cells are these
         self._batch = (BatchScanner(self.fan, base.walls.segments, grid)
@@ -137,9 +144,6 @@ class Arenas:
         state.add_balls(np.concatenate((starts, positions)),
                         np.concatenate((np.zeros((robots, 2)), velocities)),
                         self.radii, self.masses)
-        if not state.reachable_speed() <= self.speed_limit:
-            raise ValueError('the balls of the episode carry more energy than the world can step; '
-                             'lower random.speed')
         first = world * robots
         for robot in range(robots):
             name = self.names[first + robot]
@@ -150,7 +154,6 @@ class Arenas:
         self.goals[first:first + robots] = goals
         self.commands[first:first + robots] = 0.0
         self.steps[world] = 0
-        self.noise_seeds[world] = noise_seed
         self.layouts[world] = (noise_seed, starts, self.agents.yaws()[first:first + robots],
                                goals, positions, velocities)
 
