@@ -1,6 +1,6 @@
-"""Beyond one machine: ball_world_score --ray on a Ray cluster gives the report of this
-machine bit for bit; every way a tracker ends on a Ray worker is one line with no task left
-running; an unreachable cluster is one line, not a hang.
+"""Beyond one machine: ball_world_score --ray and envs.rollouts on a Ray cluster give the
+reports and rollouts of this machine bit for bit; every way a tracker ends on a Ray worker
+is one line with no task left running; an unreachable cluster is one line, not a hang.
 
 One Ray cluster for the module (`ray start --head --block` on this machine, 2 CPUs; a
 minute to start on a loaded machine), stopped at the end with every process it started
@@ -15,6 +15,7 @@ import sys
 import time
 import uuid
 
+import numpy as np
 import pytest
 
 from ball_world.tools import score
@@ -58,6 +59,15 @@ class Hangs:
             out.write(str(os.getpid()))
         while True:
             time.sleep(0.05)
+"""
+
+POLICY = """
+import numpy as np
+
+
+def act(observations):
+    lidar = next(iter(observations.values()))
+    return np.tanh(np.stack([lidar[:, 0], -lidar[:, -1]], axis=1))
 """
 
 
@@ -207,6 +217,23 @@ def test_every_way_a_tracker_ends_on_a_worker_is_one_line_and_no_task_runs_on(
     assert wait_until(lambda: pid_file.exists() and pid_file.read_text(), 120.0)
     assert wait_until(lambda: not alive(int(pid_file.read_text())), 60.0), \
         'a Ray task was left running'
+
+
+def test_rollouts_on_a_cluster_equal_those_here(cluster, tmp_path):
+    from ball_world.envs.rollouts import rollouts
+    policy = tmp_path / 'policy.py'
+    policy.write_text(POLICY)
+    for spec in (None, f'{policy}:act'):
+        here = rollouts([4, 9], num_envs=2, steps=6, policy=spec)
+        there = rollouts([4, 9], num_envs=2, steps=6, policy=spec, ray=cluster)
+        assert len(there) == 2
+        for mine, theirs in zip(here, there):
+            assert mine.keys() == theirs.keys()
+            for key in ('rewards', 'terminated', 'truncated'):
+                assert mine[key].tobytes() == theirs[key].tobytes(), key
+            for key, values in mine['observation'].items():
+                assert np.array_equal(values, theirs['observation'][key]), key
+    assert not np.array_equal(here[0]['rewards'], here[1]['rewards'])  # seeds matter
 
 
 if __name__ == '__main__':
