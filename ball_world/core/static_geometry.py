@@ -305,7 +305,11 @@ class SegmentIndex:
             # of each chunk keeps every bucket's walls in increasing order.
             order = np.argsort(keys, kind='stable')
             ordered = np.take(keys, order)
-            rank = np.arange(len(ordered)) - np.searchsorted(ordered, ordered, side='left')
+            # Each entry's rank among its bucket's in this chunk: its place less its group's.
+            place = np.arange(len(ordered))
+            group = np.ones(len(ordered), dtype=bool)
+            group[1:] = ordered[1:] != ordered[:-1]
+            rank = place - np.maximum.accumulate(np.where(group, place, 0))
             items[np.take(fill, ordered) + rank] = np.take(walls, order)
             fill += np.bincount(keys, minlength=buckets)
         return first, items
