@@ -35,6 +35,7 @@ class Good:
         self.offset = offset
 
     def act(self, observation):
+        print('a print of the user')
         return observation + self.offset
 
 
@@ -267,12 +268,14 @@ def test_every_way_user_code_ends_in_a_worker_is_one_line_and_no_process(
     assert gone(marked)
 
 
-def test_a_controller_in_a_worker_answers_and_a_bad_one_is_refused(tmp_path, marked):
+def test_a_controller_in_a_worker_answers_and_a_bad_one_is_refused(tmp_path, marked, capfd):
     path = tmp_path / 'kinds.py'
     path.write_text(KINDS)
     with Remote(f'{path}:Good', '--controller', args=(2.0,)) as remote:
         assert remote.call('act', np.ones(3)).tolist() == [3.0, 3.0, 3.0]
         assert remote.call('act', np.zeros((2, 3))).shape == (2, 3)  # it kept its state
+    out, err = capfd.readouterr()
+    assert 'a print of the user' not in out and 'a print of the user' in err  # stdout: reports
     with pytest.raises(JobFailed) as caught:
         Remote(f'{path}:Broken', '--controller')
     assert 'making one raised SystemExit: 2 (at kinds.py:' in one_line(str(caught.value))
