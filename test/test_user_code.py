@@ -282,6 +282,16 @@ def test_a_controller_in_a_worker_answers_and_a_bad_one_is_refused(tmp_path, mar
     assert gone(marked)
 
 
+def test_a_module_that_ends_its_worker_on_import_is_one_line(tmp_path, marked):
+    path = tmp_path / 'leaves.py'
+    path.write_text('import os\nos._exit(5)\n')
+    with pytest.raises(JobFailed) as caught:
+        Remote(f'{path}:X', '--tracker')
+    assert one_line(str(caught.value)) == (f'the worker for --tracker {path}:X exited with '
+                                           'status 5: os._exit(5) (at leaves.py:2)')
+    assert gone(marked)
+
+
 # Through ball_world_score ----------------------------------------------------------------------
 
 def score_command(tracker, jobs, *extra):

@@ -439,6 +439,11 @@ def run_scene(job):
     scans = simulated_scans(scene)
     frames = frames_with_tracker(scans, tracker, spec or EXAMPLE, _scene_map(scene),
                                  scene.label)
+    # The tracker ends here, under a deadline (its __del__ is user code too).
+    from ball_world.user_code.calls import call
+    held = [tracker]
+    del tracker
+    call(f'{spec or EXAMPLE} on {scene.label}: its end', held.clear)
     try:
         score = figures.score_tracks(frames, gate)
     except DuplicateTrack as error:
@@ -473,7 +478,8 @@ def run(args):
     results = [None] * len(scenes)
     with executor(args, jobs) as pool:
         if args.tracker is not None:  # a bad tracker: one line, once, not one per worker
-            for _ in pool.map_unordered(check_tracker, [args.tracker], ['--tracker']):
+            for _ in pool.map_unordered(check_tracker, [args.tracker],
+                                        [f'--tracker {args.tracker}']):
                 pass
         for position, result in pool.map_unordered(run_scene, work,
                                                    [scene.label for scene in scenes]):
