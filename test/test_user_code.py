@@ -22,7 +22,7 @@ from ball_world.user_code import checks
 from ball_world.user_code.calls import call
 from ball_world.user_code.describe import describe_exit, shown, UserCodeError
 from ball_world.user_code.loading import load_class
-from ball_world.user_code.workers import JobFailed, Remote
+from ball_world.user_code.workers import JobFailed, LocalPool, Remote
 
 WHO, WHEN = 'my.py:T', 'on seed 3 at scan 12 (stamp 1.200 s)'
 
@@ -78,6 +78,15 @@ class Hangs:
 class Broken:
     def __init__(self):
         raise SystemExit(2)
+
+
+class EndsHanging:
+    def update(self, scan, pose):
+        return []
+
+    def __del__(self):
+        while True:
+            time.sleep(0.05)
 """
 
 
@@ -289,6 +298,20 @@ def test_a_module_that_ends_its_worker_on_import_is_one_line(tmp_path, marked):
         Remote(f'{path}:X', '--tracker')
     assert one_line(str(caught.value)) == (f'the worker for --tracker {path}:X exited with '
                                            'status 5: os._exit(5) (at leaves.py:2)')
+    assert gone(marked)
+
+
+def test_a_tracker_whose_end_hangs_is_stopped_by_the_deadline(tmp_path, marked):
+    """Its __del__ is user code too: the scorer lets go of a tracker under the deadline."""
+    from ball_world.tools.score_bench import check_tracker
+    path = tmp_path / 'kinds.py'
+    path.write_text(KINDS)
+    with pytest.raises(JobFailed) as caught:
+        with LocalPool(1, 2.0, 'the test deadline of 2 s') as pool:
+            list(pool.map_unordered(check_tracker, [f'{path}:EndsHanging'], ['a check']))
+    line = len(KINDS.split('class EndsHanging')[0].splitlines()) + 7  # its sleep
+    assert one_line(str(caught.value)) == ('a check: user code ran past the test deadline of '
+                                           f'2 s (at kinds.py:{line}); its worker was stopped')
     assert gone(marked)
 
 

@@ -377,8 +377,15 @@ def _new_tracker(tracker_class, spec):
 def check_tracker(spec):
     """Load and make one tracker (a job: in a worker), so that a bad one is one line once,
     before any scene."""
-    _new_tracker(load_tracker_class(spec), spec or EXAMPLE)
+    _end([_new_tracker(load_tracker_class(spec), spec or EXAMPLE)], spec, 'a check')
     return True
+
+
+def _end(held, spec, where):
+    """Let go of the tracker in `held` (a list) under the deadline: its __del__ is user code
+    too, and a __del__ that hangs would hold its worker past every deadline."""
+    from ball_world.user_code.calls import call
+    call(f'{spec or EXAMPLE} on {where}: its end', held.clear)
 
 
 # One scene, in a worker -----------------------------------------------------------------------
@@ -443,11 +450,9 @@ def run_scene(job):
     scans = simulated_scans(scene)
     frames = frames_with_tracker(scans, tracker, spec or EXAMPLE, _scene_map(scene),
                                  scene.label)
-    # The tracker ends here, under a deadline (its __del__ is user code too).
-    from ball_world.user_code.calls import call
     held = [tracker]
     del tracker
-    call(f'{spec or EXAMPLE} on {scene.label}: its end', held.clear)
+    _end(held, spec, scene.label)
     try:
         score = figures.score_tracks(frames, gate)
     except DuplicateTrack as error:
