@@ -97,10 +97,38 @@ def test_worlds_from_a_file_and_its_mistakes(tmp_path, capsys):
                            ('worlds:\n  - parameters: {random.cont: 3}\n',
                             "'random.cont': no such parameter"),
                            ('worlds: [{}]\nspeed: 3\n', "unknown key 'speed'"),
-                           ('worlds: [{}\n', 'worlds.yaml')):
+                           ('worlds: [{}\n', 'worlds.yaml'),
+                           # Each message states the input as written and the real rule.
+                           ('duration: 1e308\nworlds: [{}]\n',
+                            'duration is 1e308; it must be in (0, 3600] s'),
+                           ('duration: 1.0e400\nworlds: [{}]\n',
+                            'duration is 1.0e400, beyond the largest float'),
+                           ('duration: .nan\nworlds: [{}]\n', 'duration is .nan; it must be a '
+                                                              'number, not nan'),
+                           ('x: &a 3\nduration: *a\nworlds: [{}]\n',
+                            'YAML aliases (*name) are not accepted in a --worlds file (line 2)'),
+                           ('agent: 3\nworlds: [{}]\n', 'agent is 3; it must be an entity '
+                                                        'name'),
+                           ('cmd_vel: [1, 2]\nworlds: [{}]\n',
+                            'cmd_vel is [1, 2]; it must be [vx, vy, wz]'),
+                           ('worlds: [{nme: x}]\n', "world 0: unknown key 'nme'"),
+                           ('worlds: 3\n', 'got `worlds: 3`'),
+                           ('duration: yes\nworlds: [{}]\n', "duration is 'yes'; it must be a "
+                                                             'number')):
         worlds.write_text(text)
         code, _, err = bench(capsys, '--worlds', worlds, '--jobs', '1')
         assert code == 1 and err.count('\n') == 1 and expected in err, err
+
+
+def test_worlds_files_read_numbers_as_yaml_1_2_does(tmp_path, capsys):
+    """YAML 1.1 (PyYAML's) reads `seeds: 5:7` as 307 (base 60) and 1e308 as text."""
+    from ball_world.tools.score_bench import world_scenes
+    worlds = tmp_path / 'worlds.yaml'
+    worlds.write_text('duration: 2e-1\ncmd_vel: [1e-1, 0, 017]\n'
+                      'worlds: [{name: w, seeds: 5:7}]\n')
+    scenes = world_scenes(str(worlds), None)
+    assert [scene.label for scene in scenes] == ['w seed 5', 'w seed 6']
+    assert tuple(scenes[0].command) == (0.1, 0.0, 17.0) and scenes[0].steps == 12
 
 
 @pytest.mark.parametrize('argv', [
@@ -112,6 +140,20 @@ def test_bad_benchmark_arguments_exit_2(argv, capsys):
         score.main(argv)
     assert stop.value.code == 2
     assert capsys.readouterr().err.splitlines()[-1].startswith('ball_world_score: error: ')
+
+
+@pytest.mark.parametrize('argv, expected', [
+    (['--duration', '1e400'], '--duration is 1e400; it must be in (0, 3600] s'),
+    (['--duration', 'x'], "--duration: expected a number, got 'x'"),
+    (['--timeout', '0'], '--timeout is 0; it must be in (0, 86400] s'),
+    (['--worst', '-1'], '--worst is -1; it must be in [0, 100000]'),
+    (['--jobs', '0'], '--jobs is 0; it must be in [1, 1024]'),
+    (['--seeds', '0:99999999999999999999'], 'expected 0 <= A < B <= 2**63, got'),
+])
+def test_argument_messages_state_the_input_and_the_rule(argv, expected, capsys):
+    with pytest.raises(SystemExit):
+        score.main(['--seeds', '2', *argv])
+    assert expected in capsys.readouterr().err.splitlines()[-1]
 
 
 def test_scenes_recorded_with_a_tracker_node_score_as_a_benchmark(tmp_path, capsys):
@@ -156,7 +198,7 @@ def test_the_score_modules_import_each_other_without_a_circle():
     from pathlib import Path
     root = Path(score.__file__).resolve().parents[2]
     paths = [*root.glob('ball_world/tools/score*.py'), *root.glob('ball_world/scoring/*.py'),
-             root / 'ball_world/tools/tracker.py', root / 'ball_world/tools/user_code.py']
+             *root.glob('ball_world/user_code/*.py'), root / 'ball_world/tools/tracker.py']
     modules = {'.'.join(p.relative_to(root).with_suffix('').parts): p for p in paths}
     graph = {}
     for name, path in modules.items():
@@ -181,3 +223,14 @@ def test_the_score_modules_import_each_other_without_a_circle():
 
     for name in sorted(graph):
         visit(name)
+
+
+def test_a_scenes_directory_description_is_checked_in_one_line(tmp_path, capsys):
+    for text, expected in (('agent: ball_0\n', 'tracks_topic is None; it must be a topic name'),
+                           ('tracks_topic: 5\n', 'tracks_topic is 5;'),
+                           ('t: &a x\ntracks_topic: *a\n',
+                            'YAML aliases (*name) are not accepted in scenes.yaml of a scenes '
+                            'directory')):
+        (tmp_path / 'scenes.yaml').write_text(text)
+        code, _, err = bench(capsys, '--scenes', tmp_path, '--jobs', '1')
+        assert code == 1 and err.count('\n') == 1 and expected in err, err

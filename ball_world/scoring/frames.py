@@ -104,7 +104,7 @@ def prepare(frames, gate):
         if len(set(frame.track_ids)) != len(frame.track_ids):
             seen = set()
             twice = next(i for i in frame.track_ids if i in seen or seen.add(i))
-            raise DuplicateTrack(f'track id {twice!r} appears twice at stamp '
+            raise DuplicateTrack(f'track id {_shown(twice)} appears twice at stamp '
                                  f'{frame.stamp_ns} ns')
         gone = hidden_matches(frame, gate)
         kept = np.setdiff1d(np.arange(len(frame.track_ids)), gone)
@@ -137,5 +137,13 @@ def _order(key):
         return (0, int(key), ())
     text = str(key)
     head = text.rstrip('0123456789')
-    digits = text[len(head):]
-    return (1, 0, (head, int(digits) if digits else -1, text))
+    digits = text[len(head):].lstrip('0')
+    # Digits compared as numbers without making one (a name may end in 5,000 digits).
+    return (1, 0, (head, (len(digits), digits) if text[len(head):] else (-1, ''), text))
+
+
+def _shown(key):
+    """An id in a message: its repr, cut short (a huge int's repr is no line to read)."""
+    text = str(key) if isinstance(key, int) and key.bit_length() < 1000 else (
+        'a huge int' if isinstance(key, int) else repr(key))
+    return text if len(text) <= 60 else text[:57] + '...'

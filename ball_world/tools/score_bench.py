@@ -12,9 +12,13 @@ drifts with agent.odom.noise), exactly as a recording of that scene would be sco
 class `update(scan, pose) -> rows (id, x, y, ...)` (tools.tracker.ScanTracker), made anew
 for each scene with no arguments (and given the scene's map first when it has `use_map(grid)`).
 
-Scenes run in worker processes (one per core by default), each scene alone in one and all
-of its numbers its own, and results are gathered in scene order: the report is the same
-bit for bit whatever the number of processes or the machine's load. Each figure is given
+Scenes run in worker processes (one per core by default; `executor` is where a Ray executor
+would plug in), each scene alone in one and all of its numbers its own, and results are
+gathered in scene order: the report is the same bit for bit whatever the number of
+processes or the machine's load. The tracker, user code, runs only there (with --jobs 1
+too): the workers are supervised (user_code.workers), so however it ends (an exception,
+SystemExit, os._exit, a segfault, a signal, a call past --timeout) the run stops with one
+line and no process left. Each figure is given
 as its mean over scenes with a 95% confidence interval (scoring.scenes), with the scenes
 pooled as TrackEval combines sequences, and the worst scenes by HOTA.
 
@@ -31,18 +35,17 @@ pooled as TrackEval combines sequences, and the worst scenes by HOTA.
         parameters: {random.count: 60, arena: [0.0, 0.0, 12.0, 12.0]}
 """
 from dataclasses import dataclass
-import importlib
-import importlib.util
 import math
-import multiprocessing
 import os
-import sys
 import time
 
 #: Most scenes one benchmark runs.
 MAX_SCENES = 100_000
 #: Longest scene, simulated seconds.
 MAX_DURATION = 3600.0
+#: Default and largest --timeout: wall seconds one call of the tracker may take.
+DEFAULT_TIMEOUT = 60.0
+MAX_TIMEOUT = 86400.0
 #: Largest worlds file read.
 MAX_WORLDS_BYTES = 1 << 20
 DEFAULT_COMMAND = (0.5, 0.0, 0.4)
@@ -74,7 +77,7 @@ def add_arguments(parser):
     group.add_argument('--scenes', metavar='DIR',
                        help='score recorded scenes: the directories ball_world_score_scenes '
                             'made (world and tracks of a tracker node, one per scene)')
-    group.add_argument('--duration', type=float, default=None, metavar='S',
+    group.add_argument('--duration', type=given_float, default=None, metavar='S',
                        help='simulated seconds per scene (default 30)')
     group.add_argument('--tracker', metavar='MODULE:CLASS',
                        help='a tracker class (update(scan, pose) -> rows (id, x, y, ...)), '
@@ -82,6 +85,11 @@ def add_arguments(parser):
                             'the example tracker)')
     group.add_argument('--jobs', type=int, default=None, metavar='N',
                        help='worker processes (default: every core this process may use)')
+    group.add_argument('--timeout', type=given_float,
+                       default=given_float(f'{DEFAULT_TIMEOUT:g}'), metavar='S',
+                       help='wall seconds one call of the tracker (import, making one, one '
+                            'update) may take before its worker is stopped and the run '
+                            f'fails (default {DEFAULT_TIMEOUT:g})')
     group.add_argument('--worst', type=int, default=5, metavar='K',
                        help='how many worst scenes to name (default 5)')
 
@@ -95,11 +103,18 @@ def check_arguments(parser, args):
                      'benchmark')
     if args.duration is not None and not (math.isfinite(args.duration)
                                           and 0.0 < args.duration <= MAX_DURATION):
-        parser.error(f'--duration must be in (0, {MAX_DURATION:g}] s')
+        parser.error(f'--duration is {_given(args.duration)}; it must be in '
+                     f'(0, {MAX_DURATION:g}] s')
     if args.jobs is not None and not 1 <= args.jobs <= 1024:
-        parser.error('--jobs must be in [1, 1024]')
+        parser.error(f'--jobs is {args.jobs}; it must be in [1, 1024]')
+    if not (math.isfinite(args.timeout) and 0.0 < args.timeout <= MAX_TIMEOUT):
+        parser.error(f'--timeout is {_given(args.timeout)}; it must be in '
+                     f'(0, {MAX_TIMEOUT:g}] s')
+    args.timeout = float(args.timeout)
+    if args.duration is not None:
+        args.duration = float(args.duration)
     if not 0 <= args.worst <= MAX_SCENES:
-        parser.error('--worst must be >= 0')
+        parser.error(f'--worst is {args.worst}; it must be in [0, {MAX_SCENES}]')
     if args.seeds is not None:
         try:
             args.seed_range = parse_seeds(args.seeds)
@@ -120,9 +135,9 @@ def parse_seeds(text):
         else:
             raise ValueError
     except ValueError:
-        raise ValueError(f'expected A:B or N (whole numbers), got {text!r}') from None
+        raise ValueError(f'expected A:B or N (whole numbers), got {_given(text)}') from None
     if not 0 <= first < last <= 2 ** 63:
-        raise ValueError(f'expected 0 <= A < B, got {text!r}')
+        raise ValueError(f'expected 0 <= A < B <= 2**63, got {_given(text)}')
     if last - first > MAX_SCENES:
         raise ValueError(f'{last - first:,} scenes; at most {MAX_SCENES:,}')
     return range(first, last)
@@ -152,47 +167,164 @@ def seed_scenes(seeds, duration):
             for seed in seeds]
 
 
+class _Number(float):
+    """A float read from YAML that remembers how it was written (for messages)."""
+
+    text = ''
+
+
+def _yaml_loader():
+    """A YAML loader for the scorer's files: YAML 1.2's numbers, no aliases.
+
+    PyYAML reads YAML 1.1, where `1e308` is a string (its floats need a dot), `017` is 15
+    (octal), `5:10` is 310 (base 60: `seeds: 5:10` would be 310 scenes) and `no` is False.
+    Here, as in YAML 1.2, an int is decimal digits, a float a decimal with an optional
+    exponent (or .inf, .nan), a bool true or false, and anything else is text. Aliases are
+    refused: a few hundred bytes of them expand to gigabytes."""
+    import re
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        context = 'this file'
+
+        def compose_node(self, parent, index):
+            if self.check_event(yaml.AliasEvent):
+                mark = self.peek_event().start_mark
+                raise yaml.YAMLError(f'YAML aliases (*name) are not accepted in '
+                                     f'{self.context} (line {mark.line + 1}): write the '
+                                     'value out')
+            return super().compose_node(parent, index)
+
+    int_tag, float_tag = 'tag:yaml.org,2002:int', 'tag:yaml.org,2002:float'
+    bool_tag = 'tag:yaml.org,2002:bool'
+    Loader.yaml_implicit_resolvers = {
+        first: [(tag, regex) for tag, regex in resolvers
+                if tag not in (int_tag, float_tag, bool_tag)]
+        for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+    Loader.add_implicit_resolver(bool_tag, re.compile(
+        r'^(?:true|True|TRUE|false|False|FALSE)$'), list('tTfF'))
+    Loader.add_implicit_resolver(int_tag, re.compile(r'^[-+]?[0-9]+$'), list('-+0123456789'))
+    Loader.add_implicit_resolver(float_tag, re.compile(
+        r'^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?'
+        r'|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$'), list('-+0123456789.'))
+
+    def integer(loader, node):
+        return int(loader.construct_scalar(node))
+
+    def number(loader, node):
+        text = loader.construct_scalar(node)
+        lowered = text.lower().lstrip('+')
+        value = _Number(float(lowered.replace('.inf', 'inf').replace('.nan', 'nan')))
+        value.text = text
+        return value
+
+    Loader.add_constructor(int_tag, integer)
+    Loader.add_constructor(float_tag, number)
+    return Loader
+
+
+def load_yaml(text, what, context):
+    """The document of YAML `text` (BenchError naming `what` in one line); `context` says
+    where aliases were refused ('a --worlds file')."""
+    import yaml
+    loader = _yaml_loader()(text)
+    loader.context = context
+    try:
+        return loader.get_single_data()
+    except RecursionError:
+        raise BenchError(f'{what} nests too deeply') from None
+    except (ValueError, yaml.YAMLError) as error:
+        reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise BenchError(f'{what} does not parse: {reason}') from None
+    finally:
+        loader.dispose()
+
+
+def _plain(value):
+    """The document with _Number as plain floats (what the world's parameters take)."""
+    if isinstance(value, _Number):
+        return float(value)
+    if isinstance(value, dict):
+        return {key: _plain(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [_plain(item) for item in value]
+    return value
+
+
+def given_float(text):
+    """float(text) that remembers `text` (argparse's type: messages say what was given)."""
+    import argparse
+    try:
+        value = _Number(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected a number, got {_given(text)}') from None
+    value.text = text
+    return value
+
+
+def _given(value):
+    """A value as the file or command line gave it."""
+    from ball_world.user_code.describe import shown
+    return getattr(value, 'text', '') or shown(value)
+
+
 def world_scenes(path, duration_override):
     """The scenes a worlds file lists (BenchError naming what is wrong)."""
     from ball_world.recording.files import open_regular
-    from ball_world.recording.mcap_reader import load_untrusted, RecordingError
     try:
         with open_regular(path) as stream:
-            text = stream.read(MAX_WORLDS_BYTES + 1).decode('utf-8')
-        document = load_untrusted(text, path, MAX_WORLDS_BYTES, json_text=False)
-    except (OSError, UnicodeDecodeError, RecordingError) as error:
-        raise BenchError(f'{path}: {getattr(error, "strerror", None) or error}') from None
+            data = stream.read(MAX_WORLDS_BYTES + 1)
+        if len(data) > MAX_WORLDS_BYTES:
+            raise BenchError(f'{path} is larger than {MAX_WORLDS_BYTES:,} bytes, the most '
+                             'a --worlds file may hold')
+        text = data.decode('utf-8')
+    except UnicodeDecodeError as error:
+        raise BenchError(f'{path} is not UTF-8 text (byte {error.start})') from None
+    except OSError as error:
+        raise BenchError(f'{path}: {error.strerror or error}') from None
+    document = load_yaml(text, path, 'a --worlds file')
     if not isinstance(document, dict) or not isinstance(document.get('worlds'), list) \
             or not document['worlds']:
-        raise BenchError(f'{path}: expected a mapping with a non-empty list `worlds`')
+        raise BenchError(f'{path}: expected a mapping with a non-empty list `worlds`, got '
+                         f'{_shown_kind(document)}')
     unknown = set(document) - {'duration', 'agent', 'cmd_vel', 'worlds'}
     if unknown:
-        raise BenchError(f'{path}: unknown key {sorted(unknown)[0]!r} (duration, agent, '
-                         'cmd_vel, worlds)')
+        raise BenchError(f'{path}: unknown key {_given(sorted(unknown, key=str)[0])} '
+                         '(duration, agent, cmd_vel, worlds)')
     duration = _number(document.get('duration', 30.0), path, 'duration')
     if duration_override is not None:
         duration = duration_override
-    if not 0.0 < duration <= MAX_DURATION:
-        raise BenchError(f'{path}: duration must be in (0, {MAX_DURATION:g}] s')
+    elif not 0.0 < duration <= MAX_DURATION:
+        raise BenchError(f'{path}: duration is {_given(document["duration"])}; it must be '
+                         f'in (0, {MAX_DURATION:g}] s')
     agent = document.get('agent', 'ball_0')
     if not isinstance(agent, str) or not agent:
-        raise BenchError(f'{path}: agent must be an entity name')
+        raise BenchError(f'{path}: agent is {_given(agent)}; it must be an entity name '
+                         '(text, e.g. ball_0)')
     command = document.get('cmd_vel', list(DEFAULT_COMMAND))
     if not isinstance(command, list) or len(command) != 3:
-        raise BenchError(f'{path}: cmd_vel must be [vx, vy, wz]')
+        raise BenchError(f'{path}: cmd_vel is {_given(command)}; it must be [vx, vy, wz]')
     command = [_number(v, path, 'cmd_vel') for v in command]
     scenes = []
     for position, world in enumerate(document['worlds']):
-        if not isinstance(world, dict) or set(world) - {'name', 'seeds', 'parameters'}:
-            raise BenchError(f'{path}: world {position}: expected name, seeds, parameters')
+        if not isinstance(world, dict):
+            raise BenchError(f'{path}: world {position} is {_given(world)}; expected a '
+                             'mapping of name, seeds, parameters')
+        extra = set(world) - {'name', 'seeds', 'parameters'}
+        if extra:
+            raise BenchError(f'{path}: world {position}: unknown key '
+                             f'{_given(sorted(extra, key=str)[0])} (name, seeds, parameters)')
         name = str(world.get('name', f'world {position}'))
         parameters = world.get('parameters', {}) or {}
         if not isinstance(parameters, dict):
-            raise BenchError(f'{path}: {name}: parameters must be a mapping')
+            raise BenchError(f'{path}: {name}: parameters is {_given(parameters)}; it must be '
+                             'a mapping')
+        parameters = _plain(parameters)
         seeds = [None]
         if 'seeds' in world:
             try:
-                seeds = parse_seeds(str(world['seeds']))
+                seeds = parse_seeds(world['seeds'] if isinstance(world['seeds'], str)
+                                    else _given(world['seeds']))
             except ValueError as error:
                 raise BenchError(f'{path}: {name}: seeds: {error}') from None
         for seed in seeds:
@@ -204,55 +336,56 @@ def world_scenes(path, duration_override):
     return scenes
 
 
+def _shown_kind(document):
+    if isinstance(document, dict):
+        return (f"`worlds: {_given(document['worlds'])}`" if 'worlds' in document
+                else 'no `worlds`')
+    return f'a {type(document).__name__}' if document is not None else 'an empty document'
+
+
 def _number(value, path, key):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not math.isfinite(value):
-        raise BenchError(f'{path}: {key} must be a finite number, got {value!r}')
+    if isinstance(value, float) and math.isnan(value):
+        raise BenchError(f'{path}: {key} is {_given(value)}; it must be a number, not nan')
+    if isinstance(value, float) and math.isinf(value):
+        raise BenchError(f'{path}: {key} is {_given(value)}, beyond the largest float '
+                         '(1.8e308); it must be finite')
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise BenchError(f'{path}: {key} is {_given(value)}; it must be a number')
     return float(value)
 
 
 # The tracker ---------------------------------------------------------------------------------
 
 def load_tracker_class(spec):
-    """The class `spec` names: 'module:Class' or 'path/to/file.py:Class' (BenchError)."""
+    """The class `spec` names: 'module:Class' or 'path/to/file.py:Class' (UserCodeError).
+    Runs the user's module: call it in a worker (user_code.workers), never in the tool."""
     if spec is None:
         from ball_world.tools.tracker import ScanTracker
         return ScanTracker
-    module_name, _, class_name = spec.rpartition(':')
-    if not module_name or not class_name:
-        raise BenchError(f'--tracker {spec!r}: expected MODULE:CLASS or FILE.py:CLASS')
-    try:
-        if module_name.endswith('.py'):
-            if not os.path.isfile(module_name):
-                raise BenchError(f'--tracker: {module_name} is not a file')
-            loaded = importlib.util.spec_from_file_location(
-                f'ball_world_user_tracker_{abs(hash(module_name))}', module_name)
-            module = importlib.util.module_from_spec(loaded)
-            loaded.loader.exec_module(module)
-        else:
-            module = importlib.import_module(module_name)
-    except BenchError:
-        raise
-    except Exception as error:  # noqa: B902 - a user's module may raise anything on import
-        from ball_world.tools.user_code import describe_exception
-        raise BenchError(f'--tracker: importing {module_name} failed: '
-                         f'{describe_exception(error)}') from None
-    tracker_class = getattr(module, class_name, None)
-    if tracker_class is None or not callable(tracker_class):
-        raise BenchError(f'--tracker: {module_name} has no class {class_name}')
-    return tracker_class
+    from ball_world.user_code.loading import load_class
+    return load_class(spec, '--tracker')
 
 
 def _new_tracker(tracker_class, spec):
-    try:
-        tracker = tracker_class()
-    except Exception as error:  # noqa: B902 - user code
-        from ball_world.tools.user_code import describe_exception
-        raise BenchError(f'--tracker {spec}: making one failed: '
-                         f'{describe_exception(error)}') from None
+    from ball_world.user_code.calls import call
+    tracker = call(f'--tracker {spec}: making one', tracker_class)
     if not callable(getattr(tracker, 'update', None)):
         raise BenchError(f'--tracker {spec}: it has no update(scan, pose) method')
     return tracker
+
+
+def check_tracker(spec):
+    """Load and make one tracker (a job: in a worker), so that a bad one is one line once,
+    before any scene."""
+    _end([_new_tracker(load_tracker_class(spec), spec or EXAMPLE)], spec, 'a check')
+    return True
+
+
+def _end(held, spec, where):
+    """Let go of the tracker in `held` (a list) under the deadline: its __del__ is user code
+    too, and a __del__ that hangs would hold its worker past every deadline."""
+    from ball_world.user_code.calls import call
+    call(f'{spec or EXAMPLE} on {where}: its end', held.clear)
 
 
 # One scene, in a worker -----------------------------------------------------------------------
@@ -306,30 +439,26 @@ def _scene_map(scene):
 
 
 def run_scene(job):
-    """Score one scene: (position, label, SequenceScore without its frames) or the one-line
-    error of a tracker that failed. Runs in a worker process."""
+    """Score one scene: (label, SequenceScore without its frames). Runs in a worker; a
+    tracker that fails or returns what cannot be scored raises one line (UserCodeError,
+    FramesError, DuplicateTrack: ValueErrors)."""
     position, scene, spec, gate = job
     from ball_world.scoring import figures
     from ball_world.scoring.frames import DuplicateTrack
-    from ball_world.tools.score_frames import frames_with_tracker, FramesError
+    from ball_world.tools.score_frames import frames_with_tracker
+    tracker = _new_tracker(load_tracker_class(spec), spec or EXAMPLE)
+    scans = simulated_scans(scene)
+    frames = frames_with_tracker(scans, tracker, spec or EXAMPLE, _scene_map(scene),
+                                 scene.label)
+    held = [tracker]
+    del tracker
+    _end(held, spec, scene.label)
     try:
-        tracker = _new_tracker(load_tracker_class(spec), spec or EXAMPLE)
-        scans = simulated_scans(scene)
-        try:
-            frames = frames_with_tracker(scans, tracker, spec or EXAMPLE, _scene_map(scene))
-        except FramesError:
-            raise
-        except Exception as error:  # noqa: B902 - a user's tracker may raise anything
-            from ball_world.tools.user_code import describe_exception
-            raise BenchError(f'{spec or EXAMPLE} failed on {scene.label}: '
-                             f'{describe_exception(error)}') from None
         score = figures.score_tracks(frames, gate)
     except DuplicateTrack as error:
-        return position, scene.label, None, f'{spec or EXAMPLE} on {scene.label}: {error}'
-    except (BenchError, FramesError) as error:
-        return position, scene.label, None, str(error)
+        raise DuplicateTrack(f'{spec or EXAMPLE} on {scene.label}: {error}') from None
     score.sequence = score.matches = None  # not sent back: large, and not needed
-    return position, scene.label, score, None
+    return scene.label, score
 
 
 # The benchmark ------------------------------------------------------------------------------
@@ -351,37 +480,29 @@ def run(args):
     else:
         scenes = world_scenes(args.worlds, args.duration)
         what = f'worlds of {args.worlds}'
-    tracker_class = load_tracker_class(args.tracker)  # fail here, once, not in every worker
-    _new_tracker(tracker_class, args.tracker or EXAMPLE)
     jobs = min(args.jobs or available_cores(), len(scenes))
     began = time.perf_counter()
     work = [(position, scene, args.tracker, args.gate) for position, scene in
             enumerate(scenes)]
     results = [None] * len(scenes)
-    if jobs == 1:
-        outcomes = map(run_scene, work)
-        pool = None
-    else:
-        pool = multiprocessing.get_context('spawn').Pool(jobs, initializer=_worker_start,
-                                                         initargs=(sys.path,))
-        outcomes = pool.imap_unordered(run_scene, work)
-    try:
-        for position, label, score, error in outcomes:
-            if error is not None:
-                raise BenchError(error)
-            results[position] = (label, score)
-    finally:
-        if pool is not None:
-            pool.terminate()
-            pool.join()
+    with executor(args, jobs) as pool:
+        if args.tracker is not None:  # a bad tracker: one line, once, not one per worker
+            for _ in pool.map_unordered(check_tracker, [args.tracker],
+                                        [f'--tracker {args.tracker}']):
+                pass
+        for position, result in pool.map_unordered(run_scene, work,
+                                                   [scene.label for scene in scenes]):
+            results[position] = result
     seconds = time.perf_counter() - began
     return summarize(results, what, args.tracker or EXAMPLE, args.gate, jobs, seconds,
                      args.worst)
 
 
-def _worker_start(path):
-    """A spawned worker: the parent's import path (a tracker module beside the user)."""
-    sys.path[:] = path
+def executor(args, jobs):
+    """Where the jobs run (user_code's executor seam): the local pool of supervised workers
+    (a Ray executor would be chosen here). Every user call has --timeout s."""
+    from ball_world.user_code.workers import LocalPool
+    return LocalPool(jobs, args.timeout, f'the --timeout of {args.timeout:g} s')
 
 
 def summarize(results, what, tracker, gate, jobs, seconds, worst_count):

@@ -33,21 +33,11 @@ def frame(recorded, track_ids, track_xy):
                  track_xy=np.asarray(track_xy, dtype=np.float64).reshape(-1, 2))
 
 
-def tracker_rows(rows, who):
-    """(ids, xy) of what a tracker's update returned: rows (id, x, y, ...)."""
-    ids, xy = [], []
-    try:
-        for row in rows:
-            track_id, x, y = row[0], float(row[1]), float(row[2])
-            ids.append(track_id.item() if isinstance(track_id, np.generic) else track_id)
-            xy.append((x, y))
-        hash(tuple(ids))
-    except (TypeError, ValueError, IndexError) as error:
-        raise FramesError(f'{who} returned something that is not rows (id, x, y, ...): '
-                          f'{error}') from None
-    if not np.isfinite(np.asarray(xy, dtype=np.float64)).all():
-        raise FramesError(f'{who} returned a track at a position that is not finite')
-    return ids, xy
+def tracker_rows(rows, who, when=''):
+    """(ids, xy) of what a tracker's update returned: rows (id, x, y, ...), checked
+    (user_code.checks: refused in one line naming who, when and the bad value)."""
+    from ball_world.user_code.checks import track_rows
+    return track_rows(rows, who, when or 'at a scan')
 
 
 def map_grid(occupancy_map):
@@ -56,14 +46,20 @@ def map_grid(occupancy_map):
                            occupancy_map.data)
 
 
-def frames_with_tracker(scans, tracker, who='the tracker', occupancy_map=None):
+def frames_with_tracker(scans, tracker, who='the tracker', occupancy_map=None, where=''):
     """Frames of scans (RecordedScan) with `tracker` (update(scan, pose)) run on them; a
-    tracker with a `use_map(grid)` method is first given the world's map, if it has one."""
+    tracker with a `use_map(grid)` method is first given the world's map, if it has one.
+    What it raises or returns wrong is one line naming `who` and the scan (of `where`)."""
+    from ball_world.user_code.calls import call
     if occupancy_map is not None and callable(getattr(tracker, 'use_map', None)):
-        tracker.use_map(map_grid(occupancy_map))
+        call(f"{who}{f' on {where}' if where else ''}: use_map", tracker.use_map,
+             map_grid(occupancy_map))
     out = []
-    for recorded in scans:
-        ids, xy = tracker_rows(tracker.update(scan_of(recorded.message), recorded.pose), who)
+    for index, recorded in enumerate(scans):
+        when = (f"{f'on {where} ' if where else ''}at scan {index} (stamp "
+                f'{recorded.stamp_ns * 1e-9:.3f} s)')
+        rows = call(f'{who} {when}', tracker.update, scan_of(recorded.message), recorded.pose)
+        ids, xy = tracker_rows(rows, who, when)
         out.append(frame(recorded, ids, xy))
     return out
 

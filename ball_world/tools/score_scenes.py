@@ -38,7 +38,8 @@ class ScenesError(Exception):
 
 
 def parse_args(argv):
-    from ball_world.tools.score_bench import DEFAULT_COMMAND, MAX_DURATION, parse_seeds
+    from ball_world.tools.score_bench import (DEFAULT_COMMAND, given_float, MAX_DURATION,
+                                              parse_seeds)
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split('\n\n')[0],
                                      usage=f'{PROG} --seeds A:B --out DIR --tracks-topic '
                                            'TOPIC [options] -- TRACKER COMMAND ...')
@@ -49,9 +50,9 @@ def parse_args(argv):
     parser.add_argument('--tracks-topic', required=True, metavar='TOPIC',
                         help="the tracker's output (MarkerArray or PoseArray)")
     parser.add_argument('--agent', default='ball_0', help='the scanning agent (default ball_0)')
-    parser.add_argument('--duration', type=float, default=30.0, metavar='S',
+    parser.add_argument('--duration', type=given_float, default=given_float('30'), metavar='S',
                         help='simulated seconds per scene (default 30)')
-    parser.add_argument('--rate', type=float, default=60.0, metavar='HZ',
+    parser.add_argument('--rate', type=given_float, default=given_float('60'), metavar='HZ',
                         help="the world's steps per second of wall time (default 60: real "
                              'time, dt 1/60 s either way)')
     parser.add_argument('--cmd-vel', type=float, nargs=3, default=list(DEFAULT_COMMAND),
@@ -69,11 +70,14 @@ def parse_args(argv):
     except ValueError as error:
         parser.error(f'--seeds: {error}')
     if not (math.isfinite(args.duration) and 0.0 < args.duration <= MAX_DURATION):
-        parser.error(f'--duration must be in (0, {MAX_DURATION:g}] s')
+        parser.error(f'--duration is {args.duration.text}; it must be in '
+                     f'(0, {MAX_DURATION:g}] s')
     if not (math.isfinite(args.rate) and 1.0 <= args.rate <= 10_000.0):
-        parser.error('--rate must be in [1, 10000] Hz')
+        parser.error(f'--rate is {args.rate.text}; it must be in [1, 10000] Hz')
     if not all(math.isfinite(v) for v in args.cmd_vel):
-        parser.error('--cmd-vel must be finite')
+        parser.error(f"--cmd-vel is {' '.join(f'{v:g}' for v in args.cmd_vel)}; each must be "
+                     'finite')
+    args.duration, args.rate = float(args.duration), float(args.rate)
     if not args.tracks_topic.startswith('/'):
         args.tracks_topic = '/' + args.tracks_topic
     if shutil.which(args.tracker[0]) is None and not os.path.isfile(args.tracker[0]):
@@ -338,21 +342,22 @@ def _score_scene(job):
 
 def score_directory(args):
     """The benchmark report of a directory ball_world_score_scenes made."""
-    import multiprocessing
     from ball_world.recording.files import open_regular
-    from ball_world.recording.mcap_reader import load_untrusted, RecordingError
-    from ball_world.tools.score_bench import available_cores, BenchError, summarize
+    from ball_world.tools.score_bench import available_cores, BenchError, load_yaml, summarize
     path = args.scenes
+    description = os.path.join(path, SCENES_FILE)
     try:
-        with open_regular(os.path.join(path, SCENES_FILE)) as stream:
-            described = load_untrusted(stream.read(1 << 16).decode('utf-8', 'replace'),
-                                       SCENES_FILE, 1 << 16, json_text=False)
+        with open_regular(description) as stream:
+            text = stream.read(1 << 16).decode('utf-8', 'replace')
         scenes = scene_directories(path)
-    except (OSError, RecordingError) as error:
-        raise BenchError(f'{path}: {getattr(error, "strerror", None) or error} (a '
-                         f'directory {PROG} made)') from None
+    except OSError as error:
+        raise BenchError(f'{path}: {error.strerror or error} (a directory {PROG} '
+                         'made)') from None
+    described = load_yaml(text, description, f'{SCENES_FILE} of a scenes directory')
     if not isinstance(described, dict) or not isinstance(described.get('tracks_topic'), str):
-        raise BenchError(f'{path}/{SCENES_FILE}: no tracks_topic')
+        topic = described.get('tracks_topic') if isinstance(described, dict) else None
+        raise BenchError(f'{description}: tracks_topic is {topic!r}; it must be a topic name '
+                         f'(a directory {PROG} made has one)')
     if not scenes:
         raise BenchError(f'{path} holds no scene (seed_<k>/world.mcap)')
     agent = str(described.get('agent', 'ball_0'))
@@ -362,20 +367,15 @@ def score_directory(args):
     began = time.perf_counter()
     results = [None] * len(scenes)
     notes = []
-    pool = None if jobs == 1 else multiprocessing.get_context('spawn').Pool(jobs)
-    try:
-        for position, label, score, note, error in (
-                map(_score_scene, work) if pool is None else pool.imap_unordered(_score_scene,
-                                                                                 work)):
+    from ball_world.user_code.workers import LocalPool
+    with LocalPool(jobs) as pool:
+        for _, (position, label, score, note, error) in pool.map_unordered(
+                _score_scene, work, [label for label, _, _ in scenes]):
             if error is not None:
                 raise BenchError(error)
             results[position] = (label, score)
             if note:
                 notes.append(f'{label}: {note}')
-    finally:
-        if pool is not None:
-            pool.terminate()
-            pool.join()
     report = summarize(results, f'scenes of {path}', str(described.get('tracker', '?')),
                        args.gate, jobs, time.perf_counter() - began, args.worst)
     report['stamp_notes'] = notes
