@@ -44,6 +44,7 @@ from std_msgs.msg import Float64MultiArray
 
 from ball_world.recording.mcap_reader import Scan
 from ball_world.recording.rerun_log import BALLS, STEP
+from ball_world.ros.rcl_init import creating_node
 
 PACKAGE = 'ball_world'
 #: Seconds to wait for anything that must happen (discovery, an answer, an exit): generous,
@@ -233,8 +234,9 @@ class Probe:
         # No /rosout publisher: rcl keeps those in one table per process, keyed by node name
         # and not thread-safe, and a test worker makes hundreds of nodes named alike, each in
         # a context of its own; a probe logs nothing a test reads from /rosout.
-        self.node = rclpy.create_node(name, namespace=namespace, context=self.context,
-                                      enable_rosout=False)
+        with creating_node(keep=True):  # a test that cannot join the graph says why
+            self.node = rclpy.create_node(name, namespace=namespace, context=self.context,
+                                          enable_rosout=False)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._nodes = [self.node]
