@@ -119,10 +119,14 @@ def creating_node(prog=None, seconds=NODE_SECONDS, grace=STUCK_GRACE, keep=False
         yield
     finally:
         watchdog.send(node_watchdog.DISARM)
-        if watchdog not in _kept.values():
-            watchdog.end()
-        if swapped is not None:
-            _give_signals_back(swapped, caught)
+        try:
+            if swapped is not None:
+                _give_signals_back(swapped)  # before the pipe may close: no signal writes to it
+        finally:
+            if watchdog not in _kept.values():
+                watchdog.end()
+        for signum in dict.fromkeys(caught):  # as if they came now
+            signal.raise_signal(signum)
 
 
 class _Watchdog:
@@ -181,7 +185,7 @@ def _take_signals(fd, caught):
     return options, previous, wakeup
 
 
-def _give_signals_back(swapped, caught):
+def _give_signals_back(swapped):
     options, previous, wakeup = swapped
     mask = signal.pthread_sigmask(signal.SIG_BLOCK, STOPPING)
     try:
@@ -192,5 +196,3 @@ def _give_signals_back(swapped, caught):
             install_signal_handlers(options)
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)
-    for signum in dict.fromkeys(caught):
-        signal.raise_signal(signum)
