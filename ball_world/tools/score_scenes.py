@@ -93,10 +93,13 @@ class _Recorder:
         import rclpy
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
+
+        from ball_world.ros.rcl_init import creating_node
         self.rclpy = rclpy
         self.context = Context()
         rclpy.init(context=self.context)
-        self.node = rclpy.create_node('ball_world_score_scenes', context=self.context)
+        with creating_node(PROG):
+            self.node = rclpy.create_node('ball_world_score_scenes', context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.args = args
