@@ -153,7 +153,8 @@ def _parser():
     drive.add_argument('--vy', type=finite, default=0.0, help='leftward, m/s (omni drive)')
     drive.add_argument('--rate', type=rate, default=10.0, help='commands per second (10)')
     drive.add_argument('--for', dest='seconds', type=duration, metavar='S',
-                       help='stop after S seconds (default: at Ctrl-C)')
+                       help='stop S seconds after the command started, joining the graph '
+                            'included (default: at Ctrl-C)')
     drive.add_argument('-w', '--wait-matching-subscriptions', dest='matching', type=count,
                        metavar='N', help='send the first command only once N subscriptions '
                        'match, within --timeout (ros2 topic pub -w; default: the agent, then '
@@ -709,6 +710,7 @@ def run(argv):
                   file=sys.stderr)
             return 2
     args = _parser().parse_args(own)
+    args.started = started  # drive's --for counts from here (cli_topics.drive)
     client = None
     try:
         _check(args)
