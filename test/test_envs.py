@@ -64,7 +64,7 @@ def same(first, second):
 
 
 def test_gymnasium_checker_passes_on_the_sandbox():
-    env = gymnasium.make(NAVIGATE)
+    env = gymnasium.make('ball_world.envs:' + NAVIGATE)  # the default world: the sandbox
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter('always')
         check_env(env.unwrapped)
@@ -192,6 +192,8 @@ def test_max_episode_steps_truncates():
     ({'world': 'atlantis'}, "world 'atlantis': no such file"),
     ({'world': {'arena': [], 'random.count': 0}}, 'need a bounded world'),
     ({'world': {**BOX, 'random.count': 500}}, 'random.count'),
+    ({'world': {**BOX, 'random.speed': 230.0, 'dt': 0.05}}, 'lower random.speed'),
+    ({'world': {**BOX, 'agent.max_speed': 1e4}}, 'agent.max_speed'),
 ])
 def test_bad_options_are_refused_in_one_line(options, words):
     with pytest.raises(ValueError) as caught:

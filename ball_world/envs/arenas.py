@@ -31,8 +31,9 @@ import numpy as np
 
 from ball_world.core import lidar
 from ball_world.core.agents import Agents
-from ball_world.core.stepping import speed_limit, travel_per_substep
+from ball_world.core.stepping import reachable_speed, speed_limit, travel_per_substep
 from ball_world.core.world import World
+from ball_world.envs.batch_scan import BatchScanner, scan_worlds
 from ball_world.envs.layout import EpisodeLayout
 from ball_world.envs.world_file import fixed_balls, random_sizes
 from ball_world.scans import fan_from
@@ -104,20 +105,32 @@ class Arenas:
         self.worlds = [World(np.zeros((0, 2)), np.zeros((0, 2)), [], [],
                              walls=base.walls.segments, backend=base.backend, mode=base.mode,
                              solid_cells=base.solid_cells) for _ in range(self.count)]
-        #: No ball of these worlds is ever faster (the episodes' balls are checked against it).
+        #: No ball of these worlds is ever faster: the energy an episode can start with (the
+        #: fixed balls', the random ones' at random.speed and the robots' at max_speed) could
+        #: not make one so.
         self.speed_limit = speed_limit(travel_per_substep(float(self.radii.min())), self.dt)
+        energy = 0.5 * (float(np.dot(fixed[3], (fixed[1] ** 2).sum(axis=1)))
+                        + float(masses.sum()) * env_world.random_speed ** 2
+                        + self.robots * env_world.robot_mass * self.limits.max_speed ** 2)
+        if not reachable_speed(energy, float(self.masses.min())) <= self.speed_limit:
+            raise ValueError(f'the balls of an episode could carry a ball past the '
+                             f'{self.speed_limit:.3g} m/s the world can step: lower '
+                             'random.speed, the speeds of the balls or agent.max_speed')
         rows = self.count * self.robots
         self.names = [f'{world}/{robot}' for world in range(self.count)
                       for robot in range(self.robots)]
         self.agents = Agents(self.names, self.limits)
-        self._rows = {name: row for row, name in enumerate(self.names)}
         self._robot_masses = np.full(rows, env_world.robot_mass)
         self.goals = np.zeros((rows, 2))
         self.commands = np.zeros((rows, 2))  # the last (forward, yaw rate) each robot took
         self.steps = np.zeros(self.count, dtype=np.int64)  # physics steps since reset
         self.scanners = [None] * rows
-        self.noise_seeds = np.zeros(self.count, dtype=np.int64)
         self.layouts = [None] * self.count  # what each episode started from (recording)
+        grid = self.worlds[0].static.scan_grid  # every world's map cells are these
+        self._batch = (BatchScanner(self.fan, base.walls.segments, grid)
+                       if scan_worlds is not None else None)
+        self._radii_rows = np.ascontiguousarray(np.broadcast_to(self.radii,
+                                                                (rows, len(self.radii))))
 
     # Episodes ---------------------------------------------------------------------------
 
@@ -131,9 +144,6 @@ class Arenas:
         state.add_balls(np.concatenate((starts, positions)),
                         np.concatenate((np.zeros((robots, 2)), velocities)),
                         self.radii, self.masses)
-        if not state.reachable_speed() <= self.speed_limit:
-            raise ValueError('the balls of the episode carry more energy than the world can step; '
-                             'lower random.speed')
         first = world * robots
         for robot in range(robots):
             name = self.names[first + robot]
@@ -144,7 +154,6 @@ class Arenas:
         self.goals[first:first + robots] = goals
         self.commands[first:first + robots] = 0.0
         self.steps[world] = 0
-        self.noise_seeds[world] = noise_seed
         self.layouts[world] = (noise_seed, starts, self.agents.yaws()[first:first + robots],
                                goals, positions, velocities)
 
@@ -184,9 +193,12 @@ class Arenas:
         slots = {names[row]: slot for slot, row in enumerate(rows.tolist())}
         masses = self._robot_masses[rows]
         impulses = np.zeros(len(rows))
+        # The velocities as the next physics step takes them (then after the drive): nothing
+        # changes them between one physics step's end and the next one's drive.
+        moving = np.concatenate([state.velocities[:robots] for state in active])
         for substep in range(self.substeps):
             end_ns = (substep + 1) * dt_ns
-            driven = np.concatenate([state.velocities[:robots] for state in active])
+            driven = moving
             due = agents.impulses(driven, masses, slots, dt_ns, end_ns)
             if due:
                 names_due, jx, jy = zip(*due)
@@ -199,7 +211,8 @@ class Arenas:
                 state.velocities[:robots] = driven[first:first + robots]
                 first += robots
                 state.step(dt)
-            change = np.concatenate([state.velocities[:robots] for state in active]) - driven
+            moving = np.concatenate([state.velocities[:robots] for state in active])
+            change = moving - driven
             impulses += masses * np.hypot(change[:, 0], change[:, 1])
             agents.turn(dt_ns, end_ns)
         self.steps[worlds] += self.substeps
@@ -217,16 +230,34 @@ class Arenas:
         return positions, self.agents.yaws(), velocities
 
     def scans(self, rows):
-        """The lidar ranges (len(rows), beams) of robot rows `rows`, REP 117 with noise."""
+        """The lidar ranges (len(rows), beams) of robot rows `rows`, REP 117 with noise:
+        the node's scan (core.lidar.Scanner.scan), all rows in one compiled call where
+        numba is installed (envs.batch_scan: the same bits)."""
         robots = self.robots
-        out = np.empty((len(rows), self.fan.samples))
         yaws = self.agents.yaws()
-        for slot, row in enumerate(rows):
-            world, robot = divmod(row, robots)
-            state = self.worlds[world]
-            out[slot] = self.scanners[row].scan(
-                state.positions, state.radii, state.walls, state.positions[robot],
-                float(yaws[row]), robot, int(self.steps[world]), state.static.scan_grid)
+        steps = self.steps
+        if self._batch is None:
+            out = np.empty((len(rows), self.fan.samples))
+            for slot, row in enumerate(rows):
+                world, robot = divmod(row, robots)
+                state = self.worlds[world]
+                out[slot] = self.scanners[row].scan(
+                    state.positions, state.radii, state.walls, state.positions[robot],
+                    float(yaws[row]), robot, int(steps[world]), state.static.scan_grid)
+            return out
+        rows = np.asarray(rows, dtype=np.int64)
+        worlds, excludes = np.divmod(rows, robots)
+        states = self.worlds
+        positions = np.stack([states[world].positions for world in worlds.tolist()])
+        origins = positions[np.arange(len(rows)), excludes]
+        out = self._batch.ranges(positions, self._radii_rows[:len(rows)], origins, yaws[rows],
+                                 excludes)
+        stddev = self.fan.noise_stddev
+        if stddev > 0.0:
+            scanners = self.scanners
+            for slot, (row, world) in enumerate(zip(rows.tolist(), worlds.tolist())):
+                lidar.add_noise(out[slot], stddev,
+                                scanners[row].noise.generator(int(steps[world])))
         return out
 
     def yaw_rates(self):

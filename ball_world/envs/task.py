@@ -48,8 +48,9 @@ class Task:
         arenas = self.arenas
         arenas.reset_world(world, rng)
         rows = self.rows_of(world)
-        positions, yaws, _ = arenas.robot_state()
-        distance, bearing = goal_terms(positions[rows], yaws[rows], arenas.goals[rows])
+        positions = arenas.worlds[world].positions[:self.robots]
+        yaws = arenas.agents.yaws()
+        distance, bearing = goal_terms(positions, yaws[rows], arenas.goals[rows])
         self.distances[rows] = distance
         return observe(arenas.scans(rows), arenas.fan.range_max, distance, bearing,
                        yaws[rows], np.zeros((len(rows), 2)), np.zeros(len(rows)), self.reach,

@@ -6,9 +6,9 @@ worlds are never merged into one: a seed-mode World plans its substeps from its 
 ball, so K worlds in one World would step differently from K worlds alone), stepped by one
 Task with K rows, so each world's episodes are bit for bit those of Navigate-v0 with the
 same seeds and actions (test/test_envs_vector.py checks it against Gymnasium's
-SyncVectorEnv). What is batched: the drive (one core.agents.Agents over the K robots), the
-observations and the rewards; each world's physics is its own compiled World.step, and its
-scan its own compiled scan.
+SyncVectorEnv). What is batched: the drive (one core.agents.Agents over the K robots), the K
+scans (one compiled call, envs.batch_scan), the observations and the rewards; each world's
+physics is its own compiled World.step.
 
 Gymnasium 1.x's autoreset, next-step mode (the default): the step after a world's episode
 ended resets that world (its action is ignored) and returns its first observation with

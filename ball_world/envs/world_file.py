@@ -49,18 +49,29 @@ class WorldError(ValueError):
 
 def world_path(name):
     """The parameters file `name` means: a path, or the name of a world shipped with
-    ball_world (`sandbox`, `depot`: worlds/NAME.yaml in the repository or in the installed
-    share/ball_world)."""
+    ball_world (`sandbox`, `depot`: worlds/NAME.yaml, _world_folders)."""
     path = Path(name)
     if path.suffix in ('.yaml', '.yml') or path.exists():
         return path
-    for folder in (Path(__file__).resolve().parents[2] / 'worlds',
-                   Path(sys.prefix) / 'share' / 'ball_world' / 'worlds'):
+    for folder in _world_folders():
         candidate = folder / f'{name}.yaml'
         if candidate.is_file():
             return candidate
     raise WorldError(f'world {str(name)[:200]!r}: no such file, and no world of that name '
                      'is shipped with ball_world (sandbox, depot)')
+
+
+def _world_folders():
+    """Where shipped worlds are: the repository's worlds/, the package's share/ball_world/
+    worlds of a pip install (under sys.prefix) and of a colcon install (ament's index, when
+    ROS is there)."""
+    yield Path(__file__).resolve().parents[2] / 'worlds'
+    yield Path(sys.prefix) / 'share' / 'ball_world' / 'worlds'
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        yield Path(get_package_share_directory('ball_world')) / 'worlds'
+    except (ImportError, KeyError, ValueError, OSError):
+        return
 
 
 def flatten(node, prefix=''):
