@@ -16,6 +16,7 @@
 Whatever goes wrong here raises HarnessError, an AssertionError: a test fails with its
 message, and a soak run reports it as a run that could not be carried out.
 """
+import contextlib
 import dataclasses
 import os
 from pathlib import Path
@@ -44,6 +45,7 @@ from std_msgs.msg import Float64MultiArray
 
 from ball_world.recording.mcap_reader import Scan
 from ball_world.recording.rerun_log import BALLS, STEP
+from ball_world.ros.rcl_init import creating_node
 
 PACKAGE = 'ball_world'
 #: Seconds to wait for anything that must happen (discovery, an answer, an exit): generous,
@@ -211,6 +213,31 @@ class Children:
 
 # Probe ----------------------------------------------------------------------------------------
 
+#: A probe's participant: Fast DDS's UDP transport alone (see Probe). rmw_fastrtps adds
+#: shared memory to a LOCALHOST discovery range of its own, so a probe's rcl context takes
+#: the SUBNET range; the test's own domain keeps it apart, and the nodes a test starts,
+#: LOCALHOST, announce themselves on the loopback, where it hears them.
+PROBE_SETTINGS = {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}
+
+
+@contextlib.contextmanager
+def udp_only():
+    """Fast DDS reads FASTDDS_BUILTIN_TRANSPORTS when it makes a participant (a context's
+    first node): set for that moment only, so that the nodes a test starts keep the
+    transports a user's have."""
+    settings = PROBE_SETTINGS
+    before = {name: os.environ.get(name) for name in settings}
+    os.environ.update(settings)
+    try:
+        yield
+    finally:
+        for name, value in before.items():
+            if value is None:
+                del os.environ[name]
+            else:
+                os.environ[name] = value
+
+
 class Heard(list):
     """What a probe's subscription received, in order; `subscription` is the subscription."""
 
@@ -224,17 +251,26 @@ class Probe:
     discovered by it as a separate process would be. add_node() spins another node of the
     same context along with it (a node under test in this process). `timeout` is how long it
     waits for anything unless told otherwise.
+
+    The participant talks over UDP only (PROBE_TRANSPORTS), never Fast DDS's shared memory:
+    a peer that dies (SIGKILL) while it writes into a shared-memory port leaves that port's
+    interprocess mutex locked, Fast DDS then gives the port up, and deleting the
+    participant later locks the mutex in memory no longer mapped: the SIGSEGV in
+    `destroy_node` that ended test workers (docs/reliability.md has the native backtrace).
+    Tests kill nodes on purpose, and the fixtures kill what a test left running.
     """
 
     def __init__(self, name='probe', namespace=None, domain_id=None, timeout=DEADLINE):
         self.timeout = timeout
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
+        with udp_only():
+            rclpy.init(context=self.context, domain_id=domain_id)
         # No /rosout publisher: rcl keeps those in one table per process, keyed by node name
         # and not thread-safe, and a test worker makes hundreds of nodes named alike, each in
         # a context of its own; a probe logs nothing a test reads from /rosout.
-        self.node = rclpy.create_node(name, namespace=namespace, context=self.context,
-                                      enable_rosout=False)
+        with creating_node(keep=True), udp_only():  # a test that cannot join says why
+            self.node = rclpy.create_node(name, namespace=namespace, context=self.context,
+                                          enable_rosout=False)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._nodes = [self.node]

@@ -15,10 +15,19 @@ exit) with the map and without, so their difference is what the map costs a star
 loaded machine that difference drowns in the start's noise); the world's build in this process
 (a Simulation: files read, decoded, cells, placement, the World's static geometry, /map
 encoded) is what the node does between its start and its first step.
+
+`--worst` measures the worst maps inside the limits instead (issue 33): a checkerboard of 5 cm
+cells with exactly limits.MAX_MAP_RUNS boundary runs (1024 x 1024: every cell its own block),
+the largest map (4096 x 4096) with 2% speckle (a raw SLAM map), and a checkerboard two rows
+and columns larger, which must be refused in one line. For each: the world's build in this
+process (CPU seconds and the growth of this process's peak RSS) and the node from start to
+first step with 1,000 random balls (wall seconds, and the largest peak RSS of the children so
+far), after the node without a map for comparison.
 """
 import argparse
 import os
 from pathlib import Path
+import resource
 import statistics
 import subprocess
 import sys
@@ -28,6 +37,7 @@ import time
 from benchmarks import warehouse as generated
 import numpy as np
 
+from ball_world.core import limits
 from ball_world.core.parameters import DEFAULTS
 from ball_world.core.solid_cells import CellQueries
 from ball_world.map_files import load_map_file
@@ -89,11 +99,81 @@ def node_seconds(repeat, *parameters):
     return statistics.median(times)
 
 
+def write_pgm(folder, name, pixels, resolution=0.05):
+    """A trinary map of `pixels` (0 occupied, 254 free), its YAML's path."""
+    rows, columns = pixels.shape
+    (folder / f'{name}.pgm').write_bytes(f'P5\n{columns} {rows}\n255\n'.encode()
+                                         + pixels.astype(np.uint8).tobytes())
+    (folder / f'{name}.yaml').write_text(f'image: {name}.pgm\nmode: trinary\n'
+                                         f'resolution: {resolution}\norigin: [0.0, 0.0, 0]\n'
+                                         'negate: 0\noccupied_thresh: 0.65\n'
+                                         'free_thresh: 0.25\n')
+    return folder / f'{name}.yaml'
+
+
+def worst_maps(folder):
+    """(label, YAML path, refused) of the worst maps inside the limits, and one past them."""
+    # Each interior grid line of an n x n checkerboard has n runs, each border line n / 2
+    # (the outside is solid): 2 (n - 1) n + 2 n runs, exactly the limit at n = 1024.
+    side = 1024
+    assert 2 * side * side == limits.MAX_MAP_RUNS
+    board = np.add.outer(np.arange(side), np.arange(side)) % 2 * 254
+    speckle = np.where(np.random.default_rng(0).random((4096, 4096)) < 0.02, 0, 254)
+    past = np.add.outer(np.arange(side + 2), np.arange(side + 2)) % 2 * 254
+    return [(f'checkerboard {side} x {side}', write_pgm(folder, 'board', board), False),
+            ('4096 x 4096, 2% speckle', write_pgm(folder, 'speckle', speckle), False),
+            (f'checkerboard {side + 2} x {side + 2}', write_pgm(folder, 'past', past), True)]
+
+
+def worst(folder):
+    """The --worst table's lines."""
+    balls = ['random.count:=1000', 'random.radius:=[0.02, 0.02]', 'random.seed:=1',
+             'dt:=0.01']
+    node = Path(sys.prefix) / 'bin' / 'ball_world'
+    start = time.perf_counter()
+    subprocess.run([str(node), '--ros-args', '-p', 'max_steps:=1', '-p', 'rate_hz:=0.0', '-p',
+                    'markers.rate_hz:=0.0', *[part for value in balls for part in ('-p', value)]],
+                   check=True, capture_output=True)
+    print(f'no map: node start to first step {time.perf_counter() - start:.1f} s; peak RSS '
+          f'{resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6:.2f} GB', flush=True)
+    for label, path, refused in worst_maps(folder):
+        values = {'map': str(path), 'arena': [], 'random.count': 1000,
+                  'random.radius': [0.02, 0.02], 'random.seed': 1, 'dt': 0.01}
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        start = time.process_time()
+        try:
+            Simulation({**DEFAULTS, **values})
+            built = f'world built in {time.process_time() - start:.2f} s CPU'
+        except ValueError as error:
+            built = f'refused: {error}'
+        grown = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1e6
+        command = [str(node), '--ros-args', '-p', 'max_steps:=1', '-p', 'rate_hz:=0.0', '-p',
+                   'markers.rate_hz:=0.0', '-p', f'map:={path}', '-p', 'arena:=[]']
+        for parameter in balls:
+            command += ['-p', parameter]
+        start = time.perf_counter()
+        done = subprocess.run(command, capture_output=True, text=True)
+        seconds = time.perf_counter() - start
+        peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6
+        outcome = 'exit 0' if done.returncode == 0 else \
+            f'exit {done.returncode}: {done.stderr.strip().splitlines()[-1]}'
+        print(f'{label}: {built} (peak RSS +{grown:.2f} GB); node start to first step '
+              f'{seconds:.1f} s, {outcome}; largest child peak RSS so far {peak:.2f} GB',
+              flush=True)
+        assert refused == (done.returncode != 0)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='benchmarks.map_load', description=__doc__)
     parser.add_argument('--repeat', type=int, default=5)
+    parser.add_argument('--worst', action='store_true',
+                        help='the worst maps inside the limits (see above) instead')
     args = parser.parse_args(argv)
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    if args.worst:
+        with tempfile.TemporaryDirectory() as folder:
+            worst(Path(folder))
+        return
     with tempfile.TemporaryDirectory() as folder:
         maps = [ROOT / 'maps' / 'tb3_sandbox.yaml', ROOT / 'maps' / 'depot.yaml',
                 warehouse(Path(folder)), generated.write(Path(folder) / 'generated')]

@@ -4,7 +4,9 @@ For each colour the view draws text or arrows in (rerun_agents, rerun_log, view_
 finds the pixels of a screenshot drawn in that colour (within TOLERANCE: antialiased edges
 are left out), takes what lies around them (the most common colour in a small window that
 is clearly not the colour itself: the view's background, or a label's box), and prints the
-WCAG 2 contrast ratio of the colour against each background it was found on.
+WCAG 2 contrast ratio of the colour against each background it was found on. A cased mark
+(rerun_casing) is measured against its casing; the casings, as the tags' pills, against
+what lies around them.
 
     .venv/bin/python scripts/contrast.py docs/screenshots/demo-light-40s.png ...
 
@@ -23,14 +25,19 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from ball_world.recording.rerun_agents import (AGENT_COLOR, BUMPER_TEXT_COLOR,  # noqa: E402
                                                BUMPER_VIEW_COLOR)
+from ball_world.recording.rerun_casing import CASING_COLOR  # noqa: E402
 from ball_world.recording.rerun_log import (IMPULSE_COLOR, IMPULSE_TEXT_COLOR,  # noqa: E402
                                             LABEL_LIMIT, name_color, RULER_TEXT_COLOR)
 from ball_world.recording.rerun_text import TAG_COLOR  # noqa: E402
 from ball_world.tools.view_tracks import TRACK_COLOR  # noqa: E402
 
 #: What is drawn in each colour (or any of a list): arrows on the view, texts on their tags.
-COLORS = {'heading arrow': AGENT_COLOR, 'push arrow': IMPULSE_COLOR,
-          'bumper arrow': BUMPER_VIEW_COLOR, 'track ring': TRACK_COLOR}
+COLORS = {'push arrow': IMPULSE_COLOR,
+          'casings and tags': CASING_COLOR}
+#: Marks drawn over a dark casing (rerun_casing): measured against the casing beside them,
+#: as a tag's text against its pill; the casing itself against what lies around it.
+CASED = {'heading arrow': AGENT_COLOR, 'bumper arrow': BUMPER_VIEW_COLOR,
+         'track ring': TRACK_COLOR}
 #: Texts, measured together (a pixel is the closest of their colours) against the tag's fill
 #: as drawn beside them: a pixel without it in its window is not a tag's (the names' light
 #: hues are also the highlights of shaded balls). The names: each ball's light hue.
@@ -114,6 +121,13 @@ def main(argv=None):
             text, background, ratio = text_contrast(image, tuple(int(v) for v in
                                                                  box.split(',')))
             print(f'  {name} {text} on {background}: {ratio:.2f}:1')
+        for name, color in CASED.items():
+            found = measure(image, [color], CASING_COLOR)
+            if not found:
+                print(f'  {name}: not on this screenshot')
+            for background, drawn, count in found[:1]:
+                print(f'  {name} {drawn} on its casing {background} ({count} px): '
+                      f'{contrast(drawn, background):.2f}:1')
         texts = measure(image, [color for _, color in TEXTS], TAG_COLOR)
         for name, colors, beside in ([(n, [c], None) for n, c in COLORS.items()]
                                      + [(n, [c for m, c in TEXTS if m == n], TAG_COLOR)

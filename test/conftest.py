@@ -37,8 +37,9 @@ def processes():
 
 
 @pytest.fixture
-def probes():
-    """Probe(name, ...) factory; every probe leaves the graph when the test ends."""
+def probes(processes):
+    """Probe(name, ...) factory; every probe leaves the graph when the test ends, before the
+    test's processes are killed (a probe outlives no peer killed while it wrote to it)."""
     made = []
 
     def make(name='probe', **options):

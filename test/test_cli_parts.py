@@ -92,3 +92,15 @@ def test_integers_fit_their_message_field_and_numbers_are_finite():
         with pytest.raises(argparse.ArgumentTypeError):
             finite(bad)
     assert finite('-0.5') == -0.5
+
+
+def test_drive_counts_for_from_the_process_start():
+    """--for 5 ran 8.8 s under load: it counts from the process's start, Python's start-up
+    and imports included, not from when run() began."""
+    import subprocess
+    import sys
+    code = ('import time; from ball_world.tools.cli import process_started; '
+            'now = time.monotonic(); print(now - process_started(now))')
+    age = float(subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                               check=True).stdout)
+    assert 0.0 < age < 60.0  # the interpreter's start-up and the import came first

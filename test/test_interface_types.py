@@ -10,6 +10,7 @@ import json
 from pathlib import Path
 import re
 
+from ball_world_testing.harness import DEADLINE
 from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import TransformStamped
 import pytest
@@ -121,7 +122,7 @@ def test_service_round_trips_a_request_in_process(probe):
 
     node.create_service(GetSimulatorFeatures, 'get_simulator_features', answer)
     client = node.create_client(GetSimulatorFeatures, 'get_simulator_features')
-    assert client.wait_for_service(timeout_sec=10.0)
+    assert client.wait_for_service(timeout_sec=DEADLINE)
     features = probe.result(client.call_async(GetSimulatorFeatures.Request()))
     assert list(features.features.features) == [0, 33]
     assert features.features.spawn_formats == ['yaml']
@@ -141,7 +142,7 @@ def test_action_round_trips_a_goal_in_process(probe):
 
     server = ActionServer(node, SimulateSteps, 'simulate_steps', simulate)
     client = ActionClient(node, SimulateSteps, 'simulate_steps')
-    assert client.wait_for_server(timeout_sec=10.0)
+    assert client.wait_for_server(timeout_sec=DEADLINE)
     goal = probe.result(client.send_goal_async(SimulateSteps.Goal(steps=3)))
     assert goal.accepted
     outcome = probe.result(goal.get_result_async())
@@ -186,7 +187,7 @@ def test_lookup_transform_action_round_trips_a_goal_in_process(probe):
 
     server = ActionServer(node, LookupTransform, 'lookup_transform', lookup)
     client = ActionClient(node, LookupTransform, 'lookup_transform')
-    assert client.wait_for_server(timeout_sec=10.0)
+    assert client.wait_for_server(timeout_sec=DEADLINE)
     goal = probe.result(client.send_goal_async(LookupTransform.Goal(
         target_frame='world', source_frame='ball_0/base_link', timeout=Duration(sec=1))))
     assert goal.accepted

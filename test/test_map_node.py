@@ -19,6 +19,7 @@ from simulation_interfaces.msg import Result
 from simulation_interfaces.srv import SetEntityState, SpawnEntity
 from std_srvs.srv import Trigger
 
+from ball_world.core import limits
 from ball_world.recording.rerun_map import MAP, MAP_CELLS
 
 MAPS = Path(__file__).resolve().parents[1] / 'maps'
@@ -137,6 +138,13 @@ def test_map_is_read_only_once_started(world):
     (lambda d: (d / 'tb3_sandbox.yaml').write_text(
         (MAPS / 'tb3_sandbox.yaml').read_text().replace('0.000000]', '0.5]')),
      "'origin' yaw is 0.5 rad"),
+    # A checkerboard of 1,100 x 1,100 cells: inside the cells' limit, but its boundary runs
+    # would build an index of gigabytes (issue 33): counted and refused before any is made.
+    (lambda d: (d / 'tb3_sandbox.pgm').write_bytes(
+        b'P5\n1100 1100\n255\n'
+        + (np.add.outer(np.arange(1100), np.arange(1100)) % 2 * 254).astype(np.uint8).tobytes()),
+     f'boundary runs (edges between solid and free cells, merged along each grid line); a '
+     f'world takes at most {limits.MAX_MAP_RUNS:,}'),
 ])
 def test_the_node_refuses_a_bad_map_in_one_line(tmp_path, break_it, words):
     folder = copy_maps(tmp_path / 'maps')
@@ -211,9 +219,8 @@ def test_replay_republishes_the_map_latched(recorded, processes):
         late = listener.listen(OccupancyGrid, '/map', qos=LATCHED)
         listener.spin_until(lambda: late, 'the replayed map', process=replay)
         assert np.array_equal(grid_of(late[0]), expected_grid('tb3_sandbox'))
-        replay.kill()
     finally:
-        listener.close()
+        listener.close()  # before the replay is killed (test/conftest.py, probes)
 
 
 def test_rerun_draws_the_map_where_it_is(recorded):

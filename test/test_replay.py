@@ -12,7 +12,7 @@ import subprocess
 import sys
 import time
 
-from ball_world_testing.harness import finish
+from ball_world_testing.harness import DEADLINE, finish
 import pytest
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
@@ -59,6 +59,12 @@ def subscribe(probe, topics_types):
             for topic, type_name in topics_types.items()}
 
 
+def clock_ns(data):
+    """The time a raw /clock message carries (CDR: a 4-byte header, sec, nanosec)."""
+    return (int.from_bytes(data[4:8], 'little', signed=True) * 10**9
+            + int.from_bytes(data[8:12], 'little'))
+
+
 def test_replay_publishes_the_recording_in_order_with_its_timing_and_clock(
         recording_path, probe, processes):
     recording = Recording(recording_path)
@@ -71,11 +77,13 @@ def test_replay_publishes_the_recording_in_order_with_its_timing_and_clock(
                                  '/clock': 'rosgraph_msgs/msg/Clock'})
     child = start_replay(processes, recording_path, '--clock')
     assert probe.wait_for(lambda: all(
-        len(received[t]) >= len(recorded[t]) for t in TOPICS), timeout=30), \
+        len(received[t]) >= len(recorded[t]) for t in TOPICS), timeout=DEADLINE), \
         {t: len(v) for t, v in received.items()}
-    code, _, err = finish(child, timeout=15)
+    code, _, err = finish(child)
     assert code == 0, err
-    probe.wait_for(lambda: len(received['/clock']) >= 51, timeout=2)
+    # The last /clock (keep_last 1: the newest is never dropped) may still be on its way
+    probe.wait_for(lambda: received['/clock'] and clock_ns(received['/clock'][-1][1])
+                   == recorded['/balls'][-1].log_time_ns, timeout=DEADLINE)
     for topic in TOPICS[:-1]:
         assert [data for _, data in received[topic]] == \
             [message.data for message in recorded[topic]], topic
@@ -85,8 +93,7 @@ def test_replay_publishes_the_recording_in_order_with_its_timing_and_clock(
         [deserialize_message(message.data, MarkerArray) for message in recorded['/markers']]
     stamps = [decode_pose_array(data)[0] for _, data in received['/balls']]
     assert stamps == [round(k * DT * 1e9) for k in range(51)]
-    clock = [int.from_bytes(data[4:8], 'little', signed=True) * 10**9
-             + int.from_bytes(data[8:12], 'little') for _, data in received['/clock']]
+    clock = [clock_ns(data) for _, data in received['/clock']]
     # /clock is keep_last 1 and not waited for: some may be missed (how many depends on the
     # machine's load), none made up; over half of them rules out a clock that skips steps.
     assert clock == sorted(set(clock)) and len(clock) > len(recorded['/balls']) // 2
@@ -104,9 +111,9 @@ def test_replay_loops_filters_remaps_and_stops_cleanly_on_sigterm(recording_path
     child = start_replay(processes, recording_path, '--topics', '/balls', '--loop', '--rate',
                          '5', '--start-offset', '2.0', '--remap-prefix', '/replay')
     # from 2.0 s on: steps 40-50, 11 per pass; more than 11 proves it loops
-    assert probe.wait_for(lambda: len(received['/replay/balls']) >= 25, timeout=30)
+    assert probe.wait_for(lambda: len(received['/replay/balls']) >= 25, timeout=DEADLINE)
     child.send_signal(signal.SIGTERM)
-    code, _, err = finish(child, timeout=15)
+    code, _, err = finish(child)
     assert code == 0, err
     stamps = [decode_pose_array(data)[0] for _, data in received['/replay/balls']]
     assert stamps[:22] == [round(k * DT * 1e9) for k in range(40, 51)] * 2

@@ -1172,7 +1172,9 @@ def _wait_gone(pid, timeout):
 #: locals. An interrupt anywhere in them leaves the sink as one at the line that called them
 #: does, and that line is interrupted every time it runs; so each of their lines is
 #: interrupted only the first time it runs (1,300 of the 1,531 lines of a 20-ball step).
-PURE = {'ball_color', '_oklch_to_linear_srgb', '_srgb_encode'}
+#: ball_color's work moved to _oklch_color and _hue (shared with name_color): without them
+#: here, 605 of a step's 888 lines were their repeats, each a run of the sink of its own.
+PURE = {'ball_color', '_oklch_color', '_hue', '_oklch_to_linear_srgb', '_srgb_encode'}
 
 
 class InterruptAt:

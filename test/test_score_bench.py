@@ -223,3 +223,14 @@ def test_the_score_modules_import_each_other_without_a_circle():
 
     for name in sorted(graph):
         visit(name)
+
+
+def test_a_scenes_directory_description_is_checked_in_one_line(tmp_path, capsys):
+    for text, expected in (('agent: ball_0\n', 'tracks_topic is None; it must be a topic name'),
+                           ('tracks_topic: 5\n', 'tracks_topic is 5;'),
+                           ('t: &a x\ntracks_topic: *a\n',
+                            'YAML aliases (*name) are not accepted in scenes.yaml of a scenes '
+                            'directory')):
+        (tmp_path / 'scenes.yaml').write_text(text)
+        code, _, err = bench(capsys, '--scenes', tmp_path, '--jobs', '1')
+        assert code == 1 and err.count('\n') == 1 and expected in err, err

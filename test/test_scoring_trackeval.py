@@ -6,6 +6,8 @@ TrackEval (PyPI `trackeval`, pinned in requirements/base.txt) evaluates a sequen
 per-frame ids and similarity matrices, the layout scoring.frames.prepare makes, after the
 don't-care rule; its CLEAR, Identity and HOTA classes are called directly.
 """
+import warnings
+
 from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
@@ -114,6 +116,8 @@ EDGE_CASES = {
     'nothing at all': ([[]] * 3, [[]] * 3),
     'every ball hidden': ([[(0, 0, False)]] * 3, [[(1, *FAR)]] * 3),
     'near but beyond the gate': ([[(0, 0, True)]] * 3, [[(1, 1.5, 0)]] * 3),
+    'a track at the largest floats': ([[(0, 0, True)]] * 2,
+                                      [[(1, 1.7e308, -1.7e308)], [(1, -1.7e308, 1.7e308)]]),
     'truth, then tracks, then neither matching': (
         [[(0, 0, True)], [], [(0, 0, True)]], [[], [(1, 0, 0)], [(1, *FAR)]]),
 }
@@ -122,8 +126,11 @@ EDGE_CASES = {
 @pytest.mark.parametrize('name', EDGE_CASES)
 def test_edge_cases_score_as_trackeval_scores_them(name):
     truth, tracks = EDGE_CASES[name]
-    ours = assert_equal_to_trackeval(prepare(frames_of(truth, tracks), GATE))
-    if name in ('no match anywhere', 'one frame, no match', 'near but beyond the gate'):
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')  # no RuntimeWarning line beside the report
+        ours = assert_equal_to_trackeval(prepare(frames_of(truth, tracks), 0.05))
+        assert_equal_to_trackeval(prepare(frames_of(truth, tracks), GATE))
+    if name in ('no match anywhere', 'one frame, no match', 'a track at the largest floats'):
         assert np.all(ours['HOTA'] == 0.0) and ours['MOTA'] <= 0.0  # scored, not refused
 
 

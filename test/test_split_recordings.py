@@ -17,7 +17,7 @@ import sys
 import textwrap
 import time
 
-from ball_world_testing.harness import (finish, rewrite_recording, ROSBAGS_TYPES,
+from ball_world_testing.harness import (DEADLINE, finish, rewrite_recording, ROSBAGS_TYPES,
                                         rrd_ball_steps, start_node, Truth)
 from geometry_msgs.msg import PoseArray
 from mcap.reader import make_reader
@@ -605,9 +605,9 @@ def test_replay_plays_the_files_in_order_with_their_timing(by_time, probe, proce
     child = processes.start([sys.executable, '-m', 'ball_world.tools.replay', str(directory),
                              '--topics', '/balls', '--wait-for-subscribers', '--delay', '0.3'],
                             cwd=ROOT, env=env)
-    assert probe.wait_for(lambda: len(received) >= len(truth.records), timeout=60), \
+    assert probe.wait_for(lambda: len(received) >= len(truth.records), timeout=DEADLINE), \
         len(received)
-    code, _, err = finish(child, timeout=15)
+    code, _, err = finish(child)
     assert code == 0, err
     assert [data for _, data in received] == [rec.balls_cdr for rec in truth.records]
     # steps 50 ms of log time apart, across the files and the reset (its log time goes on

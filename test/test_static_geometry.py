@@ -9,8 +9,10 @@ from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
+from ball_world.core import limits, static_geometry
 from ball_world.core.solid_cells import SolidCells
-from ball_world.core.static_geometry import boundary_runs, SegmentIndex, StaticGeometry
+from ball_world.core.static_geometry import (boundary_runs, count_boundary_runs, SegmentIndex,
+                                             StaticGeometry)
 from ball_world.core.world import Walls, World
 
 ORIGIN = (-1.5, 2.25)
@@ -202,3 +204,90 @@ def test_index_buckets_are_sized_by_the_geometry_not_the_balls():
     # Within the budget of a few buckets per segment, never narrower than a few cells.
     assert index.columns * index.rows <= 4 * len(runs) + 1024
     assert index.size >= 4 * RESOLUTION
+
+
+# Bounded by the segments' count (issue 33) ----------------------------------------------------
+
+def checkerboard(rows, columns):
+    return np.add.outer(np.arange(rows), np.arange(columns)) % 2 == 1
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 30), st.integers(1, 30), st.floats(0.0, 1.0), st.integers(0, 2**32 - 1))
+def test_runs_are_counted_without_making_them(rows, columns, fill, seed):
+    mask = np.random.default_rng(seed).random((rows, columns)) < fill
+    assert count_boundary_runs(cells_of(mask)) == len(boundary_runs(cells_of(mask)))
+    board = cells_of(checkerboard(rows, columns))
+    assert count_boundary_runs(board) == len(boundary_runs(board))
+
+
+def index_entries(index):
+    """(bucket, wall) of every entry, for comparing two indexes."""
+    buckets = np.repeat(np.arange(len(index.first) - 1), np.diff(index.first))
+    return list(zip(buckets.tolist(), index.items.tolist()))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.0, 3.0))
+def test_the_entries_bound_holds_for_any_segment(seed, reach):
+    """Oblique walls too: the bound the bucket width is chosen by is never below what the
+    index then holds, segment by segment."""
+    rng = np.random.default_rng(seed)
+    starts = rng.uniform(-5.0, 5.0, (40, 2))
+    segments = np.concatenate((starts, starts + rng.uniform(-4.0, 4.0, (40, 2))), axis=1)
+    segments[:5, 2] = segments[:5, 0]  # vertical ones
+    segments[5:10, 3] = segments[5:10, 1]  # horizontal ones
+    index = SegmentIndex(segments, 0.0, reach)
+    keys, walls = index._bucket_entries(segments, 0)
+    made = np.bincount(walls, minlength=len(segments))
+    assert (made <= index.entries_bound(segments)).all()
+    assert len(index.items) == len(walls)
+
+
+def test_a_fine_checkerboard_with_a_wide_reach_stays_within_its_budget(monkeypatch):
+    """Issue 33: a checkerboard of 5 cm cells dilated by 1 m listed every run in some 25
+    buckets (gigabytes at 512 x 512). Buckets widen instead: at most ENTRIES_PER_SEGMENT
+    entries a run, and every run within reach of a point still in its bucket."""
+    cells = cells_of(checkerboard(64, 64), (0.0, 0.0), 0.05)
+    static = StaticGeometry(Walls([]), cells)
+    index = static.dilated(1.0)
+    budget = static_geometry.ENTRIES_PER_SEGMENT * len(static) + static_geometry.BUCKETS_SLACK
+    assert len(index.items) <= budget
+    ox, oy, size, _ = index.grid
+    points = np.random.default_rng(2).uniform(-0.5, 3.7, (100, 2))
+    distances = segment_distances(points, static.segments)
+    for k, (x, y) in enumerate(points):
+        column = min(max(int(np.floor((x - ox) / size)), 0), index.columns - 1)
+        row = min(max(int(np.floor((y - oy) / size)), 0), index.rows - 1)
+        bucket = column * index.rows + row
+        listed = index.items[index.first[bucket]:index.first[bucket + 1]]
+        assert set(np.flatnonzero(distances[k] < index.reach)) <= set(listed.tolist())
+    # Made a few entries at a time, the index is the same, bucket by bucket in wall order.
+    monkeypatch.setattr(static_geometry, 'FILL_CHUNK', 97)
+    assert index_entries(SegmentIndex(static.segments, 0.05, index.reach)) == \
+        index_entries(index)
+
+
+def test_a_map_of_too_many_runs_is_refused_before_its_world_is_built():
+    """Counted from the grid at the real limit (a checkerboard just past MAX_MAP_RUNS): one
+    line, and no runs made."""
+    side = int(np.ceil(np.sqrt(limits.MAX_MAP_RUNS / 2.0))) + 2
+    cells = SolidCells(0.0, 0.0, 0.05, checkerboard(side, side))
+    assert count_boundary_runs(cells.checked()) > limits.MAX_MAP_RUNS
+    with pytest.raises(ValueError) as refused:
+        World([[1.0, 1.0]], [[0.0, 0.0]], [0.01], [1.0], solid_cells=cells)
+    message = str(refused.value)
+    assert f'at most {limits.MAX_MAP_RUNS:,}' in message and '\n' not in message
+
+
+def test_the_world_builds_its_indexes_when_made_not_on_its_first_step():
+    """A node says it started once its World is made: the compiled step's dilated index must
+    exist by then, and the first step must not make another."""
+    mask = np.zeros((40, 40), dtype=bool)
+    mask[10:30, 20] = True
+    world = World([[1.0, 1.0], [4.0, 4.0]], [[1.0, 0.0], [0.0, 1.0]], [0.1, 0.1], [1.0, 1.0],
+                  backend='numba', solid_cells=cells_of(mask, (0.0, 0.0), 0.125))
+    index = world.static._dilated
+    assert index is not None and len(index.items) > 0 and index.reach >= 0.1 + 2 * 0.1
+    world.step(0.01)
+    assert world.static._dilated is index

@@ -22,7 +22,7 @@ from ball_world.user_code import checks
 from ball_world.user_code.calls import call
 from ball_world.user_code.describe import describe_exit, shown, UserCodeError
 from ball_world.user_code.loading import load_class
-from ball_world.user_code.workers import JobFailed, Remote
+from ball_world.user_code.workers import JobFailed, LocalPool, Remote
 
 WHO, WHEN = 'my.py:T', 'on seed 3 at scan 12 (stamp 1.200 s)'
 
@@ -35,6 +35,7 @@ class Good:
         self.offset = offset
 
     def act(self, observation):
+        print('a print of the user')
         return observation + self.offset
 
 
@@ -77,6 +78,15 @@ class Hangs:
 class Broken:
     def __init__(self):
         raise SystemExit(2)
+
+
+class EndsHanging:
+    def update(self, scan, pose):
+        return []
+
+    def __del__(self):
+        while True:
+            time.sleep(0.05)
 """
 
 
@@ -267,15 +277,41 @@ def test_every_way_user_code_ends_in_a_worker_is_one_line_and_no_process(
     assert gone(marked)
 
 
-def test_a_controller_in_a_worker_answers_and_a_bad_one_is_refused(tmp_path, marked):
+def test_a_controller_in_a_worker_answers_and_a_bad_one_is_refused(tmp_path, marked, capfd):
     path = tmp_path / 'kinds.py'
     path.write_text(KINDS)
     with Remote(f'{path}:Good', '--controller', args=(2.0,)) as remote:
         assert remote.call('act', np.ones(3)).tolist() == [3.0, 3.0, 3.0]
         assert remote.call('act', np.zeros((2, 3))).shape == (2, 3)  # it kept its state
+    out, err = capfd.readouterr()
+    assert 'a print of the user' not in out and 'a print of the user' in err  # stdout: reports
     with pytest.raises(JobFailed) as caught:
         Remote(f'{path}:Broken', '--controller')
     assert 'making one raised SystemExit: 2 (at kinds.py:' in one_line(str(caught.value))
+    assert gone(marked)
+
+
+def test_a_module_that_ends_its_worker_on_import_is_one_line(tmp_path, marked):
+    path = tmp_path / 'leaves.py'
+    path.write_text('import os\nos._exit(5)\n')
+    with pytest.raises(JobFailed) as caught:
+        Remote(f'{path}:X', '--tracker')
+    assert one_line(str(caught.value)) == (f'the worker for --tracker {path}:X exited with '
+                                           'status 5: os._exit(5) (at leaves.py:2)')
+    assert gone(marked)
+
+
+def test_a_tracker_whose_end_hangs_is_stopped_by_the_deadline(tmp_path, marked):
+    """Its __del__ is user code too: the scorer lets go of a tracker under the deadline."""
+    from ball_world.tools.score_bench import check_tracker
+    path = tmp_path / 'kinds.py'
+    path.write_text(KINDS)
+    with pytest.raises(JobFailed) as caught:
+        with LocalPool(1, 2.0, 'the test deadline of 2 s') as pool:
+            list(pool.map_unordered(check_tracker, [f'{path}:EndsHanging'], ['a check']))
+    line = len(KINDS.split('class EndsHanging')[0].splitlines()) + 7  # its sleep
+    assert one_line(str(caught.value)) == ('a check: user code ran past the test deadline of '
+                                           f'2 s (at kinds.py:{line}); its worker was stopped')
     assert gone(marked)
 
 

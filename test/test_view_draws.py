@@ -501,3 +501,25 @@ def test_a_bumper_tag_moves_off_a_name_it_would_cover():
     assert centre[0] == pytest.approx(0.5 * (middle[0] + middle[2]), abs=1e-5)
     assert rect[3] < middle[1]  # a tag's height lower
     feed.close()
+
+
+def test_no_name_covers_a_robots_heading(robot_run):
+    """ball_0's name tag lay over part of its heading: every name's box keeps clear of the
+    discs over each heading arrow (rerun_agents.heading_discs), step after step."""
+    from ball_world.recording.rerun_agents import heading_discs
+    from ball_world.recording.rerun_labels import box_hits_discs, LabelPlacer
+    simulation, records, _ = robot_run
+    placer = LabelPlacer((-1.0, -1.0, 11.0, 11.0))  # the default 10 m box and its ruler
+    radii = simulation.world.radii
+    names = [f'ball_{i}' for i in range(len(radii))]
+    for record in records:
+        clear = heading_discs(record, radii)
+        kept, points = placer.place(record.positions, radii, names, record.agents.indices,
+                                    clear)
+        assert 0 in kept and 1 in kept  # the robots are still named
+        for index, point in zip(kept, points):
+            width, height = placer.size(names[index])
+            x, y = point
+            box = (x - 0.5 * width, y - placer.scale.gap - height, x + 0.5 * width,
+                   y - placer.scale.gap)
+            assert not box_hits_discs(box, *clear).any(), (record.step, names[index])

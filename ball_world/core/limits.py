@@ -42,6 +42,13 @@ MAX_NAME_LENGTH = 256
 #: at 3 cm. Its grid, solid cells and /map message take about 16 MB each at this size, and
 #: decoding it about 200 MB for a moment; every cell is encoded and recorded with numpy.
 MAX_MAP_CELLS = 16_777_216
+#: Boundary runs of a map (core.static_geometry.boundary_runs: edges between a solid and a
+#: free cell, merged along each grid line), counted from the grid before anything is built
+#: from them: every run is a segment the physics indexes. A checkerboard of the largest map
+#: would make 33 million (several GB of index); a 4096 x 4096 SLAM map with 2% speckle makes
+#: 1.3 million. At this limit the worst case builds within the figures of
+#: docs/performance.md (Loading a map: the worst maps inside the limits).
+MAX_MAP_RUNS = 2_097_152
 #: Bytes of a map's image file: the largest map as a 16-bit ASCII PGM (up to 6 bytes a cell,
 #: 100 MB) or an uncompressed colour PNG fits.
 MAX_MAP_IMAGE_BYTES = 128 << 20

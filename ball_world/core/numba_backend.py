@@ -453,17 +453,25 @@ def _rasterised_walls(x, radii, margin, walls, wall_scale, level_starts, level_l
 
 @_compile
 def build_direct(x, radii, walls, wall_scale, margin, members, level_starts, level_largest,
-                 order):
+                 order, wall_first):
     """build_pairs' pairs and the ball-wall pairs within `margin` of touching, from the same
-    grids, both in canonical order (DIRECT_WALLS: a world without a map)."""
+    grids, both in canonical order (DIRECT_WALLS: a world without a map); `wall_first` gets
+    where each ball's ball-wall pairs begin (as refresh_walls keeps it)."""
     low, cell, shape, starts, cell_balls, cell_keys, scale = build_grids(
         x, members, level_starts, level_largest, margin)
     order[:] = cell_balls
     pairs = _candidate_pairs(x, radii, margin, level_starts, low, cell, shape, starts,
                              cell_balls, cell_keys)
-    near_walls = _rasterised_walls(x, radii, margin, walls, wall_scale, level_starts,
-                                   level_largest, low, cell, shape, starts, cell_balls, scale)
-    return _canonical(pairs, x.shape[0]), _canonical(near_walls, x.shape[0])
+    near_walls = _canonical(_rasterised_walls(x, radii, margin, walls, wall_scale,
+                                              level_starts, level_largest, low, cell, shape,
+                                              starts, cell_balls, scale), x.shape[0])
+    row = 0
+    for i in range(x.shape[0]):
+        wall_first[i] = row
+        while row < near_walls.shape[0] and near_walls[row, 0] == i:
+            row += 1
+    wall_first[x.shape[0]] = row
+    return _canonical(pairs, x.shape[0]), near_walls
 
 
 @_compile
@@ -548,13 +556,12 @@ def refresh_walls(x, radii, walls, index_grid, index_shape, index_first, index_i
 
 @_compile
 def find_contacts(x, radii, walls, candidates, near_walls, wall_anchor, wall_first,
-                  wall_clear, direct):
+                  wall_clear):
     """The touching contacts among the candidates, in their (canonical) order.
 
     Ball i's walls (rows wall_first[i] to wall_first[i + 1] of near_walls) are not tested
     while it lies less than wall_clear[i] from wall_anchor[i] (refresh_walls): none of them
-    can touch it. `direct` (build_direct's lists): every row is tested, and the anchors are
-    not read. Returns pairs (P, 2) with a < b, rel (P, 2) = r_a - r_b, wall contacts
+    can touch it. Returns pairs (P, 2) with a < b, rel (P, 2) = r_a - r_b, wall contacts
     (W, 2) as (ball, wall), offsets (W, 2) and interior (W,).
     """
     touching = np.empty(candidates.shape[0], dtype=np.bool_)
@@ -579,14 +586,7 @@ def find_contacts(x, radii, walls, candidates, near_walls, wall_anchor, wall_fir
             count += 1
     inside = np.zeros(near_walls.shape[0], dtype=np.bool_)
     count = 0
-    c = near_walls.shape[0] if direct else 0
-    for d in range(near_walls.shape[0] if direct else 0):
-        i = near_walls[d, 0]
-        w = near_walls[d, 1]
-        sx, sy, _ = wall_offset(x[i, 0], x[i, 1], walls[w, 0], walls[w, 1], walls[w, 4],
-                                walls[w, 5], walls[w, 6])
-        inside[d] = wall_touching(sx, sy, radii[i])
-        count += inside[d]
+    c = 0
     while c < near_walls.shape[0]:
         i = near_walls[c, 0]
         end = wall_first[i + 1]
@@ -721,10 +721,9 @@ def speed_and_energy(v, masses):
 
 
 @_compile
-def lists_stale(x, anchor, wall_anchor, skin, direct):
+def lists_stale(x, anchor, wall_anchor, skin):
     """Whether the pair lists (built with the balls at `anchor`) and the ball-wall lists
-    (built at `wall_anchor`) may have had their skin closed: (pairs, walls). `direct`
-    (build_direct's lists, which live as long as the pairs): walls is False, unread.
+    (built at `wall_anchor`) may have had their skin closed: (pairs, walls).
 
     A pair left out was r_a + r_b + skin apart; it can touch only once the two largest
     displacements since then add up to the skin. A ball-wall pair left out needs its ball
@@ -745,10 +744,9 @@ def lists_stale(x, anchor, wall_anchor, skin, direct):
                 first = moved2
             else:
                 second = moved2
-        if not direct:
-            dx = x[i, 0] - wall_anchor[i, 0]
-            dy = x[i, 1] - wall_anchor[i, 1]
-            wall = max(wall, dx * dx + dy * dy)
+        dx = x[i, 0] - wall_anchor[i, 0]
+        dy = x[i, 1] - wall_anchor[i, 1]
+        wall = max(wall, dx * dx + dy * dy)
     limit = LISTS_MARGIN * skin
     return not np.sqrt(first) + np.sqrt(second) < limit, not np.sqrt(wall) < limit
 
@@ -757,7 +755,7 @@ def lists_stale(x, anchor, wall_anchor, skin, direct):
 def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, index_grid, index_shape,
               index_first, index_items, members, level_starts, level_largest, skin,
               pair_rows, wall_rows, lists, anchor, wall_anchor, wall_first, wall_clear,
-              order, best, totals, direct, wall_scale):
+              order, best, totals):
     """One seed-mode step, planned and split exactly as numpy_backend.NumpyStepper.step.
 
     The candidates are Verlet lists with `skin`, built with the balls at `anchor` (pairs)
@@ -774,9 +772,7 @@ def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, index_grid, inde
 
     `walls` packs every static segment (walls, then map runs: pack_walls), and index_* is
     their bucket index dilated by at least the largest radius plus the skin
-    (core.static_geometry.StaticGeometry.dilated). With `direct` (DIRECT_WALLS: no map, a
-    few walls) the ball-wall lists are build_direct's instead, made with the pairs from the
-    same grids (walls reaching `wall_scale` m from the origin); the index is not read.
+    (core.static_geometry.StaticGeometry.dilated).
     """
     totals[:] = 0
     speed, energy = speed_and_energy(v, masses)
@@ -796,26 +792,100 @@ def seed_step(x, v, radii, masses, min_mass, dt, travel, walls, index_grid, inde
         move(x, v, h)
         pairs_stale = walls_stale = not fresh
         if fresh:
-            pairs_stale, walls_stale = lists_stale(x, anchor, wall_anchor, skin, direct)
-        if pairs_stale and direct:
-            candidates, near_walls = build_direct(x, radii, walls, wall_scale, skin, members,
-                                                  level_starts, level_largest, order)
-            anchor[:] = x
-            rebuilt = True
-        elif pairs_stale:
+            pairs_stale, walls_stale = lists_stale(x, anchor, wall_anchor, skin)
+        if pairs_stale:
             candidates = build_pairs(x, radii, skin, members, level_starts, level_largest,
                                      order)
             anchor[:] = x
             rebuilt = True
-        if walls_stale and not direct:
+        if walls_stale:
             near_walls = refresh_walls(x, radii, walls, index_grid, index_shape, index_first,
                                        index_items, skin, order, wall_anchor, near_walls,
                                        wall_first, wall_clear, not fresh)
             rebuilt = True
         fresh = True
         pairs, rel, contacts, offsets, interior = find_contacts(
-            x, radii, walls, candidates, near_walls, wall_anchor, wall_first, wall_clear,
-            direct)
+            x, radii, walls, candidates, near_walls, wall_anchor, wall_first, wall_clear)
+        fastest = resolve(v, masses, walls, pairs, rel, contacts, offsets, interior, best,
+                          totals)
+        done += 1
+        totals[SUBSTEPS] += 1
+        count, done, h, speed = replan(count, done, h, speed, fastest, travel)
+        if over_budget(totals[SUBSTEPS], count, done):
+            x[:] = saved_x  # kept: this is reachable only when refusal_possible
+            v[:] = saved_v
+            lists[FRESH] = 0
+            return STEP_REFUSED
+    if rebuilt:
+        lists[PAIRS] = candidates.shape[0]
+        lists[NEAR_WALLS] = near_walls.shape[0]
+        fits = (candidates.shape[0] <= pair_rows.shape[0]
+                and near_walls.shape[0] <= wall_rows.shape[0])
+        if fits:
+            pair_rows[:candidates.shape[0]] = candidates
+            wall_rows[:near_walls.shape[0]] = near_walls
+        lists[FRESH] = 1 if fits else 0
+    return STEP_DONE
+
+
+@_compile
+def pairs_stale(x, anchor, skin):
+    """Whether two balls may have closed the skin since the lists were built at `anchor`
+    (lists_stale's first answer, for box_step: its ball-wall lists live as long)."""
+    first = 0.0
+    second = 0.0
+    for i in range(x.shape[0]):
+        dx = x[i, 0] - anchor[i, 0]
+        dy = x[i, 1] - anchor[i, 1]
+        moved2 = dx * dx + dy * dy
+        if moved2 > second:
+            if moved2 > first:
+                second = first
+                first = moved2
+            else:
+                second = moved2
+    return not np.sqrt(first) + np.sqrt(second) < LISTS_MARGIN * skin
+
+
+@_compile
+def box_step(x, v, radii, masses, min_mass, dt, travel, walls, wall_scale, members,
+             level_starts, level_largest, skin, pair_rows, wall_rows, lists, anchor,
+             wall_first, wall_clear, order, best, totals):
+    """seed_step for a world without a map and with at most DIRECT_WALLS walls (reaching
+    `wall_scale` m from the origin): the same plan, stages and rounds, but its ball-wall
+    lists are build_direct's, made with the pair lists from the same grids and rebuilt with
+    them, as the step was before the static index (issue 33: the index's search, its wall
+    lists' own lifetime and their per-ball anchors cost a box 11-16% of its step). A kernel
+    of its own, not a flag in seed_step: the flag's branches cost a map's step 13%
+    (measured), as the compiled step's inlining changed. `wall_clear` stays 0: no ball's
+    walls are skipped. Same buffers and returns as seed_step; find the same contacts in the
+    same order (tested against seed_step and the numpy backend).
+    """
+    totals[:] = 0
+    speed, energy = speed_and_energy(v, masses)
+    count = plan_substeps(speed, dt, travel)
+    if over_budget(0, count, 0):
+        return STEP_REFUSED
+    keep = refusal_possible(energy, min_mass, travel, dt)
+    saved_x = x.copy() if keep else x[:0]
+    saved_v = v.copy() if keep else v[:0]
+    fresh = lists[FRESH] == 1
+    candidates = pair_rows[:lists[PAIRS]]
+    near_walls = wall_rows[:lists[NEAR_WALLS]]
+    rebuilt = False
+    h = dt / count
+    done = 0
+    while done < count:
+        move(x, v, h)
+        if not fresh or pairs_stale(x, anchor, skin):
+            candidates, near_walls = build_direct(x, radii, walls, wall_scale, skin, members,
+                                                  level_starts, level_largest, order,
+                                                  wall_first)
+            anchor[:] = x
+            rebuilt = True
+            fresh = True
+        pairs, rel, contacts, offsets, interior = find_contacts(
+            x, radii, walls, candidates, near_walls, anchor, wall_first, wall_clear)
         fastest = resolve(v, masses, walls, pairs, rel, contacts, offsets, interior, best,
                           totals)
         done += 1
@@ -919,11 +989,17 @@ class NumbaStepper:
         (min_mass, walls, index_grid, index_shape, index_first, index_items, members,
          level_starts, largest, skin, pair_rows, wall_rows, lists, anchor, wall_anchor,
          wall_first, wall_clear, order, best, direct, wall_scale) = self._prepared
-        status = seed_step(world.positions, world.velocities, world.radii, world.masses,
-                           min_mass, dt, travel, walls, index_grid, index_shape, index_first,
-                           index_items, members, level_starts, largest, skin, pair_rows,
-                           wall_rows, lists, anchor, wall_anchor, wall_first, wall_clear,
-                           order, best, totals, direct, wall_scale)
+        if direct:
+            status = box_step(world.positions, world.velocities, world.radii, world.masses,
+                              min_mass, dt, travel, walls, wall_scale, members, level_starts,
+                              largest, skin, pair_rows, wall_rows, lists, anchor, wall_first,
+                              wall_clear, order, best, totals)
+        else:
+            status = seed_step(world.positions, world.velocities, world.radii, world.masses,
+                               min_mass, dt, travel, walls, index_grid, index_shape,
+                               index_first, index_items, members, level_starts, largest, skin,
+                               pair_rows, wall_rows, lists, anchor, wall_anchor, wall_first,
+                               wall_clear, order, best, totals)
         if not lists[FRESH] and status == STEP_DONE:
             self._grow(pair_rows, wall_rows, lists)
         return status

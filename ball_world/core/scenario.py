@@ -30,6 +30,7 @@ from ball_world.core.broadphase import grid_pairs, wall_pairs
 from ball_world.core.parameters import (BALL_FIELDS, checked, DEFAULTS, list_text,
                                         number_text, ParameterError)
 from ball_world.core.solid_cells import CellQueries
+from ball_world.core.static_geometry import check_run_count
 from ball_world.core.world import BACKENDS, numba_installed, Walls, World
 
 #: ScenarioError is the parameter table's error: a world is refused by naming a parameter.
@@ -392,7 +393,12 @@ def map_cells(params, occupancy_map):
         raise ScenarioError('map', 'names a map, but none was loaded (the world is built from '
                                    "the map's files read by ball_world.map_files, or from a "
                                    "recording's copy)")
-    return CellQueries(occupancy_map.solid_cells(params['map.unknown_solid']))
+    cells = occupancy_map.solid_cells(params['map.unknown_solid'])
+    try:  # before anything the runs' number decides is built
+        check_run_count(cells)
+    except ValueError as error:
+        raise ScenarioError('map', str(error)) from None
+    return CellQueries(cells)
 
 
 def build_scene(params, occupancy_map=None):

@@ -31,7 +31,11 @@ box, in compressed rows (CSR): the walls listed in bucket (column c, row r) are
 items[first[c * rows + r]:first[c * rows + r + 1]], in increasing wall order. Buckets of one
 column are consecutive, so a box of buckets is one contiguous run of items per column. A
 segment is listed in every bucket it passes through (widened by a hair, SLACK), so any
-region a query covers finds every segment that enters it. No I/O, no ROS.
+region a query covers finds every segment that enters it. What is built from a map is
+bounded by its runs' count, itself bounded (limits.MAX_MAP_RUNS, counted from the grid before
+anything is built: count_boundary_runs): an index holds at most ENTRIES_PER_SEGMENT entries
+a segment, its buckets widening when a fine map and a wide reach would list more (issue 33:
+a dilated checkerboard took gigabytes). No I/O, no ROS.
 """
 import math
 
@@ -53,6 +57,16 @@ REACH_GROWTH = 1.05
 #: Most buckets per segment (plus BUCKETS_SLACK); buckets grow past it.
 BUCKETS_PER_SEGMENT = 4
 BUCKETS_SLACK = 1024
+#: Most entries (a segment listed in a bucket) per segment, plus BUCKETS_SLACK; buckets grow
+#: past it. A dilated index lists a short segment in every bucket within reach of it: with
+#: buckets half the reach wide that is 25 or more, and a checkerboard of a million cells
+#: took gigabytes (issue 33). Bounded so, an index costs at most this many items a segment
+#: however fine the map or wide the reach; a wider bucket costs a search more tests (the
+#: warehouse of benchmarks.map_speed, at its balls' reach, needs 15: unchanged).
+ENTRIES_PER_SEGMENT = 16
+#: Entries made at a time while filling an index: its temporaries stay this small (about
+#: 100 bytes an entry) whatever the index's size.
+FILL_CHUNK = 1 << 20
 
 
 def expand(owners, low, high):
@@ -93,14 +107,9 @@ def _runs(kinds):
     return line, starts - line * width, ends - line * width
 
 
-def boundary_runs(cells):
-    """The boundary of a map's solid cells (core.solid_cells.SolidCells, checked) as merged
-    axis-aligned runs: (K, 4) segments x1, y1, x2, y2, horizontal runs first (by row line,
-    then x), left to right, then vertical runs (by column line, then y), bottom to top.
-
-    Vertex (i, j) of the grid is at (origin_x + i resolution, origin_y + j resolution), the
-    same expression the lidar's grid walk uses for cell edges, so both see the same lines.
-    """
+def _edge_kinds(cells):
+    """The grid's edges between a solid and a free cell, as two int8 arrays whose runs along
+    the last axis are boundary_runs': horizontal edges, then vertical ones (transposed)."""
     solid = cells.solid
     rows, columns = solid.shape
     # A ring of solid cells around the grid: everything outside it is solid.
@@ -111,20 +120,55 @@ def boundary_runs(cells):
     # on both sides, so runs never continue from one line to the next.
     below = padded[:-1, :]
     above = padded[1:, :]
-    kinds = (below & ~above).astype(np.int8) + 2 * (above & ~below).astype(np.int8)
-    line, first, end = _runs(kinds)
+    yield (below & ~above).astype(np.int8) + 2 * (above & ~below).astype(np.int8)
+    # Vertical edges on column line i (0..columns), between padded columns i and i + 1,
+    # transposed so that runs go along the last axis.
+    left = padded[:, :-1]
+    right = padded[:, 1:]
+    yield np.ascontiguousarray(
+        ((left & ~right).astype(np.int8) + 2 * (right & ~left).astype(np.int8)).T)
+
+
+def count_boundary_runs(cells):
+    """How many runs boundary_runs would make of `cells` (checked), without making them: a
+    few passes over the grid's bytes, so a map can be refused (limits.MAX_MAP_RUNS) before
+    anything its size decides is built."""
+    total = 0
+    for kinds in _edge_kinds(cells):
+        flat = kinds.reshape(-1)
+        total += int(np.count_nonzero(flat[0] != 0))
+        total += int(np.count_nonzero((flat[1:] != 0) & (flat[1:] != flat[:-1])))
+    return total
+
+
+def check_run_count(cells):
+    """ValueError (one line) when `cells` have more boundary runs than limits.MAX_MAP_RUNS."""
+    count = count_boundary_runs(cells)
+    if count > limits.MAX_MAP_RUNS:
+        raise ValueError(f'the map has {count:,} boundary runs (edges between solid and free '
+                         f'cells, merged along each grid line); a world takes at most '
+                         f'{limits.MAX_MAP_RUNS:,} (speckle or a fine pattern of cells makes '
+                         'many: clean the map, or coarsen its resolution)')
+    return count
+
+
+def boundary_runs(cells):
+    """The boundary of a map's solid cells (core.solid_cells.SolidCells, checked) as merged
+    axis-aligned runs: (K, 4) segments x1, y1, x2, y2, horizontal runs first (by row line,
+    then x), left to right, then vertical runs (by column line, then y), bottom to top.
+
+    Vertex (i, j) of the grid is at (origin_x + i resolution, origin_y + j resolution), the
+    same expression the lidar's grid walk uses for cell edges, so both see the same lines.
+    """
+    horizontal_kinds, vertical_kinds = _edge_kinds(cells)
+    line, first, end = _runs(horizontal_kinds)
+    del horizontal_kinds
     y = cells.origin_y + line.astype(np.float64) * cells.resolution
     horizontal = np.stack((cells.origin_x + (first - 1).astype(np.float64) * cells.resolution,
                            y,
                            cells.origin_x + (end - 1).astype(np.float64) * cells.resolution,
                            y), axis=1)
-    # Vertical edges on column line i (0..columns), between padded columns i and i + 1,
-    # transposed so that runs go along the last axis.
-    left = padded[:, :-1]
-    right = padded[:, 1:]
-    kinds = np.ascontiguousarray(
-        ((left & ~right).astype(np.int8) + 2 * (right & ~left).astype(np.int8)).T)
-    line, first, end = _runs(kinds)
+    line, first, end = _runs(vertical_kinds)
     x = cells.origin_x + line.astype(np.float64) * cells.resolution
     vertical = np.stack((x, cells.origin_y + (first - 1).astype(np.float64) * cells.resolution,
                          x, cells.origin_y + (end - 1).astype(np.float64) * cells.resolution),
@@ -166,6 +210,11 @@ class SegmentIndex:
     ball asks one bucket, not a box of them (seed mode's compiled search, see
     StaticGeometry.dilated). `grid` holds (origin_x, origin_y, bucket width, largest
     |coordinate|) and `shape` (columns, rows), as the compiled kernels take them.
+
+    Its size is bounded by the segments' count, not by what they span or the reach: buckets
+    widen until the entries (a segment listed in a bucket) are at most ENTRIES_PER_SEGMENT
+    per segment (plus BUCKETS_SLACK), counted by an upper bound (entries_bound) before any
+    is made, and the entries are made FILL_CHUNK at a time.
     """
 
     def __init__(self, segments, resolution=0.0, reach=0.0):
@@ -181,22 +230,95 @@ class SegmentIndex:
         size = bucket_size(float(high[0] - low[0]), float(high[1] - low[1]), count, resolution,
                            reach)
         self.reach = float(reach)
-        self.columns = int((high[0] - low[0]) / size) + 1
-        self.rows = int((high[1] - low[1]) / size) + 1
-        self.grid = np.array([low[0], low[1], size, scale])
+        budget = ENTRIES_PER_SEGMENT * count + BUCKETS_SLACK
+        while True:
+            self.columns = int((high[0] - low[0]) / size) + 1
+            self.rows = int((high[1] - low[1]) / size) + 1
+            self.grid = np.array([low[0], low[1], size, scale])
+            bound = self.entries_bound(segments)
+            total = int(bound.sum())
+            if total <= budget:
+                break
+            # Entries of short segments fall as the square of the width: close in fast,
+            # then by tenths.
+            size *= min(max(1.1, math.sqrt(total / budget) / 1.1), 4.0)
         self.shape = np.array([self.columns, self.rows], dtype=np.int64)
-        self.first, self.items = self._fill(segments)
+        self.first, self.items = self._fill(segments, bound)
 
     @property
     def size(self):
         """A bucket's width, m."""
         return float(self.grid[2])
 
-    def _fill(self, segments):
-        """(first, items): each segment listed in the buckets it passes within `reach` of,
-        column by column (the part of the segment whose x lies within reach of a column's
-        gives rows, widened by reach). Conservative: it may list a bucket slightly out of
-        reach, never miss one within it."""
+    def entries_bound(self, segments):
+        """For each segment, at least as many entries as _fill makes of it: its columns
+        times the rows one column's slice of it can span (exact for axis-aligned segments),
+        without making them."""
+        ox, oy, size, scale = self.grid
+        slack = widened(self.reach, max(size, scale))
+        dx = np.abs(segments[:, 2] - segments[:, 0])
+        dy = np.abs(segments[:, 3] - segments[:, 1])
+        first_col, last_col = _cell_ranges(np.minimum(segments[:, 0], segments[:, 2]),
+                                           np.maximum(segments[:, 0], segments[:, 2]), ox,
+                                           size, self.columns, slack)
+        first_row, last_row = _cell_ranges(np.minimum(segments[:, 1], segments[:, 3]),
+                                           np.maximum(segments[:, 1], segments[:, 3]), oy,
+                                           size, self.rows, slack)
+        columns = np.maximum(last_col - first_col + 1, 0)
+        rows = np.maximum(last_row - first_row + 1, 0)
+        # A column's slice spans at most dy/dx times its widened width, plus slack each side.
+        with np.errstate(divide='ignore', invalid='ignore'):
+            span = np.where(dx > 0.0, dy / np.where(dx > 0.0, dx, 1.0), np.inf) \
+                * (size + 2.0 * slack) + 2.0 * slack
+        per_column = np.minimum(rows, np.floor(np.minimum(span / size, float(self.rows)))
+                                .astype(np.int64) + 2)
+        return columns * per_column
+
+    def _fill(self, segments, bound):
+        """(first, items): each segment listed in the buckets it passes within `reach` of
+        (_bucket_entries), in compressed rows, each bucket's in wall order. Made a chunk of
+        segments at a time (about FILL_CHUNK entries by `bound`), placed by a counting sort:
+        the temporaries stay small however large the index (a checkerboard's took
+        gigabytes, issue 33)."""
+        buckets = self.columns * self.rows
+        narrow = np.int32 if max(buckets, len(segments)) < 2 ** 31 else np.int64
+        chunks = []
+        counts = np.zeros(buckets, dtype=np.int64)
+        ends = np.searchsorted(np.cumsum(bound),
+                               np.arange(FILL_CHUNK, int(bound.sum()), FILL_CHUNK),
+                               side='right')
+        begin = 0
+        for end in [*ends.tolist(), len(segments)]:
+            end = max(end, begin + 1)
+            if begin >= len(segments):
+                break
+            keys, items = self._bucket_entries(segments[begin:end], begin)
+            counts += np.bincount(keys, minlength=buckets)
+            chunks.append((keys.astype(narrow), items.astype(narrow)))
+            begin = end
+        first = np.zeros(buckets + 1, dtype=np.int64)
+        np.cumsum(counts, out=first[1:])
+        items = np.empty(int(first[-1]), dtype=np.int64)
+        fill = first[:-1].copy()
+        for keys, walls in chunks:
+            # Entries come segment by segment, and chunks in segment order: a stable sort
+            # of each chunk keeps every bucket's walls in increasing order.
+            order = np.argsort(keys, kind='stable')
+            ordered = np.take(keys, order)
+            # Each entry's rank among its bucket's in this chunk: its place less its group's.
+            place = np.arange(len(ordered))
+            group = np.ones(len(ordered), dtype=bool)
+            group[1:] = ordered[1:] != ordered[:-1]
+            rank = place - np.maximum.accumulate(np.where(group, place, 0))
+            items[np.take(fill, ordered) + rank] = np.take(walls, order)
+            fill += np.bincount(keys, minlength=buckets)
+        return first, items
+
+    def _bucket_entries(self, segments, offset):
+        """(bucket key, wall number) of each bucket within `reach` of each segment (walls
+        numbered from `offset`), segment by segment: column by column (the part of the
+        segment whose x lies within reach of a column's gives rows, widened by reach).
+        Conservative: it may list a bucket slightly out of reach, never miss one within it."""
         ox, oy, size, scale = self.grid
         slack = widened(self.reach, max(size, scale))
         x0 = segments[:, 0]
@@ -224,12 +346,7 @@ class SegmentIndex:
                                            self.rows, slack)
         entry, row = expand(np.arange(len(wall)), first_row, last_row + 1)
         keys = np.take(col, entry) * self.rows + row
-        items = np.take(wall, entry)
-        # Entries come segment by segment: a stable sort keeps each bucket's in wall order.
-        order = np.argsort(keys, kind='stable')
-        first = np.zeros(self.columns * self.rows + 1, dtype=np.int64)
-        np.cumsum(np.bincount(keys, minlength=self.columns * self.rows), out=first[1:])
-        return first, np.ascontiguousarray(np.take(items, order), dtype=np.int64)
+        return keys, np.take(wall, entry) + offset
 
     def near_pairs(self, positions, radii, margin, starts, directions, lengths):
         """(ball, segment) with the ball's centre closer than r + margin to the segment, in
@@ -278,6 +395,7 @@ class StaticGeometry:
         if cells is None:
             runs = np.empty((0, 4))
         else:
+            check_run_count(cells)
             runs = boundary_runs(cells)
             far = np.abs(runs) > limits.COORDINATE_LIMIT
             if far.any():

@@ -10,14 +10,19 @@ the modules or in NUMBA_CACHE_DIR), and recompiles them itself when the sources 
 The kernels come in two parts because set-up should not make a newcomer wait for what the
 first run does not use: `--kernels run` is what the default world steps (seed mode, without
 robots: about 16 s of the 24 s a first `make run` used to wait for), `--kernels rest` the rest
-(exact mode and the lidar), which set-up compiles in the background (scripts/setup.sh) and a
-run would otherwise compile on first use (the lidar's ~8 s at a robot's first scan).
+(seed mode with a map, whose step is a kernel of its own since a box's became
+core.numba_backend.box_step; exact mode and the lidar), which set-up compiles in the
+background (scripts/setup.sh) and a run would otherwise compile on first use (the lidar's
+~8 s at a robot's first scan).
 """
 import argparse
 import sys
 import time
 
+import numpy as np
+
 from ball_world.core import lidar
+from ball_world.core.solid_cells import SolidCells
 from ball_world.core.stepping import numba_installed
 from ball_world.core.world import World
 
@@ -28,10 +33,13 @@ _RADII = [0.5, 0.4, 0.05]
 _WALLS = [[0.0, 0.0, 10.0, 0.0], [0.0, 4.0, 4.0, 4.0], [4.0, 0.0, 4.0, 4.0]]
 
 
-#: What each choice of --kernels compiles, and how main() names it.
+#: A map of 10 m x 10 m with one solid cell, away from the balls (mode 'map').
+_MAP = SolidCells(0.0, 0.0, 0.25, (np.arange(1600) == 30 * 40 + 30).reshape(40, 40))
+#: What each choice of --kernels compiles, and how main() names it ('map': seed mode in a
+#: map).
 PARTS = {'run': (('seed',), False, 'seed mode'),
-         'rest': (('exact',), True, 'exact mode and the lidar'),
-         'all': (('seed', 'exact'), True, 'seed mode, exact mode and the lidar')}
+         'rest': (('map', 'exact'), True, 'seed mode with a map, exact mode and the lidar'),
+         'all': (('seed', 'map', 'exact'), True, 'seed mode, exact mode and the lidar')}
 
 
 def warm(kernels='all'):
@@ -41,7 +49,8 @@ def warm(kernels='all'):
     began = time.perf_counter()
     for mode in modes:
         world = World(_POSITIONS, _VELOCITIES, _RADII, [1.0, 1.0, 1.0], walls=_WALLS,
-                      backend='numba', mode=mode)
+                      backend='numba', mode='seed' if mode == 'map' else mode,
+                      solid_cells=_MAP if mode == 'map' else None)
         for _ in range(3):
             world.step(0.1)
     if scanner:

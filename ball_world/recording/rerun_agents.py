@@ -56,6 +56,22 @@ def heading_arrows(record):
     return cased_arrows(origins, headings * lengths[:, None], AGENT_COLOR, AGENT_RADIUS, 35.0)
 
 
+def heading_discs(record, radii):
+    """(centres (k, 2), radii (k,)) of discs over the agents' heading arrows (radii: every
+    ball's, in pose order), which no name may cover (rerun_labels keep_clear), or None:
+    two per arrow, each a radius wide, at one and two radii beyond the disc's edge (the
+    arrow runs from the edge to HEADING_RADII radii beyond it)."""
+    frame = getattr(record, 'agents', None)
+    if frame is None or not len(frame.indices):
+        return None
+    own = np.asarray(radii, dtype=np.float64)[frame.indices]
+    headings = np.stack((np.cos(frame.yaws), np.sin(frame.yaws)), axis=1)
+    centres = np.asarray(record.positions, dtype=np.float64)[frame.indices]
+    along = [centres + headings * (own * (1.0 + k * HEADING_RADII / 2.0))[:, None]
+             for k in (1, 2)]
+    return np.concatenate(along), np.concatenate((0.5 * own, 0.5 * own))
+
+
 def bumper_arrows(record):
     """rr.Arrows2D of the record's bumper hits (world frame, from each agent's centre), or
     None when no agent was hit in its step. Their labels are kept, not shown: rerun_log

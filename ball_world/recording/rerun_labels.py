@@ -117,11 +117,12 @@ class LabelPlacer:
             size = self._sizes[text] = self.scale.size(text)
         return size
 
-    def place(self, positions, radii, names, first=()):
+    def place(self, positions, radii, names, first=(), keep_clear=None):
         """Label points for this step: (indices of the labelled balls, their points (k, 2)).
 
         positions (n, 2), radii (n,), names (n,); first: indices labelled before the others
-        (the agents).
+        (the agents); keep_clear: (centres (m, 2), radii (m,)) of discs no label may cover
+        either (the robots' heading arrows: a name tag lay over ball_0's).
         """
         positions = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
         radii = np.asarray(radii, dtype=np.float64).reshape(-1)
@@ -129,7 +130,13 @@ class LabelPlacer:
         ahead = set(first)
         order = first + [i for i in range(len(names)) if i not in ahead]
         padded_radii = radii + self.scale.clearance
-        kept = self._as_before(positions, radii, padded_radii, names, order)
+        if keep_clear is None:
+            clear = (np.zeros((0, 2)), np.zeros(0))
+        else:
+            clear = (np.asarray(keep_clear[0], dtype=np.float64).reshape(-1, 2),
+                     np.asarray(keep_clear[1], dtype=np.float64).reshape(-1)
+                     + self.scale.clearance)
+        kept = self._as_before(positions, radii, padded_radii, names, order, clear)
         if kept is not None:
             return kept
         xmin, ymin, xmax, ymax = self.scale.bounds
@@ -153,6 +160,8 @@ class LabelPlacer:
                     continue
                 if box_hits_discs(box, positions[others], padded_radii[others]).any():
                     continue
+                if box_hits_discs(box, *clear).any():
+                    continue
                 self._places[name] = place
                 kept.append(index)
                 points.append(point)
@@ -162,7 +171,7 @@ class LabelPlacer:
                 self._places.pop(name, None)
         return kept, np.asarray(points, dtype=np.float64).reshape(-1, 2)
 
-    def _as_before(self, positions, radii, padded_radii, names, order):
+    def _as_before(self, positions, radii, padded_radii, names, order, clear):
         """The answer when every name can keep its last place (the usual step): checked for
         all labels at once; None when one has no place yet or its place is taken."""
         places = [self._places.get(name) for name in names]
@@ -195,5 +204,7 @@ class LabelPlacer:
             < padded_radii[None, :] ** 2
         np.fill_diagonal(hits, False)
         if hits.any():
+            return None
+        if len(clear[1]) and any(box_hits_discs(box, *clear).any() for box in boxes):
             return None
         return order, np.column_stack((px, py))[order]

@@ -40,14 +40,13 @@ def legend_text(parameters, impulse_seconds, plot_period):
     lines += [
         "- **grey lines**: the arena's walls; ticks and numbers: a ruler in metres",
         f'- **pink arrow and tag**: a push, an impulse from outside ({impulse_seconds:g} s)',
-        '',
-        '**Plots**: energy change since step 0' + (
+        '- **plots**: energy change since step 0' + (
             " (the robots' drives put energy in and take it out; collisions keep it, so "
             'the rest stays 0 unless something pushes)' if agents else
             ' (collisions keep it: flat unless something pushes)')
-        + '; collisions since step 0 (flat at 0 until the first); real-time factor'
-        + (f'. A live view gets them every {plot_period:g} s: empty until then.'
-           if plot_period else '.')]
+        + '; collisions since step 0 (flat at 0 until the first)'
+        + (f'; a live view gets them every {plot_period:g} s: empty until then'
+           if plot_period else '')]
     return '\n'.join(lines)
 
 

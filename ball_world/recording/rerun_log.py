@@ -103,7 +103,7 @@ import rerun.blueprint as rrb
 from ball_world.core.parameters import BY_NAME
 from ball_world.recording.files import claim_output, OutputClaim
 from ball_world.recording.rerun_agents import (AGENTS, BUMPER_TEXT_COLOR, BUMPERS, BumperView,
-                                               heading_arrows)
+                                               heading_arrows, heading_discs)
 from ball_world.recording.rerun_energy import EnergyAccount
 from ball_world.recording.rerun_labels import boxes_overlap, LabelPlacer, tag_rect
 from ball_world.recording.rerun_legend import LEGEND, legend_document
@@ -423,7 +423,7 @@ def blueprint(world, parameters=None, plot_seconds=None):
         rrb.TimeSeriesView(origin=f'/{REAL_TIME_FACTOR}',
                            name=f'real-time factor (last {RTF_WINDOW:g} s)', plot_legend=hidden,
                            axis_y=real_time_factor_axis(parameters or {}), **window),
-        row_shares=[3, 2, 2, 2])
+        row_shares=[7, 4, 4, 4])
     return rrb.Blueprint(
         rrb.Horizontal(arena, plots, column_shares=[2, 1]),
         rrb.TimePanel(timeline=SIM_TIME, state='collapsed', play_state='following'),
@@ -1111,13 +1111,14 @@ class _Feed:
         if radii is None:
             segment = self._segment
             radii = [segment.radius.get(name, segment.smallest) for name in names]
+        clear = heading_discs(record, radii)
         if self._labelled:
-            kept, points = self._labels.place(record.positions, radii, names, first)
+            kept, points = self._labels.place(record.positions, radii, names, first, clear)
         else:  # only the agents
             rows = np.asarray(first, dtype=np.int64)
             kept, points = self._labels.place(np.asarray(record.positions)[rows],
                                               np.asarray(radii)[rows],
-                                              [names[i] for i in rows])
+                                              [names[i] for i in rows], keep_clear=clear)
             kept = rows[kept].tolist()
         return (points.astype(np.float32), [names[i] for i in kept],
                 self._label_colors[kept].reshape(-1, 3))

@@ -45,7 +45,7 @@ from ball_world.recording.writer_thread import BackgroundSink
 from ball_world.ros.agents import AgentTopics, TYPE_CHECK_PERIOD
 from ball_world.ros.calls import SERVICE_QOS
 from ball_world.ros.parameters import converted, current_values, declare_all, ParameterError
-from ball_world.ros.rcl_init import init_quietly
+from ball_world.ros.rcl_init import creating_node, init_quietly
 from ball_world.ros.sim_interfaces import ACTION, SimulationInterfaces
 from ball_world.ros.stopping import stopped_by_signal
 from ball_world.simulation import build, Simulation
@@ -247,7 +247,8 @@ class BallWorld(Node):
             self.destroy_node()
 
     def _start(self, **kwargs):
-        super().__init__('ball_world', **kwargs)
+        with creating_node('ball_world'):  # says why, if DDS never lets it join the graph
+            super().__init__('ball_world', **kwargs)
         self._node_made = True
         try:
             # rclpy keeps the command line's and files' values here; they are converted and

@@ -21,9 +21,11 @@ def similarity(truth_xy, track_xy, gate):
     """(G, T) similarities of G ball centres and T track positions, both (N, 2), at `gate` m."""
     truth_xy = np.asarray(truth_xy, dtype=np.float64).reshape(-1, 2)
     track_xy = np.asarray(track_xy, dtype=np.float64).reshape(-1, 2)
-    distance = np.hypot(truth_xy[:, None, 0] - track_xy[None, :, 0],
-                        truth_xy[:, None, 1] - track_xy[None, :, 1])
-    return np.maximum(0.0, 1.0 - distance / (2.0 * gate))
+    # A track near the largest float is infinitely far: similarity 0, not a warning.
+    with np.errstate(over='ignore'):
+        distance = np.hypot(truth_xy[:, None, 0] - track_xy[None, :, 0],
+                            truth_xy[:, None, 1] - track_xy[None, :, 1])
+        return np.maximum(0.0, 1.0 - distance / (2.0 * gate))
 
 
 def distance_of(similarity_value, gate):

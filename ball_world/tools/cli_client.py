@@ -205,6 +205,8 @@ class Client:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.signals import SignalHandlerOptions
+
+        from ball_world.ros.rcl_init import creating_node
         self.timeout = args.timeout
         self.context = rclpy.Context()
         # rcl reads only the --ros-args parts of the command line. No signal handlers of
@@ -214,8 +216,9 @@ class Client:
                    signal_handler_options=SignalHandlerOptions.NO)
         options = {} if args.ns is None else {'namespace': args.ns}
         # A unique name: two commands run at once are two nodes of the graph.
-        self.node = rclpy.create_node(f'{PROG}_{os.getpid()}', context=self.context,
-                                      start_parameter_services=False, **options)
+        with creating_node(PROG):
+            self.node = rclpy.create_node(f'{PROG}_{os.getpid()}', context=self.context,
+                                          start_parameter_services=False, **options)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.world = args.node

@@ -44,6 +44,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64MultiArray, String
 
+from ball_world.ros.rcl_init import creating_node
 from ball_world.ros.stopping import stopped_by_signal
 from ball_world.tools import goal_drive
 from ball_world.tools.goal_drive import AgentGoal
@@ -229,7 +230,8 @@ def main(args=None):
         with stopped_by_signal():
             rclpy.init(args=argv)
             agent = AGENT_FLAG in remove_ros_args(argv)[1:]
-            node = AgentGoal(GoalController.parameter) if agent else GoalController()
+            with creating_node(PROG):
+                node = AgentGoal(GoalController.parameter) if agent else GoalController()
             # Short waits, as the world node does: a shut-down context ends the loop within
             # 0.1 s even if the wake-up of a signal that shut it down was missed.
             while rclpy.ok():

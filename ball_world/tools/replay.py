@@ -36,6 +36,7 @@ from ball_world.msgs.definitions import message_definition
 from ball_world.recording.mcap_reader import load_untrusted, MAX_SMALL_TEXT, RecordingError
 from ball_world.recording.mcap_writer import CLOCK_TOPIC
 from ball_world.recording.recording_set import open_recording
+from ball_world.ros.rcl_init import creating_node
 from ball_world.ros.stopping import stopped_by_signal
 
 DEFAULT_DEPTH = 10
@@ -274,7 +275,8 @@ def main(argv=None):
     finished = False
     try:
         with stopped_by_signal():
-            node = rclpy.create_node('ball_world_replay')
+            with creating_node('ball_world_replay'):
+                node = rclpy.create_node('ball_world_replay')
             executor = SingleThreadedExecutor()
             executor.add_node(node)
             player = Player(node, executor, recording, topics,

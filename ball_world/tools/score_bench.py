@@ -12,9 +12,13 @@ drifts with agent.odom.noise), exactly as a recording of that scene would be sco
 class `update(scan, pose) -> rows (id, x, y, ...)` (tools.tracker.ScanTracker), made anew
 for each scene with no arguments (and given the scene's map first when it has `use_map(grid)`).
 
-Scenes run in worker processes (one per core by default), each scene alone in one and all
-of its numbers its own, and results are gathered in scene order: the report is the same
-bit for bit whatever the number of processes or the machine's load. Each figure is given
+Scenes run in worker processes (one per core by default; `executor` is where a Ray executor
+would plug in), each scene alone in one and all of its numbers its own, and results are
+gathered in scene order: the report is the same bit for bit whatever the number of
+processes or the machine's load. The tracker, user code, runs only there (with --jobs 1
+too): the workers are supervised (user_code.workers), so however it ends (an exception,
+SystemExit, os._exit, a segfault, a signal, a call past --timeout) the run stops with one
+line and no process left. Each figure is given
 as its mean over scenes with a 95% confidence interval (scoring.scenes), with the scenes
 pooled as TrackEval combines sequences, and the worst scenes by HOTA.
 
@@ -383,8 +387,15 @@ def _new_tracker(tracker_class, spec):
 def check_tracker(spec):
     """Load and make one tracker (a job: in a worker), so that a bad one is one line once,
     before any scene."""
-    _new_tracker(load_tracker_class(spec), spec or EXAMPLE)
+    _end([_new_tracker(load_tracker_class(spec), spec or EXAMPLE)], spec, 'a check')
     return True
+
+
+def _end(held, spec, where):
+    """Let go of the tracker in `held` (a list) under the deadline: its __del__ is user code
+    too, and a __del__ that hangs would hold its worker past every deadline."""
+    from ball_world.user_code.calls import call
+    call(f'{spec or EXAMPLE} on {where}: its end', held.clear)
 
 
 # One scene, in a worker -----------------------------------------------------------------------
@@ -449,6 +460,9 @@ def run_scene(job):
     scans = simulated_scans(scene)
     frames = frames_with_tracker(scans, tracker, spec or EXAMPLE, _scene_map(scene),
                                  scene.label)
+    held = [tracker]
+    del tracker
+    _end(held, spec, scene.label)
     try:
         score = figures.score_tracks(frames, gate)
     except DuplicateTrack as error:
@@ -484,7 +498,8 @@ def run(args):
     with executor(args, jobs, len(scenes)) as pool:
         jobs = pool.jobs
         if args.tracker is not None:  # a bad tracker: one line, once, not one per worker
-            for _ in pool.map_unordered(check_tracker, [args.tracker], ['--tracker']):
+            for _ in pool.map_unordered(check_tracker, [args.tracker],
+                                        [f'--tracker {args.tracker}']):
                 pass
         for position, result in pool.map_unordered(run_scene, work,
                                                    [scene.label for scene in scenes]):

@@ -93,10 +93,13 @@ class _Recorder:
         import rclpy
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
+
+        from ball_world.ros.rcl_init import creating_node
         self.rclpy = rclpy
         self.context = Context()
         rclpy.init(context=self.context)
-        self.node = rclpy.create_node('ball_world_score_scenes', context=self.context)
+        with creating_node(PROG):
+            self.node = rclpy.create_node('ball_world_score_scenes', context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.args = args
@@ -355,7 +358,9 @@ def score_directory(args):
                          'made)') from None
     described = load_yaml(text, description, f'{SCENES_FILE} of a scenes directory')
     if not isinstance(described, dict) or not isinstance(described.get('tracks_topic'), str):
-        raise BenchError(f'{path}/{SCENES_FILE}: no tracks_topic')
+        topic = described.get('tracks_topic') if isinstance(described, dict) else None
+        raise BenchError(f'{description}: tracks_topic is {topic!r}; it must be a topic name '
+                         f'(a directory {PROG} made has one)')
     if not scenes:
         raise BenchError(f'{path} holds no scene (seed_<k>/world.mcap)')
     agent = str(described.get('agent', 'ball_0'))

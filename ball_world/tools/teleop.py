@@ -25,6 +25,7 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
 from ball_world.msgs.cdr import decode_pose_array
+from ball_world.ros.rcl_init import creating_node
 from ball_world.tools import usage_exit
 from ball_world.tools.keyboard import KeyDecoder, Quit, RawKeys, Screen
 from ball_world.tools.teleop_drive import Drive
@@ -310,7 +311,8 @@ def run(argv):
     node = None
     try:
         rclpy.init(args=[PROG, *argv], signal_handler_options=SignalHandlerOptions.NO)
-        node = Teleop()
+        with creating_node(PROG):
+            node = Teleop()
         if sys.stdin is None or not sys.stdin.isatty():
             raise UsageError('standard input is not a terminal: run it in a terminal, it '
                              'reads single key presses')

@@ -760,6 +760,7 @@ def main(args=None):
     import rclpy
     from rclpy.utilities import remove_ros_args
 
+    from ball_world.ros.rcl_init import creating_node
     from ball_world.ros.stopping import stopped_by_signal
     argv = sys.argv if args is None else args
     try:
@@ -779,7 +780,8 @@ def main(args=None):
     try:
         with stopped_by_signal():
             rclpy.init(args=argv)
-            node = node_class()
+            with creating_node(PROG):
+                node = node_class()
             while rclpy.ok():
                 rclpy.spin_once(node, timeout_sec=0.1)
     except ParameterError as error:

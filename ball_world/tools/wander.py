@@ -12,10 +12,13 @@ to bottom. Every scan it does three things:
   3. when nothing is, drives forward at `speed`, turning at a yaw rate that it picks at
      random every `wander_seconds`, so it does not run in circles or straight lines.
 
-It publishes one geometry_msgs/Twist on `<agent>/cmd_vel` per scan: linear.x forward,
-angular.z the yaw rate, as any diff-drive base takes them (ball_world's `agent.drive`
-`diff` or `omni` alike). Everything above the node class is plain Python and numpy:
-`Wander.command` is what the tests drive with the world's own scans, without ROS.
+It needs no map: a wall, a pillar and a ball are all things to keep off, and the scan shows
+them alike (a tracker is another matter: ball_world_tracker leaves `/map`'s solid cells out,
+as they are no objects to follow). It publishes one geometry_msgs/Twist on `<agent>/cmd_vel`
+per scan: linear.x forward, angular.z the yaw rate, as any diff-drive base takes them
+(ball_world's `agent.drive` `diff` or `omni` alike). Everything above the node class is
+plain Python and numpy: `Wander.command` is what the tests drive with the world's own scans,
+without ROS.
 
     ros2 run ball_world ball_world_wander --ros-args -p agent:=ball_0
 """
@@ -147,6 +150,7 @@ def main(args=None):
     import rclpy
     from rclpy.utilities import remove_ros_args
 
+    from ball_world.ros.rcl_init import creating_node
     from ball_world.ros.stopping import stopped_by_signal
     argv = sys.argv if args is None else args
     try:
@@ -162,7 +166,8 @@ def main(args=None):
     try:
         with stopped_by_signal():
             rclpy.init(args=argv)
-            node = _node_class()()
+            with creating_node(PROG):
+                node = _node_class()()
             while rclpy.ok():
                 rclpy.spin_once(node, timeout_sec=0.1)
     except ParameterError as error:

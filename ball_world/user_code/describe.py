@@ -60,7 +60,10 @@ def where(locations):
 def describe_exception(error):
     """One line for an exception (any BaseException) raised in a user's code."""
     frames = traceback.extract_tb(error.__traceback__)
-    text = ' '.join(str(error).split())
+    try:
+        text = ' '.join(str(error).split())
+    except Exception:  # noqa: B902 - a user's __str__ may raise anything
+        text = '<its text could not be made>'
     if len(text) > 200:
         text = text[:197] + '...'
     name = type(error).__name__

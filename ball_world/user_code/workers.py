@@ -107,11 +107,14 @@ def _worker_main(connection, notes_path, path, deadline_s, parent_pid):
             return
         position, function, argument = message
         try:
-            reply = (position, True, function(argument))
+            result = function(argument)
         except BaseException as error:  # noqa: B902 - one line for anything, then go on
-            reply = (position, False, _one_line(error))
+            # Sent before the error is let go: that frees the user's objects, whose __del__
+            # may hang; the supervisor has its answer by then.
+            connection.send((position, False, _one_line(error)))
+            continue
         try:
-            connection.send(reply)
+            connection.send((position, True, result))
         except Exception as error:  # noqa: B902 - an unpicklable result
             connection.send((position, False, f'its result could not be sent back: '
                                               f'{describe_exception(error)}'))
