@@ -175,7 +175,7 @@ def run_score(*argv):
 
 
 def test_the_scorer_on_a_cluster_reports_what_it_reports_here(cluster, capsys):
-    argv = ['--seeds', '0:3', '--duration', '2', '--jobs', '2', '--json']
+    argv = ['--seeds', '0:3', '--duration', '1', '--jobs', '2', '--json']
     there = run_score(*argv, '--ray', cluster)
     assert there.returncode == 0 and there.stderr == '', there.stderr  # Ray kept quiet
     assert score.main(argv) == 0
@@ -191,6 +191,17 @@ def test_an_unreachable_cluster_is_one_line():
     assert done.returncode == 1 and done.stdout == '', done
     assert done.stderr.count('\n') == 1 and 'no Ray cluster answers there' in done.stderr, \
         done.stderr
+
+
+@pytest.mark.parametrize('argv, expected', [
+    (['--scenes', 'scenes', '--ray', 'auto'], '--ray runs simulated scenes (--seeds, --worlds)'),
+    (['run.mcap', '--ray', 'auto'], '--ray runs simulated scenes: give it with --seeds'),
+    (['--seeds', '2', '--ray', ' '], '--ray is empty'),
+])
+def test_ray_arguments_that_cannot_run_exit_2(argv, expected, capsys):
+    with pytest.raises(SystemExit) as ended:
+        score.main(argv)
+    assert ended.value.code == 2 and expected in capsys.readouterr().err
 
 
 @pytest.mark.parametrize('name, expected', [
@@ -215,6 +226,28 @@ def test_every_way_a_tracker_ends_on_a_worker_is_one_line_and_no_task_runs_on(
     line = str(caught.value)
     assert '\n' not in line and expected in line, line
     assert wait_until(lambda: pid_file.exists() and pid_file.read_text(), 120.0)
+    assert wait_until(lambda: not alive(int(pid_file.read_text())), 60.0), \
+        'a Ray task was left running'
+
+
+def test_a_sigterm_ends_the_scorer_and_its_ray_tasks(cluster, tmp_path):
+    kinds = tmp_path / 'kinds.py'
+    kinds.write_text(KINDS)
+    pid_file = Path(f'{kinds}.pid')
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'ball_world.tools.score', '--seeds', '0:2', '--duration', '1',
+         '--tracker', f'{kinds}:Hangs', '--timeout', '600', '--ray', cluster],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=environment())
+    try:
+        assert wait_until(lambda: pid_file.exists() and pid_file.read_text(), 300.0)
+        process.send_signal(signal.SIGTERM)  # ray.init's own handler would exit at once
+        out, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 143 and err == 'ball_world_score: terminated\n', err
+    assert out == ''
     assert wait_until(lambda: not alive(int(pid_file.read_text())), 60.0), \
         'a Ray task was left running'
 

@@ -12,15 +12,15 @@ drifts with agent.odom.noise), exactly as a recording of that scene would be sco
 class `update(scan, pose) -> rows (id, x, y, ...)` (tools.tracker.ScanTracker), made anew
 for each scene with no arguments (and given the scene's map first when it has `use_map(grid)`).
 
-Scenes run in worker processes (one per core by default; `executor` is where a Ray executor
-would plug in), each scene alone in one and all of its numbers its own, and results are
-gathered in scene order: the report is the same bit for bit whatever the number of
-processes or the machine's load. The tracker, user code, runs only there (with --jobs 1
-too): the workers are supervised (user_code.workers), so however it ends (an exception,
-SystemExit, os._exit, a segfault, a signal, a call past --timeout) the run stops with one
-line and no process left. Each figure is given
-as its mean over scenes with a 95% confidence interval (scoring.scenes), with the scenes
-pooled as TrackEval combines sequences, and the worst scenes by HOTA.
+Scenes run in worker processes (one per core by default; or with --ray as tasks on a Ray
+cluster: `executor`, user_code.ray_pool), each scene alone in one and all of its numbers its
+own, and results are gathered in scene order: the report is the same bit for bit whatever
+the number of processes or the machine's load. The tracker, user code, runs only there
+(with --jobs 1 too): the workers are supervised (user_code.workers), so however it ends (an
+exception, SystemExit, os._exit, a segfault, a signal, a call past --timeout) the run stops
+with one line and no process left. Each figure is given as its mean over scenes with a 95%
+confidence interval (scoring.scenes), with the scenes pooled as TrackEval combines
+sequences, and the worst scenes by HOTA.
 
 `--worlds FILE.yaml` lists worlds instead (docs/scoring.md):
 

@@ -22,7 +22,9 @@ numpy (docs/scoring.md): each job's numbers are its own and the caller orders th
 """
 import atexit
 import logging
+import signal
 import socket
+import threading
 
 from ball_world.user_code.describe import UserCodeError
 from ball_world.user_code.workers import JobFailed, LocalPool
@@ -65,12 +67,19 @@ def connect(address, connect_s=CONNECT_S):
         raise ClusterError('--ray needs the ray package (pip install ray==2.60.0)') from None
     if ray.is_initialized():
         return ray
+    # ray.init replaces the SIGTERM handler (with one that exits at once): the tool's own
+    # (one line, tasks cancelled) is put back.
+    main = threading.current_thread() is threading.main_thread()
+    handler = signal.getsignal(signal.SIGTERM) if main else None
     try:
         ray.init(address=address, log_to_driver=False, logging_level=logging.ERROR,
                  configure_logging=True)
     except Exception as error:  # noqa: B902 - Ray raises many kinds; each is one line
         raise ClusterError(f'--ray {address}: could not connect to a Ray cluster: '
                            f'{_one_line(error)}') from None
+    finally:
+        if handler is not None:
+            signal.signal(signal.SIGTERM, handler)
     return ray
 
 
@@ -163,7 +172,7 @@ class RayPool:
                     task = (function, arguments[position], labels[position],
                             self.deadline_s, self.deadline_text)
                     running[self._task.remote(task)] = position
-                done, _ = ray.wait(list(running), num_returns=1)
+                done = self._wait(list(running))
                 for reference in done:
                     position = running.pop(reference)
                     try:
@@ -175,6 +184,30 @@ class RayPool:
                     yield position, value
         finally:
             self._cancel()
+
+    def _wait(self, references):
+        """ray.wait for the first to end. A signal handler's exception raised while Ray
+        waits (the tool's SIGTERM: 'terminated', exit 143) comes out of Ray as a plain
+        KeyboardInterrupt: the handler is run again here to raise its own."""
+        main = threading.current_thread() is threading.main_thread()
+        handler = signal.getsignal(signal.SIGTERM) if main else None
+        if not callable(handler):
+            return self.ray.wait(references, num_returns=1)[0]
+        received = []
+
+        def noting(signum, frame):
+            received.append(signum)
+            handler(signum, frame)
+
+        signal.signal(signal.SIGTERM, noting)
+        try:
+            return self.ray.wait(references, num_returns=1)[0]
+        except KeyboardInterrupt:
+            if received:
+                handler(received[0], None)
+            raise
+        finally:
+            signal.signal(signal.SIGTERM, handler)
 
     def _cancel(self):
         running, self._running = self._running, {}
