@@ -191,6 +191,14 @@ def test_an_unreachable_cluster_is_one_line():
     assert done.returncode == 1 and done.stdout == '', done
     assert done.stderr.count('\n') == 1 and 'no Ray cluster answers there' in done.stderr, \
         done.stderr
+    # auto: the cluster RAY_ADDRESS or the last `ray start` names, which may be gone
+    gone = f'127.0.0.1:{free_port()}'
+    done = subprocess.run([sys.executable, '-m', 'ball_world.tools.score', '--seeds', '0:1',
+                           '--ray', 'auto'], capture_output=True, text=True, timeout=600,
+                          env=environment(RAY_ADDRESS=gone))
+    assert done.returncode == 1 and done.stderr == (
+        f'ball_world_score: --ray auto (the cluster at {gone}): no Ray cluster answers there '
+        '(Connection refused)\n'), done.stderr
 
 
 @pytest.mark.parametrize('argv, expected', [

@@ -42,19 +42,36 @@ def _one_line(error):
     return lines[0] if lines else type(error).__name__
 
 
-def _probe(address, connect_s):
-    """ClusterError unless something listens at 'host:port' (ray.init itself would retry for
-    a minute, logging to the terminal)."""
+def _probe(address, connect_s, given=None):
+    """ClusterError unless something listens at 'host:port' (ray.init itself would retry
+    for ever, logging to the terminal). `given`: what the user gave, for the message."""
+    given = given or address
     host, _, port = address.removeprefix('ray://').rpartition(':')  # ray://: Ray Client
     if not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise ClusterError(f"--ray {address}: expected HOST:PORT (the head node's GCS "
+        raise ClusterError(f"--ray {given}: expected HOST:PORT (the head node's GCS "
                            'address, e.g. 10.0.0.5:6379) or auto')
     try:
         socket.create_connection((host.strip('[]'), int(port)), timeout=connect_s).close()
     except OSError as error:
         reason = error.strerror or _one_line(error) or 'timed out'
-        raise ClusterError(f'--ray {address}: no Ray cluster answers there ({reason})') \
+        raise ClusterError(f'--ray {given}: no Ray cluster answers there ({reason})') \
             from None
+
+
+def _probe_auto(connect_s):
+    """Probe the cluster 'auto' means (RAY_ADDRESS, or the last `ray start` on this
+    machine, which may be long gone: ray.init would then retry for ever)."""
+    try:
+        from ray._private.services import get_ray_address_from_environment
+    except ImportError:  # Ray's private helper moved: ray.init finds it alone
+        return
+    try:
+        found = get_ray_address_from_environment('auto', None)
+    except Exception as error:  # noqa: B902 - none found; each kind is one line
+        raise ClusterError(f'--ray auto: no Ray cluster runs on this machine '
+                           f'({_one_line(error)})') from None
+    if found and found != 'auto':
+        _probe(found, connect_s, f'auto (the cluster at {found})')
 
 
 def connect(address, connect_s=CONNECT_S):
@@ -67,6 +84,8 @@ def connect(address, connect_s=CONNECT_S):
         raise ClusterError('--ray needs the ray package (pip install ray==2.60.0)') from None
     if ray.is_initialized():
         return ray
+    if address == 'auto':
+        _probe_auto(connect_s)
     # ray.init replaces the SIGTERM handler (with one that exits at once): the tool's own
     # (one line, tasks cancelled) is put back.
     main = threading.current_thread() is threading.main_thread()
