@@ -340,26 +340,35 @@ def test_the_scorer_says_how_a_tracker_ended_and_exits_non_zero(
     assert gone(marked)
 
 
-def test_a_ctrl_c_stops_the_scorer_and_its_workers_with_130(tmp_path, marked):
+@pytest.mark.parametrize('sent, code, line', [
+    (signal.SIGINT, 130, 'interrupted'),  # a terminal's Ctrl-C, to the process group
+    (signal.SIGTERM, 143, 'terminated'),  # timeout(1), CI cancelling a job: to the tool
+])
+def test_a_ctrl_c_or_sigterm_stops_the_scorer_and_its_workers(tmp_path, marked, sent, code,
+                                                              line):
     path = tmp_path / 'kinds.py'
     path.write_text(KINDS.replace('def act(self, observation)', 'def update(self, scan, pose)'))
+    temporary = tmp_path / 'tmp'
+    temporary.mkdir()
     process = subprocess.Popen(
         score_command(f'{path}:Hangs', 2, '--timeout', '600'), stdout=subprocess.PIPE,
         stderr=subprocess.PIPE, text=True, start_new_session=True,
+        env={**os.environ, 'TMPDIR': str(temporary)},
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         end = time.monotonic() + 240.0  # until both workers run the tracker's update
         while len(marked_processes(marked)) < 3 and time.monotonic() < end:
             time.sleep(0.2)  # the tool and its two workers
         time.sleep(1.0)
-        os.killpg(process.pid, signal.SIGINT)  # as a terminal's Ctrl-C
+        (os.killpg if sent == signal.SIGINT else os.kill)(process.pid, sent)
         out, err = process.communicate(timeout=60)
     finally:
         if process.poll() is None:
             process.kill()
             process.wait()
-    assert process.returncode == 130 and err == 'ball_world_score: interrupted\n', err
+    assert process.returncode == code and err == f'ball_world_score: {line}\n', err
     assert out == '' and gone(marked)
+    assert os.listdir(temporary) == []  # the workers' notes removed
 
 
 if __name__ == '__main__':

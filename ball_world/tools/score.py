@@ -128,6 +128,24 @@ def _write_outputs(args, segments, scores):
         score_rerun.write_rrd(args.rerun, segments, scores, args.force)
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the tool is, so that its workers end with it (a `with` of the
+    pool kills them) and their notes are removed, as on a Ctrl-C."""
+
+
+def _terminate(signum, frame):
+    raise Terminated
+
+
+def _on_sigterm(handler):
+    """Install `handler` for SIGTERM (from the main thread only); the one it replaces."""
+    import signal
+    import threading
+    if handler is None or threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, handler)
+
+
 def main(argv=None):
     from ball_world.recording.mcap_reader import RecordingError
     from ball_world.scoring.frames import DuplicateTrack
@@ -136,6 +154,7 @@ def main(argv=None):
     from ball_world.tools.score_tracks import TracksError
 
     args = parse_args(sys.argv[1:] if argv is None else argv)
+    previous = _on_sigterm(_terminate)
     try:
         if args.scenes is not None:
             from ball_world.tools import score_scenes
@@ -156,9 +175,14 @@ def main(argv=None):
             text = f'{error.filename}: {text}'
         print(f'{PROG}: {text or error}', file=sys.stderr)
         return 1
+    except Terminated:
+        print(f'{PROG}: terminated', file=sys.stderr)
+        return 143
     except KeyboardInterrupt:
         print(f'{PROG}: interrupted', file=sys.stderr)
         return 130
+    finally:
+        _on_sigterm(previous)
     if args.json:
         print(json.dumps(_json_ready(report), indent=1))
     else:
