@@ -303,16 +303,18 @@ class Agents:
         """The headings at the end of the step ending end_ns (their yaw rates applied)."""
         return wrapped(self._yaws + self.yaw_rates(end_ns) * (dt_ns * 1e-9))
 
-    def impulses(self, velocities, masses, index_of, dt_ns, end_ns):
+    def impulses(self, velocities, masses, index_of, dt_ns, end_ns, rows=None):
         """The drive's impulses for the step ending end_ns: [(name, jx, jy)], agent order.
 
         velocities and masses are the world's arrays (after the impulses that arrived before
-        the step), index_of maps names to indices. An agent already at its target gets none.
+        the step), index_of maps names to indices; rows, when given, are the agents' indices
+        already looked up (agent order). An agent already at its target gets none.
         """
         if not self._names:
             return []
         limits = self.limits
-        rows = np.array([index_of.get(name, -1) for name in self._names], dtype=np.int64)
+        if rows is None:
+            rows = np.array([index_of.get(name, -1) for name in self._names], dtype=np.int64)
         present = rows >= 0
         active = self._in_force(end_ns)
         forward = np.where(active, self._commands[:, 0], 0.0)
