@@ -111,8 +111,10 @@ class AgentScans:
             self._scanners[key] = scanner
         return scanner
 
-    def take(self, world, names, indices, yaws, base_frames, step_index, stamp_ns, dt_ns):
-        """The scans of this step (a tuple of AgentScan; empty when none is due)."""
+    def take(self, world, names, indices, yaws, base_frames, step_index, stamp_ns, dt_ns,
+             encode=True):
+        """The scans of this step (a tuple of AgentScan; empty when none is due); their
+        LaserScan bytes b'' unless `encode` (nobody takes them)."""
         if not self.due(step_index, dt_ns):
             return ()
         scans = []
@@ -125,7 +127,7 @@ class AgentScans:
             fan = scanner.fan
             cdr = encode_laser_scan(stamp_ns, frame_id, fan.angle_min, fan.angle_max,
                                     fan.angle_increment, 0.0, period, fan.range_min,
-                                    fan.range_max, ranges)
+                                    fan.range_max, ranges) if encode else b''
             scans.append(AgentScan(name, frame_id, ranges, fan, cdr))
         return tuple(scans)
 

@@ -600,7 +600,8 @@ class Simulation:
             log_time_ns=self.log_offset_ns + stamp_ns,
             positions=positions, velocities=velocities,
             ball_ball=ball_ball, ball_wall=ball_wall, kinetic_energy=energy, momentum=momentum,
-            balls_cdr=encode_pose_array(positions, stamp_ns, self.frame_id),
+            balls_cdr=encode_pose_array(positions, stamp_ns, self.frame_id,
+                                        self.agents.headings(self.index_of)),
             state_cdr=encode_state(positions, velocities),
             stats_cdr=encode_float64_vector(
                 (energy, momentum[0], momentum[1], ball_ball, ball_wall, rtf), STATS_FIELDS),

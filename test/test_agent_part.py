@@ -72,3 +72,23 @@ def test_rows_are_found_again_when_balls_move_in_the_arrays():
     assert record.agents.names == ('ball_2', 'ball_8')
     assert record.agents.indices.tolist() == [index_of['ball_2'], index_of['ball_8']] == [1, 6]
     assert not record.agents.indices.flags.writeable  # shared by records: nobody writes it
+
+
+def test_only_the_kinds_someone_takes_are_encoded_and_a_swarm_encodes_none():
+    parameters = {**BASE, 'agent.scan.samples': 8, 'agent.scan.rate_hz': 50.0}
+    simulation = Simulation(parameters)
+    whole, _ = simulation.step()
+    simulation.agents.encode = frozenset({'odom'})  # as the node says when only odom is taken
+    narrow, _ = simulation.step()
+    assert len(whole.agents.odom_cdr) == len(narrow.agents.odom_cdr) == 3
+    assert whole.agents.tf_cdr and whole.agents.ground_truth_cdr
+    assert all(scan.cdr for scan in whole.agents.scans)
+    assert narrow.agents.tf_cdr == b'' and narrow.agents.ground_truth_cdr == ()
+    assert [scan.cdr for scan in narrow.agents.scans] == [b''] * 3
+    assert [len(scan.ranges) for scan in narrow.agents.scans] == [8] * 3  # still scanned
+    swarm = Simulation({**parameters, 'agent.topics': 'none'})
+    record, _ = swarm.step()
+    frame = record.agents
+    assert not frame.topics and frame.odom_cdr == () and frame.tf_cdr == b''
+    assert frame.tf_static_cdr is None and [scan.cdr for scan in frame.scans] == [b''] * 3
+    assert frame.yaws.shape == (3,) and frame.twists.shape == (3, 3)  # the state is all there

@@ -14,6 +14,15 @@ from ball_world.msgs.agent_cdr import encode_odometry, encode_tf_message
 from ball_world.msgs.impulse_batch import encode_impulses
 from ball_world.step_record import Bumper
 
+#: The per-agent messages a step can make, each encoded only when someone takes it
+#: (AgentPart.encode): odom, ground_truth, /tf, bumper, scan.
+ODOM = 'odom'
+GROUND_TRUTH = 'ground_truth'
+TF = 'tf'
+BUMPER = 'bumper'
+SCAN = 'scan'
+KINDS = frozenset((ODOM, GROUND_TRUTH, TF, BUMPER, SCAN))
+
 
 class FrameNames:
     """Each agent's frames under a prefix: <p><name>/odom, <p><name>/base_link, and the world
@@ -62,34 +71,33 @@ def ground_truth(stamp_ns, names, positions, yaws, twists):
     return tuple(encode_odometry(stamp_ns, names.world, names.base, positions, yaws, twists))
 
 
-def true_odometry(stamp_ns, names, positions, yaws, twists):
-    """(odom bytes of each agent, /tf bytes) when odometry is the ground truth."""
-    odom = tuple(encode_odometry(stamp_ns, names.odom, names.base, positions, yaws, twists))
-    return odom, encode_tf_message(stamp_ns, names.odom, names.base, positions, yaws)
+def odometry_messages(stamp_ns, names, positions, yaws, twists, covariances=None,
+                      twist_covariances=None):
+    """nav_msgs/Odometry of each agent in its odom frame (covariances (A, 36) or zeros)."""
+    return tuple(encode_odometry(stamp_ns, names.odom, names.base, positions, yaws, twists,
+                                 covariances, twist_covariances))
 
 
-def noisy_odometry(stamp_ns, names, poses, covariances, twists, advanced):
-    """(odom bytes of each agent, /tf bytes) from the noisy odometry's state.
-
-    advanced: the core.odometry.Step of the step that ended here for these agents, or None
-    (a new world, a spawn: agents that had just started at their true pose). The twist is
-    the true one plus that step's error, if any.
-    """
-    if advanced is not None:
-        twists = twists + advanced.twist_errors
-        twist_covariances = odometry.message_covariance(advanced.twist_covariances)
-    else:
-        twist_covariances = np.zeros((len(poses), 36))
-    odom = tuple(encode_odometry(
-        stamp_ns, names.odom, names.base, poses[:, :2], poses[:, 2], twists,
-        odometry.message_covariance(covariances), twist_covariances))
-    return odom, encode_tf_message(stamp_ns, names.odom, names.base, poses[:, :2],
-                                   poses[:, 2])
+def tf_message(stamp_ns, names, positions, yaws):
+    """/tf: every agent's odom -> base_link in one TFMessage."""
+    return encode_tf_message(stamp_ns, names.odom, names.base, positions, yaws)
 
 
-def bumpers(names, base_frames, yaws, impulses, stamp_ns):
+def noisy_twists(twists, advanced):
+    """(twists, their (A, 36) covariances) the noisy odometry reports: the true body twists
+    plus the error of the step that ended here (advanced: its core.odometry.Step), or the
+    true ones with covariance 0 when that step is not known for these agents (None: a new
+    world, a spawn: agents that had just started at their true pose)."""
+    if advanced is None:
+        return twists, np.zeros((len(twists), 36))
+    return (twists + advanced.twist_errors,
+            odometry.message_covariance(advanced.twist_covariances))
+
+
+def bumpers(names, base_frames, yaws, impulses, stamp_ns, encode=True):
     """The Bumper of each agent that took a collision impulse (impulses (A, 2), world
-    frame), in its base_link frame at the step's end heading (agent order)."""
+    frame), in its base_link frame at the step's end heading (agent order); their bytes
+    b'' unless `encode`."""
     hit = np.flatnonzero((impulses != 0.0).any(axis=1))
     if not len(hit):
         return ()
@@ -98,6 +106,7 @@ def bumpers(names, base_frames, yaws, impulses, stamp_ns):
     forward = (cos * jx + sin * jy).tolist()
     left = (cos * jy - sin * jx).tolist()
     frames_hit = [base_frames[row] for row in hit.tolist()]
-    messages = encode_impulses(stamp_ns, frames_hit, forward, left)
+    messages = (encode_impulses(stamp_ns, frames_hit, forward, left) if encode
+                else [b''] * len(frames_hit))
     return tuple(Bumper(names[row], frame, x, y, cdr) for row, frame, x, y, cdr in zip(
         hit.tolist(), frames_hit, forward, left, messages))

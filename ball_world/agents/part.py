@@ -24,8 +24,8 @@ import numpy as np
 
 from ball_world.agents import frames as messages
 from ball_world.core import odometry
-from ball_world.core.agents import (agent_names, Agents, check_command, CommandRejected,
-                                    frame_clash, Limits)
+from ball_world.core.agents import (agent_names, Agents, CommandRejected, frame_clash,
+                                    Limits)
 from ball_world.msgs.twist_cdr import encode_twist, encode_twist_stamped
 from ball_world.scans import AgentScans, check as check_scans
 from ball_world.step_record import AgentFrame, AppliedCommand
@@ -60,6 +60,14 @@ class AgentPart:
         self.stamped = bool(parameters['agent.cmd_vel_stamped'])
         self.tf_static = bool(parameters['agent.odom.tf_static'])
         self.alphas = parameters['agent.odom.noise']
+        # agent.topics: 'each' agent has its own topics; 'none' (a swarm): no per-agent
+        # message is made at all, and commands are recorded together (command_rows).
+        self.each = parameters['agent.topics'] == 'each'
+        rate = float(parameters['agent.odom.rate_hz'])
+        self.odom_period_ns = max(1, round(1e9 / rate)) if rate > 0.0 else 0
+        # The kinds of per-agent message (frames.KINDS) whose bytes are made: None for all;
+        # the node narrows it to those someone subscribes to when nothing records them.
+        self.encode = None
         self._noise = (odometry.OdometryNoise(parameters['random.seed'])
                        if odometry.enabled(self.alphas) else None)
         self.scans = AgentScans(parameters)
@@ -130,10 +138,11 @@ class AgentPart:
 
         Raises CommandRejected for an unknown agent or a bad command. Taken commands go into
         the step's record as `cdr` (the message as received), or encoded here when given in
-        code (Twist, or TwistStamped with agent.cmd_vel_stamped).
+        code (Twist, or TwistStamped with agent.cmd_vel_stamped); with agent.topics none not
+        at all (the step's AgentFrame holds them as rows).
         """
         self.state.command(name, vx, vy, wz, since_ns)
-        if not cdr:
+        if not cdr and self.each:  # a swarm records its commands as rows (command_rows)
             cdr = (encode_twist_stamped(since_ns, '', vx, vy, wz) if self.stamped
                    else encode_twist(vx, vy, wz))
         self._commands.append(AppliedCommand(name, float(vx), float(vy), float(wz), cdr))
@@ -148,13 +157,47 @@ class AgentPart:
         if commands.shape != (len(names), 3):
             raise CommandRejected('shape', f'{len(names)} agents need commands of shape '
                                            f'({len(names)}, 3), got {commands.shape}')
-        for name in names:
-            if name not in self.state:
-                raise CommandRejected('unknown_agent', f"no agent named '{name[:64]}'")
+        self.state.command_many(names, commands, since_ns)
+        stamped, each = self.stamped, self.each
+        taken = self._commands
         for name, (vx, vy, wz) in zip(names, commands.tolist()):
-            check_command(name, vx, vy, wz)
-        for name, (vx, vy, wz) in zip(names, commands.tolist()):
-            self.command(name, vx, vy, wz, since_ns)
+            cdr = b''
+            if each:
+                cdr = (encode_twist_stamped(since_ns, '', vx, vy, wz) if stamped
+                       else encode_twist(vx, vy, wz))
+            taken.append(AppliedCommand(name, vx, vy, wz, cdr))
+
+    def _command_rows(self, index_of):
+        """(K, 4) rows (ball, vx, vy, wz) of the commands taken since the last step, in
+        order, for the agents still there; ball is the row in the step's `balls`.
+
+        A swarm's commands as one message a step (recording.agent_topics): a re-simulation
+        takes them after the step's edits, as it takes cmd_vel, so the rows are those of
+        the balls after every edit made before the step, and a command given to an agent
+        deleted after it (which the deletion took away) is left out.
+        """
+        agents = self.state
+        rows = [(index_of[c.name], c.vx, c.vy, c.wz) for c in self._commands
+                if c.name in agents]
+        return np.array(rows, dtype=np.float64).reshape(-1, 4)
+
+    def headings(self, index_of):
+        """(rows, yaws) of the agents in the World's arrays, or None without agents: what
+        `balls` gives as each agent's orientation."""
+        if not len(self.state):
+            return None
+        return self.rows(index_of), self.state.yaws()
+
+    def _due(self, step_index, dt_ns):
+        """Whether step `step_index` sends odometry, ground truth and /tf: every step at
+        agent.odom.rate_hz 0, else step 0 and every step whose end crosses a multiple of
+        the period (simulated time, as the scans' rate)."""
+        period = self.odom_period_ns
+        end = step_index * dt_ns
+        return not period or step_index == 0 or end // period != (end - dt_ns) // period
+
+    def _wanted(self, kind):
+        return self.each and (self.encode is None or kind in self.encode)
 
     def take_commands(self):
         """The commands taken since the last call, in order (for the step's record)."""
@@ -232,26 +275,36 @@ class AgentPart:
         twists = messages.body_twists(yaws, velocities[rows], agents.yaw_rates(stamp_ns))
         frame_names = self._names
         static = None
-        if frame_names.update(names, frame_id) and self.tf_static:
+        if frame_names.update(names, frame_id) and self.tf_static and self.each:
             static = messages.tf_static(stamp_ns, frame_names)
         located = positions[rows]
-        truth = messages.ground_truth(stamp_ns, frame_names, located, yaws, twists)
+        due = self._due(step_index, dt_ns)
+        truth = (messages.ground_truth(stamp_ns, frame_names, located, yaws, twists)
+                 if due and self._wanted(messages.GROUND_TRUTH) else ())
         poses = covariances = None
         if self._noise is None:  # odometry is the ground truth, as it always was
-            odom, tf = messages.true_odometry(stamp_ns, frame_names, located, yaws, twists)
+            at, heading, moving, spread, twist_spread = located, yaws, twists, None, None
         else:
             agents.start_odometry(np.column_stack((located, yaws)))
             poses, covariances = agents.odometry()
             current = contact is not None and contact.names == names
-            odom, tf = messages.noisy_odometry(stamp_ns, frame_names, poses, covariances,
-                                               twists, contact.odometry if current else None)
+            moving, twist_spread = messages.noisy_twists(
+                twists, contact.odometry if current else None)
+            at, heading = poses[:, :2], poses[:, 2]
+            spread = odometry.message_covariance(covariances)
+        odom = (messages.odometry_messages(stamp_ns, frame_names, at, heading, moving, spread,
+                                           twist_spread)
+                if due and self._wanted(messages.ODOM) else ())
+        tf = (messages.tf_message(stamp_ns, frame_names, at, heading)
+              if due and self._wanted(messages.TF) else b'')
         hits = (() if contact is None or contact.names != names
                 else messages.bumpers(names, frame_names.base, yaws, contact.impulses,
-                                      stamp_ns))
+                                      stamp_ns, self._wanted(messages.BUMPER)))
         return AgentFrame(
             names=names, indices=rows, yaws=yaws, twists=twists,
             odom_frames=frame_names.odom, base_frames=frame_names.base, odom_cdr=odom,
             tf_cdr=tf, tf_static_cdr=static, ground_truth_cdr=truth, bumpers=hits,
             scans=self.scans.take(world, names, rows, yaws, frame_names.base, step_index,
-                                  stamp_ns, dt_ns),
-            odometry=poses, odometry_covariances=covariances)
+                                  stamp_ns, dt_ns, self._wanted(messages.SCAN)),
+            odometry=poses, odometry_covariances=covariances, topics=self.each,
+            command_rows=None if self.each else self._command_rows(index_of))

@@ -276,6 +276,24 @@ class Agents:
         self._since[row] = int(since_ns)
         self.commands_taken += 1
 
+    def command_many(self, names, commands, since_ns):
+        """Take commands (N, 3) for the agents `names`, in force from the step ending
+        since_ns, as N calls of command() would (a name given twice: its last row), but
+        checked first and all refused for one bad row (CommandRejected naming it)."""
+        rows = [self._row.get(name) for name in names]
+        if None in rows:
+            name = names[rows.index(None)]
+            raise CommandRejected('unknown_agent', f"no agent named '{name[:64]}'")
+        commands = np.asarray(commands, dtype=np.float64)
+        bad = ~(np.isfinite(commands) & (np.abs(commands) <= MAX_COMMAND)).all(axis=1)
+        if bad.any():
+            row = int(np.flatnonzero(bad)[0])
+            check_command(names[row], *commands[row].tolist())  # raises, saying why
+        rows = np.array(rows, dtype=np.int64)
+        self._commands[rows] = commands
+        self._since[rows] = int(since_ns)
+        self.commands_taken += len(rows)
+
     def last_command(self, name):
         """The last Command of `name`, or None."""
         row = self._row[name]

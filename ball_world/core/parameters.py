@@ -367,6 +367,13 @@ PARAMETERS = (
               'translation and from rotation; seeded by random.seed, the agent and the step. '
               'All 0: odometry is the ground truth.', sizes=(4,), low=0.0,
               high=MAX_ODOMETRY_ALPHA),
+    Parameter('agent.odom.rate_hz', DOUBLE, 0.0, 'Agents: odometry, ground truth and their '
+              '/tf per second of simulated time; 0: every step.', ON_RESET, 0.0, 1e6,
+              least=1e-3),
+    Parameter('agent.topics', STRING, 'each', "Agents: 'each' gives every agent its own "
+              "topics (cmd_vel, odom, ground_truth, bumper, scan, /tf); 'none' gives them none "
+              '(a swarm: balls, state and recordings carry it).', AT_START,
+              choices=('each', 'none')),
     Parameter('agent.odom.tf_static', BOOL, True, 'Agents: publish frame_id -> <p><name>/odom '
               '(identity) on /tf_static; false when a localization node (AMCL, slam_toolbox) '
               'publishes map -> odom.'),
