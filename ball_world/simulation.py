@@ -24,7 +24,7 @@ from ball_world.core.edits import (check_placement, check_speeds, EditRefused, E
 from ball_world.core.impulses import ImpulseRejected, lookup_ball, velocity_after
 from ball_world.core.limits import MAX_SIM_TIME_NS
 from ball_world.core.occupancy_map import MapError
-from ball_world.core.parameters import checked, MAX_AGENTS
+from ball_world.core.parameters import checked
 from ball_world.core.scenario import build_scene, ScenarioError, step_duration_ns
 from ball_world.core.world import World
 from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
@@ -441,9 +441,10 @@ class Simulation:
                 if len(world) + len(accepted) >= limits.MAX_BALLS:
                     raise EditRefused(TOO_MANY, f'the world holds {limits.MAX_BALLS:,} balls, '
                                                 'the most it can')
-                if request.agent and len(self.agents) + agents_added >= MAX_AGENTS:
-                    raise EditRefused(TOO_MANY, f'the world has {MAX_AGENTS:,} agents, the most '
-                                                'it can (parameter agents)')
+                most = self.agents.limit
+                if request.agent and len(self.agents) + agents_added >= most:
+                    raise EditRefused(TOO_MANY, f'the world has {most:,} agents, the most it '
+                                                'can (parameter agents, agent.topics)')
                 name = self.entities.new_name(request.name, request.allow_renaming, taken)
                 clash = request.agent and self.agents.frame_clash(self.frame_id, name)
                 if clash:

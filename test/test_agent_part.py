@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from ball_world.core.agents import CommandRejected
+from ball_world.core.parameters import MAX_AGENTS, MAX_AGENTS_EACH
 from ball_world.simulation import Simulation
 
 BASE = {'rate_hz': 50.0, 'random.count': 10, 'random.seed': 4, 'physics.backend': 'numpy',
@@ -92,3 +93,8 @@ def test_only_the_kinds_someone_takes_are_encoded_and_a_swarm_encodes_none():
     assert not frame.topics and frame.odom_cdr == () and frame.tf_cdr == b''
     assert frame.tf_static_cdr is None and [scan.cdr for scan in frame.scans] == [b''] * 3
     assert frame.yaws.shape == (3,) and frame.twists.shape == (3, 3)  # the state is all there
+
+
+@pytest.mark.parametrize('topics, most', [('each', MAX_AGENTS_EACH), ('none', MAX_AGENTS)])
+def test_a_world_takes_agents_up_to_the_limit_of_its_topics(topics, most):
+    assert Simulation({**BASE, 'agent.topics': topics}).agents.limit == most

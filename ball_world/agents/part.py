@@ -26,6 +26,7 @@ from ball_world.agents import frames as messages
 from ball_world.core import odometry
 from ball_world.core.agents import (agent_names, Agents, CommandRejected, frame_clash,
                                     Limits)
+from ball_world.core.parameters import MAX_AGENTS, MAX_AGENTS_EACH, ParameterError
 from ball_world.msgs.twist_cdr import encode_twist, encode_twist_stamped
 from ball_world.scans import AgentScans, check as check_scans
 from ball_world.step_record import AgentFrame, AppliedCommand
@@ -33,8 +34,15 @@ from ball_world.step_record import AgentFrame, AppliedCommand
 
 def check(parameters, count):
     """The agents of a new world of `count` balls and their scanners' parameters, checked
-    (ParameterError naming the parameter); returns the agents' names."""
+    (ParameterError naming the parameter); returns the agents' names.
+
+    Agents with topics of their own (agent.topics each) are at most MAX_AGENTS_EACH: their
+    DDS entities are what bounds the node's start and stop."""
     names = agent_names(parameters, count)
+    if parameters['agent.topics'] == 'each' and len(names) > MAX_AGENTS_EACH:
+        raise ParameterError('agents', f'{len(names):,} agents with topics of their own '
+                                       f'(agent.topics each): at most {MAX_AGENTS_EACH:,}; '
+                                       f'agent.topics none takes up to {MAX_AGENTS:,}')
     check_scans(parameters)
     return names
 
@@ -110,6 +118,11 @@ class AgentPart:
         self._rows = None
 
     # Edits ------------------------------------------------------------------------------
+
+    @property
+    def limit(self):
+        """The most agents this world may have (a spawn past it is refused)."""
+        return MAX_AGENTS_EACH if self.each else MAX_AGENTS
 
     def frame_clash(self, frame_id, name):
         """Why an agent `name` cannot be under frame_id (core.agents.frame_clash), or None."""
