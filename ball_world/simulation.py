@@ -398,10 +398,13 @@ class Simulation:
         world.apply_impulses(balls, jx, jy)
         stamp_ns = (self.step_index + 1) * self.dt_ns
         xs, ys = jx.tolist(), jy.tolist()
+        # A swarm's drives are neither recorded nor published (recording.agent_topics): no
+        # bytes are made for them (half the cost of its drive at 10,000 agents).
+        messages = (encode_impulses(stamp_ns, names, xs, ys) if self.agents.each
+                    else [b''] * len(names))
         self._applied.extend(
             AppliedImpulse(ball=ball, jx=x, jy=y, frame_id=name, cdr=cdr, drive=True)
-            for ball, x, y, name, cdr in zip(balls.tolist(), xs, ys, names,
-                                             encode_impulses(stamp_ns, names, xs, ys)))
+            for ball, x, y, name, cdr in zip(balls.tolist(), xs, ys, names, messages))
         self.drive_applied += len(names)
         drive.clear()
         return True

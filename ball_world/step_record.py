@@ -26,7 +26,9 @@ class AppliedImpulse:
     jx: float  # N*s along world x
     jy: float  # N*s along world y
     frame_id: str  # 'ball_<i>', as it arrived
-    cdr: bytes  # the Vector3Stamped as recorded: CDR, header.stamp = sim time of the step
+    # the Vector3Stamped as recorded: CDR, header.stamp = sim time of the step (b'' for a
+    # swarm's drive, agent.topics none: neither recorded nor published)
+    cdr: bytes
     # An agent's own drive (core.agents: its cmd_vel turned into an impulse), not a push from
     # outside; views draw and count the two apart.
     drive: bool = False
