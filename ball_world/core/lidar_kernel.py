@@ -679,4 +679,11 @@ def warm():
                  np.array([[3.0, -1.0, 3.0, 1.0]]), solid, free_squares(solid),
                  np.array([-1.0, -1.0, 0.5]), 0.0, 0.0, 1.0, 0.0, np.array([1.0, 0.0]),
                  np.array([0.0, 1.0]), 0.0, 0.5 * math.pi, 0, 0.1, 5.0, out)
+    many = np.empty((1, 2))
+    scan_agents(np.array([[0.0, 0.0], [2.0, 0.0]]), np.array([0.3, 0.4]),
+                np.array([[3.0, -1.0, 3.0, 1.0]]), solid, free_squares(solid),
+                np.array([-1.0, -1.0, 0.5]), np.array([0, 2]), np.array([0, 1]),
+                np.array([0.0, 0.0, 5.4, 1.0, 1.0]), np.array([0]), np.array([1.0]),
+                np.array([0.0]), np.array([1.0, 0.0]), np.array([0.0, 1.0]), 0.0,
+                0.5 * math.pi, np.array([0.1]), 5.0, many)
     return out
