@@ -15,29 +15,24 @@ import math
 import numpy as np
 
 from ball_world import __version__
+from ball_world.agents.part import AgentPart, check as check_agents
 from ball_world.core import limits
-from ball_world.core import odometry
-from ball_world.core.agents import (agent_names, Agents, CommandRejected, frame_clash,
-                                    frames, Limits)
+from ball_world.core.agents import CommandRejected
 from ball_world.core.edits import (check_placement, check_speeds, EditRefused, Entities,
                                    INVALID_POSE, MAX_SPAWN_BATCH, NAME_INVALID, Neighbours,
                                    TOO_MANY)
 from ball_world.core.impulses import ImpulseRejected, lookup_ball, velocity_after
 from ball_world.core.limits import MAX_SIM_TIME_NS
 from ball_world.core.occupancy_map import MapError
-from ball_world.core.parameters import checked, MAX_AGENTS
+from ball_world.core.parameters import checked
 from ball_world.core.scenario import build_scene, ScenarioError, step_duration_ns
 from ball_world.core.world import World
-from ball_world.msgs.agent_cdr import encode_odometry, encode_tf_message
 from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
                                  encode_vector3_stamped)
 from ball_world.msgs.impulse_batch import encode_impulses
 from ball_world.msgs.map_cdr import encode_occupancy_grid
-from ball_world.msgs.twist_cdr import encode_twist, encode_twist_stamped
-from ball_world.scans import AgentScans, check as check_scans
-from ball_world.step_record import (AgentFrame, AppliedCommand, AppliedEdit, AppliedImpulse,
-                                    Bumper, PendingEvents, RunInfo, STATS_FIELDS, StepRecord,
-                                    WorldSnapshot)
+from ball_world.step_record import (AppliedEdit, AppliedImpulse, PendingEvents, RunInfo,
+                                    STATS_FIELDS, StepRecord, WorldSnapshot)
 
 DEFAULT_TOPICS = {'balls': '/balls', 'state': '/state', 'stats': '/stats',
                   'impulse': '/impulse', 'edits': '/edits'}
@@ -92,24 +87,13 @@ def build(parameters, occupancy_map=None):
     elif not parameters['map']:
         occupancy_map = None
     world, cells = build_scene(parameters, occupancy_map)
-    agent_names(parameters, len(world))
-    check_scans(parameters)
+    check_agents(parameters, len(world))
     return BuiltWorld(parameters=parameters, world=world, dt_ns=step_duration_ns(parameters),
                       occupancy_map=occupancy_map, cells=cells)
 
 
 def _ignore(events):
     """write_pending of a sink that does not record edits (a viewer, a test's collector)."""
-
-
-@dataclass(frozen=True)
-class _AgentStep:
-    """What a step did to the agents (names in agent order): the collision impulses each
-    took, (A, 2) world frame, and the noisy odometry's advance (core.odometry.Step) or None."""
-
-    names: tuple
-    impulses: np.ndarray
-    odometry: object
 
 
 @dataclass(frozen=True)
@@ -174,17 +158,10 @@ class Simulation:
             0, self.frame_id, built.occupancy_map)
         self.entities = Entities(len(world))
         self._names = tuple(self.entities.names)
-        self.agents = Agents(agent_names(parameters, len(world)),
-                             Limits.from_parameters(parameters))
+        # The agents as one part (ball_world.agents): their drive, odometry, bumpers, scans
+        # and frames, made from the parameters; the Simulation orders its calls.
+        self.agents = AgentPart(parameters, check_agents(parameters, len(world)))
         self._drive = None  # the agents' impulses for the next step, once applied
-        # ((names, frame_id), odom frames, body frames, frame_id per agent) last used
-        self._agent_frames = None
-        alphas = parameters['agent.odom.noise']
-        self._odometry_noise = (odometry.OdometryNoise(parameters['random.seed'])
-                                if odometry.enabled(alphas) else None)
-        self._contact = None  # what the last step did to the agents (_AgentStep), or None
-        self._commands = []  # commands taken since the last step
-        self._scans = AgentScans(parameters)
         self._world_changed = False
         self._applied = []  # impulses applied since the last step
         self._edits = []  # edits applied since the last step
@@ -230,6 +207,7 @@ class Simulation:
         self.parameters = built.parameters
         self.entities = Entities.restored(state.names, state.retired, len(base))
         self._names = tuple(self.entities.names)
+        self.agents.balls_moved()
         commands = dict(state.commands)
         odometry_poses = dict(zip(state.agents, state.odometry or ()))
         covariances = dict(zip(state.agents, state.odometry_covariances or ()))
@@ -365,16 +343,11 @@ class Simulation:
         agent or a bad command. Taken commands are recorded with the next step, as `cdr`
         (the message as received), or encoded here when given in code.
         """
-        since_ns = (self.step_index + 1) * self.dt_ns
         try:
-            self.agents.command(name, vx, vy, wz, since_ns)
+            self.agents.command(name, vx, vy, wz, (self.step_index + 1) * self.dt_ns, cdr)
         except CommandRejected as rejection:
             self.count_rejection('cmd_vel_' + rejection.reason)
             raise
-        if not cdr:
-            cdr = (encode_twist_stamped(since_ns, '', vx, vy, wz)
-                   if self.parameters['agent.cmd_vel_stamped'] else encode_twist(vx, vy, wz))
-        self._commands.append(AppliedCommand(name, float(vx), float(vy), float(wz), cdr))
 
     def apply_drive(self):
         """Apply the agents' impulses for the next step now, once: (applied, rejected).
@@ -387,10 +360,7 @@ class Simulation:
         if self._drive is not None:  # already applied for this step
             return 0, []
         end_ns = (self.step_index + 1) * self.dt_ns
-        world = self.world
-        self._drive = deque(self.agents.impulses(world.velocities, world.masses,
-                                                 self.index_of, self.dt_ns, end_ns)
-                            if len(self.agents) else ())
+        self._drive = deque(self.agents.drive(self.world, self.index_of, self.dt_ns, end_ns))
         before = len(self._applied)
         rejected = [] if self._apply_at_once(self._drive) else self._apply(self._drive,
                                                                            drive=True)
@@ -428,10 +398,13 @@ class Simulation:
         world.apply_impulses(balls, jx, jy)
         stamp_ns = (self.step_index + 1) * self.dt_ns
         xs, ys = jx.tolist(), jy.tolist()
+        # A swarm's drives are neither recorded nor published (recording.agent_topics): no
+        # bytes are made for them (half the cost of its drive at 10,000 agents).
+        messages = (encode_impulses(stamp_ns, names, xs, ys) if self.agents.each
+                    else [b''] * len(names))
         self._applied.extend(
             AppliedImpulse(ball=ball, jx=x, jy=y, frame_id=name, cdr=cdr, drive=True)
-            for ball, x, y, name, cdr in zip(balls.tolist(), xs, ys, names,
-                                             encode_impulses(stamp_ns, names, xs, ys)))
+            for ball, x, y, name, cdr in zip(balls.tolist(), xs, ys, names, messages))
         self.drive_applied += len(names)
         drive.clear()
         return True
@@ -471,12 +444,12 @@ class Simulation:
                 if len(world) + len(accepted) >= limits.MAX_BALLS:
                     raise EditRefused(TOO_MANY, f'the world holds {limits.MAX_BALLS:,} balls, '
                                                 'the most it can')
-                if request.agent and len(self.agents) + agents_added >= MAX_AGENTS:
-                    raise EditRefused(TOO_MANY, f'the world has {MAX_AGENTS:,} agents, the most '
-                                                'it can (parameter agents)')
+                most = self.agents.limit
+                if request.agent and len(self.agents) + agents_added >= most:
+                    raise EditRefused(TOO_MANY, f'the world has {most:,} agents, the most it '
+                                                'can (parameter agents, agent.topics)')
                 name = self.entities.new_name(request.name, request.allow_renaming, taken)
-                clash = request.agent and frame_clash(
-                    self.frame_id, str(self.parameters['frame_prefix']), (name,))
+                clash = request.agent and self.agents.frame_clash(self.frame_id, name)
                 if clash:
                     raise EditRefused(NAME_INVALID, f'an agent named {name}: {clash}')
                 what = f"ball '{name}' at"
@@ -595,6 +568,7 @@ class Simulation:
     def _changed(self):
         self._names = tuple(self.entities.names)
         self._world_changed = True
+        self.agents.balls_moved()
 
     # Stepping ---------------------------------------------------------------------------
 
@@ -607,52 +581,12 @@ class Simulation:
         rejected += self.apply_queued()
         self._drive = None
         world = self.world
-        agents = self.agents
-        before = None
-        if len(agents):
-            # The agents as the step takes them, every impulse applied: what the bumper
-            # measures the collisions against, and the true pose the odometry starts from.
-            indices = self._agent_indices()
-            before = (indices, world.velocities[indices], world.positions[indices],
-                      agents.yaws())
+        self.agents.before_step(world, self.index_of)
         stats = world.step(self.dt_ns * 1e-9)
-        end_ns = (self.step_index + 1) * self.dt_ns
-        if before is not None:
-            agents.turn(self.dt_ns, end_ns)
-            self._contact = self._agents_stepped(*before)
         self.step_index += 1
+        self.agents.after_step(world, self.dt_ns, self.step_index)
         record = self.record(stats, real_time_factor)
         return record, rejected
-
-    def _agent_indices(self):
-        index_of = self.index_of
-        return np.array([index_of[name] for name in self.agents.names], dtype=np.int64)
-
-    def _agents_stepped(self, indices, velocities, positions, yaws):
-        """What the step did to the agents: the collision impulses they took (world frame)
-        and, with noisy odometry, its advance (core.odometry).
-
-        Within World.step velocities change only in collisions (no gravity, no friction;
-        every impulse was applied before it), so m (v after - v before) is the impulse the
-        agent received from balls, walls and map cells, in either backend and mode alike.
-        """
-        world = self.world
-        masses = world.masses[indices]
-        impulses = masses[:, None] * (world.velocities[indices] - velocities)
-        advanced = None
-        if self._odometry_noise is not None:
-            agents = self.agents
-            before = np.column_stack((positions, yaws))
-            after = np.column_stack((world.positions[indices], agents.yaws()))
-            agents.start_odometry(before)
-            poses, covariances = agents.odometry()
-            moved = np.flatnonzero((before != after).any(axis=1)).tolist()
-            normals = self._odometry_noise.normals(agents.names, self.step_index + 1, moved)
-            advanced = odometry.advance(self.parameters['agent.odom.noise'], poses,
-                                        covariances, before, after, normals,
-                                        self.dt_ns * 1e-9)
-            agents.set_odometry(advanced.poses, advanced.covariances)
-        return _AgentStep(self.agents.names, impulses, advanced)
 
     def record(self, stats, real_time_factor=None):
         """Pack the state, and what was applied since the last step, for every sink."""
@@ -670,20 +604,20 @@ class Simulation:
             log_time_ns=self.log_offset_ns + stamp_ns,
             positions=positions, velocities=velocities,
             ball_ball=ball_ball, ball_wall=ball_wall, kinetic_energy=energy, momentum=momentum,
-            balls_cdr=encode_pose_array(positions, stamp_ns, self.frame_id),
+            balls_cdr=encode_pose_array(positions, stamp_ns, self.frame_id,
+                                        self.agents.headings(self.index_of)),
             state_cdr=encode_state(positions, velocities),
             stats_cdr=encode_float64_vector(
                 (energy, momentum[0], momentum[1], ball_ball, ball_wall, rtf), STATS_FIELDS),
             impulses=tuple(self._applied), real_time_factor=real_time_factor,
             edits=tuple(self._edits), names=self._names, radii=world.radii,
             masses=world.masses, world_changed=self._world_changed,
-            agents=self._agent_frame(positions, velocities, stamp_ns),
-            commands=tuple(self._commands), exact=self._carried_state())
-        self._commands = []
+            agents=self.agents.frame(world, self.index_of, positions, velocities,
+                                     self.step_index, self.dt_ns, self.frame_id),
+            commands=self.agents.take_commands(), exact=self._carried_state())
         self._applied = []
         self._edits = []
         self._world_changed = False
-        self._contact = None
         self.last_log_ns = record.log_time_ns
         self.last_record = record
         self._each_sink(lambda sink: sink.write_step(record))
@@ -698,98 +632,6 @@ class Simulation:
                 getattr(sink, 'wants_carried_state', False) for sink in self.sinks):
             return None
         return self.world.carried_state()
-
-    def _agent_frame(self, positions, velocities, stamp_ns):
-        """The agents now (rows, headings, odom, ground truth, bumper and /tf bytes), or None
-        without agents.
-
-        Twists are in the body frame (REP 105): the world velocity turned by -yaw, and the
-        yaw rate of the step that just ended. Without odometry noise odom is the ground
-        truth, bit for bit; with it, odom and /tf carry the odometry's pose (core.odometry).
-        """
-        agents = self.agents
-        if not len(agents):
-            return None
-        names = agents.names
-        indices = self._agent_indices()
-        yaws = agents.yaws()
-        cos, sin = np.cos(yaws), np.sin(yaws)
-        moving = velocities[indices]
-        twists = np.empty((len(names), 3))
-        twists[:, 0] = cos * moving[:, 0] + sin * moving[:, 1]
-        twists[:, 1] = cos * moving[:, 1] - sin * moving[:, 0]
-        twists[:, 2] = agents.yaw_rates(stamp_ns)
-        static = None
-        key = (names, self.frame_id)  # the node may change frame_id between steps
-        if self._agent_frames is None or self._agent_frames[0] != key:
-            prefix = str(self.parameters['frame_prefix'])
-            pairs = [frames(prefix, name) for name in names]
-            self._agent_frames = (key, tuple(p[0] for p in pairs),
-                                  tuple(p[1] for p in pairs), (self.frame_id,) * len(names))
-            count = len(names)
-            if self.parameters['agent.odom.tf_static']:
-                static = encode_tf_message(stamp_ns, (self.frame_id,) * count,
-                                           self._agent_frames[1], np.zeros((count, 2)),
-                                           np.zeros(count))
-        _, odom_frames, base_frames, world_frames = self._agent_frames
-        located = positions[indices]
-        truth = tuple(encode_odometry(stamp_ns, world_frames, base_frames, located, yaws,
-                                      twists))
-        poses = covariances = None
-        if self._odometry_noise is None:  # odometry is the ground truth, as it always was
-            odom = tuple(encode_odometry(stamp_ns, odom_frames, base_frames, located, yaws,
-                                         twists))
-            tf = encode_tf_message(stamp_ns, odom_frames, base_frames, located, yaws)
-        else:
-            agents.start_odometry(np.column_stack((located, yaws)))
-            poses, covariances = agents.odometry()
-            odom, tf = self._noisy_odometry(stamp_ns, odom_frames, base_frames, poses,
-                                            covariances, twists)
-        return AgentFrame(
-            names=names, indices=indices, yaws=yaws, twists=twists, odom_frames=odom_frames,
-            base_frames=base_frames, odom_cdr=odom, tf_cdr=tf, tf_static_cdr=static,
-            ground_truth_cdr=truth, bumpers=self._bumpers(names, base_frames, yaws, stamp_ns),
-            scans=self._scans.take(self.world, names, indices, yaws, base_frames,
-                                   self.step_index, stamp_ns, self.dt_ns),
-            odometry=poses, odometry_covariances=covariances)
-
-    def _noisy_odometry(self, stamp_ns, odom_frames, base_frames, poses, covariances, twists):
-        """(odom bytes of each agent, /tf bytes) from the noisy odometry's state.
-
-        Agents that had not started (a new world, a spawn) have just started at their true
-        pose. The twist is the true one plus the error of the step that ended here, if any.
-        """
-        agents = self.agents
-        advanced = self._contact.odometry if self._contact is not None else None
-        if advanced is not None and self._contact.names == agents.names:
-            twists = twists + advanced.twist_errors
-            twist_covariances = odometry.message_covariance(advanced.twist_covariances)
-        else:
-            twist_covariances = np.zeros((len(poses), 36))
-        odom = tuple(encode_odometry(
-            stamp_ns, odom_frames, base_frames, poses[:, :2], poses[:, 2], twists,
-            odometry.message_covariance(covariances), twist_covariances))
-        return odom, encode_tf_message(stamp_ns, odom_frames, base_frames, poses[:, :2],
-                                       poses[:, 2])
-
-    def _bumpers(self, names, base_frames, yaws, stamp_ns):
-        """The Bumper of each agent that took a collision impulse in the step that ended
-        here, in its base_link frame at the step's end heading (agent order)."""
-        contact = self._contact
-        if contact is None or contact.names != names:
-            return ()
-        impulses = contact.impulses
-        hit = np.flatnonzero((impulses != 0.0).any(axis=1))
-        if not len(hit):
-            return ()
-        cos, sin = np.cos(yaws[hit]), np.sin(yaws[hit])
-        jx, jy = impulses[hit, 0], impulses[hit, 1]
-        forward = (cos * jx + sin * jy).tolist()
-        left = (cos * jy - sin * jx).tolist()
-        frames_hit = [base_frames[row] for row in hit.tolist()]
-        messages = encode_impulses(stamp_ns, frames_hit, forward, left)
-        return tuple(Bumper(names[row], frame, x, y, cdr) for row, frame, x, y, cdr in zip(
-            hit.tolist(), frames_hit, forward, left, messages))
 
     def _each_sink(self, action):
         """Run action on every sink; a sink that raises is dropped and reported once.

@@ -26,7 +26,9 @@ class AppliedImpulse:
     jx: float  # N*s along world x
     jy: float  # N*s along world y
     frame_id: str  # 'ball_<i>', as it arrived
-    cdr: bytes  # the Vector3Stamped as recorded: CDR, header.stamp = sim time of the step
+    # the Vector3Stamped as recorded: CDR, header.stamp = sim time of the step (b'' for a
+    # swarm's drive, agent.topics none: neither recorded nor published)
+    cdr: bytes
     # An agent's own drive (core.agents: its cmd_vel turned into an impulse), not a push from
     # outside; views draw and count the two apart.
     drive: bool = False
@@ -91,7 +93,9 @@ class AgentFrame:
     odom_frames: tuple  # <p><name>/odom of each agent
     base_frames: tuple  # <p><name>/base_link of each agent
     # nav_msgs/Odometry of each agent, CDR, as published on <name>/odom: the ground truth
-    # without agent.odom.noise, the drifting odometry with it (core.odometry)
+    # without agent.odom.noise, the drifting odometry with it (core.odometry). Empty (and
+    # so are tf_cdr and ground_truth_cdr) at a step agent.odom.rate_hz skips, with
+    # agent.topics none, and for a kind nobody takes (AgentPart.encode).
     odom_cdr: tuple
     tf_cdr: bytes  # tf2_msgs/TFMessage: every odom -> base_link (odom's poses), on /tf
     # /tf_static (frame_id -> each odom frame, identity) when the set of agents changed with
@@ -109,6 +113,12 @@ class AgentFrame:
     # x, y, yaw and covariances (A, 6) (core.odometry), which a split file resumes from.
     odometry: Optional[np.ndarray] = None
     odometry_covariances: Optional[np.ndarray] = None
+    # agent.topics: True ('each') when the agents have topics of their own; False for a
+    # swarm ('none'), whose frame carries no per-agent bytes at all.
+    topics: bool = True
+    # A swarm's commands taken before this step, (K, 4) rows (ball, vx, vy, wz), ball the
+    # row in `balls`: recorded as one message (recording.agent_topics); None with topics.
+    command_rows: Optional[np.ndarray] = None
 
 
 @dataclass(frozen=True)

@@ -71,8 +71,8 @@ def run(yaml_path, args, sinks=()):
     """Per-step CPU seconds, whether each step scanned, and the scans' share of each."""
     simulation = Simulation(parameters(yaml_path, args.balls, args.agents, args.seed,
                                        args.scan_rate), sinks=sinks)
-    timed = _TimedScans(simulation._scans)
-    simulation._scans = timed
+    timed = _TimedScans(simulation.agents.scans)
+    simulation.agents.scans = timed
     assert isinstance(timed.scans, scans_module.AgentScans)
     took, scanned, in_scans = [], [], []
     for k in range(args.warm_up + args.steps):

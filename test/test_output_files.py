@@ -11,7 +11,7 @@ import subprocess
 import sys
 import time
 
-from ball_world_testing.harness import finish, kill, start_node
+from ball_world_testing.harness import DEADLINE, finish, kill, start_node
 import pytest
 
 from ball_world.recording.files import (claim_output, ClaimedSink, FileRefused,
@@ -112,7 +112,7 @@ def test_a_file_being_recorded_is_locked_and_never_truncated_by_a_second_claim(t
     other = subprocess.run(
         [sys.executable, '-c', 'import sys; from ball_world.recording.files import '
          'claim_output; claim_output(sys.argv[1], overwrite=True)', str(path)],
-        capture_output=True, text=True, timeout=60)
+        capture_output=True, text=True, timeout=DEADLINE)
     assert other.returncode == 1
     assert 'is being recorded by another process (it is locked)' in other.stderr
     assert path.read_bytes() == OLD

@@ -127,7 +127,7 @@ def test_replay_refuses_bad_arguments_before_starting_ros(recording_path):
                             (['--remap-prefix', 'replay'], "must start with '/'")):
         result = subprocess.run([sys.executable, '-m', 'ball_world.tools.replay',
                                  str(recording_path), *args], cwd=ROOT, capture_output=True,
-                                text=True, timeout=60)
+                                text=True, timeout=DEADLINE)
         assert result.returncode == 2 and complaint in result.stderr
 
 
@@ -154,7 +154,7 @@ def test_a_recorded_clock_plays_unless_clock_publishes_its_own(tmp_path):
     assert '/clock' not in played_topics(parser.parse_args([str(path), '--clock']), recording)
     result = subprocess.run([sys.executable, '-m', 'ball_world.tools.replay', str(path),
                              '--clock', '--topics', '/balls', '/clock'], cwd=ROOT,
-                            capture_output=True, text=True, timeout=60)
+                            capture_output=True, text=True, timeout=DEADLINE)
     assert result.returncode == 2
     assert result.stderr.strip() == ('ball_world_replay: --clock publishes /clock itself: '
                                      'leave it out of --topics')

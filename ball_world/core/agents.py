@@ -276,6 +276,24 @@ class Agents:
         self._since[row] = int(since_ns)
         self.commands_taken += 1
 
+    def command_many(self, names, commands, since_ns):
+        """Take commands (N, 3) for the agents `names`, in force from the step ending
+        since_ns, as N calls of command() would (a name given twice: its last row), but
+        checked first and all refused for one bad row (CommandRejected naming it)."""
+        rows = [self._row.get(name) for name in names]
+        if None in rows:
+            name = names[rows.index(None)]
+            raise CommandRejected('unknown_agent', f"no agent named '{name[:64]}'")
+        commands = np.asarray(commands, dtype=np.float64)
+        bad = ~(np.isfinite(commands) & (np.abs(commands) <= MAX_COMMAND)).all(axis=1)
+        if bad.any():
+            row = int(np.flatnonzero(bad)[0])
+            check_command(names[row], *commands[row].tolist())  # raises, saying why
+        rows = np.array(rows, dtype=np.int64)
+        self._commands[rows] = commands
+        self._since[rows] = int(since_ns)
+        self.commands_taken += len(rows)
+
     def last_command(self, name):
         """The last Command of `name`, or None."""
         row = self._row[name]
@@ -303,16 +321,18 @@ class Agents:
         """The headings at the end of the step ending end_ns (their yaw rates applied)."""
         return wrapped(self._yaws + self.yaw_rates(end_ns) * (dt_ns * 1e-9))
 
-    def impulses(self, velocities, masses, index_of, dt_ns, end_ns):
+    def impulses(self, velocities, masses, index_of, dt_ns, end_ns, rows=None):
         """The drive's impulses for the step ending end_ns: [(name, jx, jy)], agent order.
 
         velocities and masses are the world's arrays (after the impulses that arrived before
-        the step), index_of maps names to indices. An agent already at its target gets none.
+        the step), index_of maps names to indices; rows, when given, are the agents' indices
+        already looked up (agent order). An agent already at its target gets none.
         """
         if not self._names:
             return []
         limits = self.limits
-        rows = np.array([index_of.get(name, -1) for name in self._names], dtype=np.int64)
+        if rows is None:
+            rows = np.array([index_of.get(name, -1) for name in self._names], dtype=np.int64)
         present = rows >= 0
         active = self._in_force(end_ns)
         forward = np.where(active, self._commands[:, 0], 0.0)

@@ -218,6 +218,73 @@ def distances_numba(positions, radii, walls, grid, origin, cos_yaw, sin_yaw, bod
     return out
 
 
+def ball_cells(positions, radii, reach):
+    """The balls sorted into square cells for scan_agents: (cell_first, cell_balls, grid).
+
+    The side is at least reach + the largest radius (so a ball a beam can meet within reach
+    lies in its scanner's cell or a neighbour), and grows past it rather than make more
+    cells than about the balls' count (a few balls far apart, a short reach). grid: x0, y0,
+    side, columns, rows; cell (i, j) is i * rows + j, and holds cell_balls[cell_first[c]:
+    cell_first[c + 1]] (ball indices)."""
+    count = len(positions)
+    if count == 0:
+        return np.zeros(2, dtype=np.int64), np.zeros(0, dtype=np.int64), np.array(
+            [0.0, 0.0, 1.0, 1.0, 1.0])
+    low = positions.min(axis=0)
+    extent = positions.max(axis=0) - low
+    side = float(reach + radii.max())
+    side = max(side, math.sqrt(float(extent[0]) * float(extent[1]) / count),
+               float(extent.max()) / max(count, 1)) * (1.0 + 1e-9) + 1e-300
+    x0, y0 = float(low[0]), float(low[1])
+    columns = int(math.floor(float(extent[0]) / side)) + 1
+    rows = int(math.floor(float(extent[1]) / side)) + 1
+    # The kernel's expression, element by element, so ball and scanner agree on cells.
+    i = np.clip(np.floor((positions[:, 0] - x0) / side).astype(np.int64), 0, columns - 1)
+    j = np.clip(np.floor((positions[:, 1] - y0) / side).astype(np.int64), 0, rows - 1)
+    keys = i * rows + j
+    order = np.argsort(keys, kind='stable')
+    first = np.zeros(columns * rows + 1, dtype=np.int64)
+    np.cumsum(np.bincount(keys, minlength=columns * rows), out=first[1:])
+    return first, order.astype(np.int64), np.array([x0, y0, side, columns, rows],
+                                                   dtype=np.float64)
+
+
+def scan_many(positions, radii, walls, agents, yaws, fan, range_mins, backend='auto',
+              grid=NO_MAP):
+    """The noiseless scans (A, samples) of the balls `agents` (indices), each from its centre
+    at heading yaws[a] with range_min range_mins[a] and the fan's beams and range_max, its
+    own ball excluded: row a equals Scanner(fan).distances(...) of that agent, bit for bit.
+
+    numpy: one scan per agent (the reference); numba: one compiled call for all of them,
+    the balls sorted into cells (ball_cells) so that a short range tests only the balls
+    near each scanner (lidar_kernel.scan_agents)."""
+    positions = _float_array(positions).reshape(-1, 2)
+    radii = _float_array(radii)
+    walls = _segments(walls)
+    agents = np.ascontiguousarray(agents, dtype=np.int64)
+    yaws = _float_array(yaws)
+    range_mins = _float_array(range_mins)
+    body = body_directions(fan) + (float(fan.angle_min), float(fan.angle_increment))
+    out = np.empty((len(agents), fan.samples))
+    if resolve_backend(backend) == 'numpy':
+        for row, (ball, yaw, low) in enumerate(zip(agents.tolist(), yaws.tolist(),
+                                                   range_mins.tolist())):
+            out[row] = distances_numpy(positions, radii, walls, grid, positions[ball],
+                                       math.cos(yaw), math.sin(yaw), body, ball, low,
+                                       fan.range_max)
+        return out
+    first, balls, cells = ball_cells(positions, radii, fan.range_max)
+    # math's cos and sin, as Scanner.distances takes them (numpy's may differ in the last
+    # bit where it has vector versions of its own).
+    headings = yaws.tolist()
+    cos = np.array([math.cos(yaw) for yaw in headings])
+    sin = np.array([math.sin(yaw) for yaw in headings])
+    lidar_kernel.scan_agents(positions, radii, walls, grid.solid, _skips(grid), grid.frame,
+                             first, balls, cells, agents, cos, sin, body[0], body[1], body[2],
+                             body[3], range_mins, float(fan.range_max), out)
+    return out
+
+
 def _skips(grid):
     """The grid's free squares (lidar_kernel.free_squares), made the first time the
     compiled scan walks it and kept with it."""

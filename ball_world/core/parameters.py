@@ -41,11 +41,14 @@ MAX_PATH_LENGTH = 4096
 MAX_SPEED = 1e6
 #: An entity name (core.edits.NAME_PATTERN: the same rule, without importing the edits).
 _NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
-#: Most agents a world may have. Each costs a subscription and three publishers, which DDS
-#: announces one by one, and two or three messages a step: at 1,000 the node starts in
-#: 5-9 s, steps at 9-25 steps/s and stops in 3 s on a loaded 2-core machine (docs/agents.md);
-#: at 3,000 it took 14 s to start, 11 steps/s and 72 s to stop, at 10,000 minutes.
-MAX_AGENTS = 1_000
+#: Most agents a world may have: a swarm's (agent.topics none), which has no topics of its
+#: own; 10,000 start, step and stop in seconds (docs/agents.md).
+MAX_AGENTS = 10_000
+#: Most agents with topics of their own (agent.topics each), the declared limit: each costs
+#: a subscription and three publishers, which DDS announces one by one: at 1,000 the node
+#: starts in 5-11 s and stops in 3-6 s on a loaded 2-core machine (docs/agents.md); at
+#: 3,000 it took 14 s to start and (before the budgeted stop) 72 s to stop.
+MAX_AGENTS_EACH = 1_000
 #: Largest alpha of agent.odom.noise: a variance of 10 times the motion squared already
 #: makes odometry useless; beyond it a value is a mistake.
 MAX_ODOMETRY_ALPHA = 10.0
@@ -346,7 +349,8 @@ PARAMETERS = (
               "touching and approaching) or 'exact' (every collision at its true time of "
               'impact; needs numba).', choices=('seed', 'exact')),
     Parameter('agents', STRING_ARRAY, [], 'Entity names of the balls that are agents (robots '
-              'driven by <name>/cmd_vel), e.g. [ball_0].', max_size=MAX_AGENTS),
+              'driven by <name>/cmd_vel), e.g. [ball_0]; at most 1,000 with agent.topics '
+              'each.', max_size=MAX_AGENTS),
     Parameter('frame_prefix', STRING, '', "Prefix of the agents' frames (<p><name>/odom, "
               '<p><name>/base_link), so two worlds on one graph do not clash.', AT_START,
               max_length=limits.MAX_NAME_LENGTH, rule=_prefix),
@@ -367,6 +371,13 @@ PARAMETERS = (
               'translation and from rotation; seeded by random.seed, the agent and the step. '
               'All 0: odometry is the ground truth.', sizes=(4,), low=0.0,
               high=MAX_ODOMETRY_ALPHA),
+    Parameter('agent.odom.rate_hz', DOUBLE, 0.0, 'Agents: odometry, ground truth and their '
+              '/tf per second of simulated time; 0: every step.', ON_RESET, 0.0, 1e6,
+              least=1e-3),
+    Parameter('agent.topics', STRING, 'each', "Agents: 'each' gives every agent its own "
+              "topics (cmd_vel, odom, ground_truth, bumper, scan, /tf); 'none' gives them none "
+              '(a swarm: balls, state and recordings carry it).', AT_START,
+              choices=('each', 'none')),
     Parameter('agent.odom.tf_static', BOOL, True, 'Agents: publish frame_id -> <p><name>/odom '
               '(identity) on /tf_static; false when a localization node (AMCL, slam_toolbox) '
               'publishes map -> odom.'),

@@ -324,3 +324,44 @@ def decode_laser_scan(data: bytes) -> DecodedScan:
     ranges = reader.f32(reader.count(4))
     intensities = reader.f32(reader.count(4))
     return DecodedScan(stamp_ns, frame_id, *fields, ranges, intensities)
+
+
+#: A swarm's commands of a step (agent.topics none): std_msgs/msg/Float64MultiArray rows
+#: (ball, vx, vy, wz), its layout's dims labelled so.
+COMMAND_LABELS = ('command', 'ball_vx_vy_wz')
+_COMMAND_COLUMNS = 4
+
+
+def encode_command_rows(rows) -> bytes:
+    """Float64MultiArray of (K, 4) rows (ball, vx, vy, wz): dims (command, K, 4K) and
+    (ball_vx_vy_wz, 4, 4), data_offset 0, as `state` lays out its rows."""
+    rows = np.ascontiguousarray(rows, dtype='<f8').reshape(-1, _COMMAND_COLUMNS)
+    count = len(rows)
+    dims = ((COMMAND_LABELS[0], count, count * _COMMAND_COLUMNS),
+            (COMMAND_LABELS[1], _COMMAND_COLUMNS, _COMMAND_COLUMNS))
+    out = _U32.pack(len(dims))
+    for label, size, stride in dims:
+        out += _string_bytes(label, len(out))
+        out += b'\x00' * _pad(len(out), 4) + struct.pack('<II', size, stride)
+    out += b'\x00' * _pad(len(out), 4) + struct.pack('<II', 0, rows.size)
+    out += b'\x00' * (_pad(len(out), 8) if rows.size else 0)
+    return ENCAPSULATION + out + rows.tobytes()
+
+
+def decode_command_rows(data: bytes) -> np.ndarray:
+    """A swarm's commands (K, 4) back from their bytes; ValueError unless the layout is
+    encode_command_rows' and every ball is a whole number >= 0."""
+    reader = _Reader(data)
+    dims = [(reader.string(), reader.u32(), reader.u32()) for _ in range(reader.count(12))]
+    offset = reader.u32()
+    values = reader.f64(reader.count(8))
+    if ([label for label, _, _ in dims] != list(COMMAND_LABELS) or offset != 0
+            or dims[1][1] != _COMMAND_COLUMNS or values.size != dims[0][1] * _COMMAND_COLUMNS):
+        raise ValueError(f'not a layout of agent commands: dims={dims}, offset={offset}, '
+                         f'{values.size} values')
+    rows = np.array(values, dtype=np.float64).reshape(-1, _COMMAND_COLUMNS)
+    balls = rows[:, 0]
+    if not (np.isfinite(rows).all() and (balls >= 0).all() and (balls == np.floor(balls)).all()):
+        raise ValueError('agent commands hold a ball row that is not a whole number >= 0, or '
+                         'a value that is not finite')
+    return rows

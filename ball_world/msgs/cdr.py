@@ -21,6 +21,8 @@ import threading
 
 import numpy as np
 
+from ball_world.core.orientation import yaw_to_quaternion
+
 ENCAPSULATION = b'\x00\x01\x00\x00'
 _HEADER_LEN = len(ENCAPSULATION)
 _ENCAPSULATION_U8 = np.frombuffer(ENCAPSULATION, dtype=np.uint8)
@@ -120,8 +122,13 @@ def _as_rows(array, columns: int, name: str) -> np.ndarray:
     return array
 
 
-def encode_pose_array(positions: np.ndarray, stamp_ns: int, frame_id: str) -> bytes:
-    """geometry_msgs/msg/PoseArray: pose i at (x_i, y_i, 0) with identity orientation."""
+def encode_pose_array(positions: np.ndarray, stamp_ns: int, frame_id: str,
+                      headings=None) -> bytes:
+    """geometry_msgs/msg/PoseArray: pose i at (x_i, y_i, 0) with identity orientation.
+
+    headings: (rows, yaws) of the poses that turn (the agents), their orientation the
+    rotation by yaw about z (core.orientation: w >= 0); None: all identity.
+    """
     positions = _as_rows(positions, 2, 'positions')
     n = positions.shape[0]
     prefix = _header_payload(stamp_ns, frame_id)
@@ -133,7 +140,13 @@ def encode_pose_array(positions: np.ndarray, stamp_ns: int, frame_id: str) -> by
             poses[:, 2:] = _POSE_CONSTANT_TAIL
             _POSE_SCRATCH.layout = layout
         poses[:, :2] = positions
-        return buf.tobytes()
+        if headings is None:
+            return buf.tobytes()
+        rows, yaws = headings
+        poses[rows, 3:] = yaw_to_quaternion(np.asarray(yaws, dtype=np.float64))
+        data = buf.tobytes()
+        poses[rows, 3:] = _POSE_CONSTANT_TAIL[1:]  # the identity again, for the next call
+        return data
 
 
 @functools.lru_cache(maxsize=8)

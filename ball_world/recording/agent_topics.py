@@ -21,7 +21,17 @@ Per step, with `<ns>` the node's namespace (that of `balls`):
   agent hit in the step; at a scan step, `<ns>/<name>/scan` of every agent with a scanner
   (ball_world.scans).
 
-The reader's step roles (agent_role) are cmd_vel, drive, odom and /tf; scans, ground
+With agent.topics none (a swarm) there are no per-agent topics: the commands taken before
+a step go, all of them, into one message at its log time, `<ns>/agent_commands`
+(std_msgs/msg/Float64MultiArray, rows (ball, vx, vy, wz), ball the row in the step's
+`balls`, msgs.agent_cdr.encode_command_rows), and the drives' impulses are not recorded
+at all: neither on `<name>/drive` nor on `impulse`, which keeps every other impulse.
+Why: 10,000 agents driving would make 20,000 messages a step; re-simulation makes the
+drives again from the commands, as it always did, and compares everything they move. With
+agent.odom.rate_hz, odom, ground truth and /tf are recorded at the steps that send them.
+
+The reader's step roles (agent_role) are cmd_vel, agent_commands, drive, odom and /tf;
+scans, ground
 truth and bumpers are read as topics of their own (AGENT_MESSAGE_KINDS), beside the steps,
 and handed to the sinks fed from a recording (recorded_frame) when they draw them.
 """
@@ -32,12 +42,14 @@ import numpy as np
 
 from ball_world.core.lidar import Fan
 from ball_world.core.orientation import quaternion_to_yaw
-from ball_world.msgs.agent_cdr import decode_laser_scan, decode_odometry
+from ball_world.msgs.agent_cdr import (decode_laser_scan, decode_odometry,
+                                       encode_command_rows)
 from ball_world.msgs.cdr import decode_vector3_stamped
 from ball_world.msgs.twist_cdr import decode_twist, decode_twist_stamped
 from ball_world.step_record import AgentFrame, Bumper
 
 COMMAND = 'cmd_vel'
+COMMANDS = 'agent_commands'
 DRIVE = 'drive'
 ODOM = 'odom'
 TF = 'tf'
@@ -52,7 +64,8 @@ TF_STATIC_TOPIC = '/tf_static'
 TYPES = {COMMAND: 'geometry_msgs/msg/Twist', ODOM: 'nav_msgs/msg/Odometry',
          TF: 'tf2_msgs/msg/TFMessage', TF_STATIC: 'tf2_msgs/msg/TFMessage',
          SCAN: 'sensor_msgs/msg/LaserScan', GROUND_TRUTH: 'nav_msgs/msg/Odometry',
-         BUMPER: 'geometry_msgs/msg/Vector3Stamped', DRIVE: 'geometry_msgs/msg/Vector3Stamped'}
+         BUMPER: 'geometry_msgs/msg/Vector3Stamped', DRIVE: 'geometry_msgs/msg/Vector3Stamped',
+         COMMANDS: 'std_msgs/msg/Float64MultiArray'}
 STAMPED_COMMAND = 'geometry_msgs/msg/TwistStamped'
 _NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
 _AGENT_TOPIC = re.compile(r'(?P<namespace>.*)/(?P<name>[A-Za-z][A-Za-z0-9_]*)/'
@@ -78,9 +91,29 @@ def command_type(parameters):
     return STAMPED_COMMAND if parameters.get('agent.cmd_vel_stamped') else TYPES[COMMAND]
 
 
+def swarm(parameters):
+    """Whether the agents of a segment with these parameters are a swarm (agent.topics
+    none: no per-agent topics)."""
+    return parameters.get('agent.topics', 'each') == 'none'
+
+
+def recorded_impulses(impulses, parameters):
+    """The impulses of a step that go on `impulse`: all, but a swarm's drives."""
+    if not swarm(parameters):
+        return impulses
+    return tuple(impulse for impulse in impulses if not impulse.drive)
+
+
 def before_step(record, namespace, parameters):
     """(topic, type, role, bytes) of the commands taken before this step, in order, then of
-    the drives' impulses applied before it."""
+    the drives' impulses applied before it; a swarm's commands as one message."""
+    frame = record.agents
+    if frame is not None and not frame.topics:
+        rows = frame.command_rows
+        if rows is None or not len(rows):
+            return []
+        return [(f'{namespace}/{COMMANDS}', TYPES[COMMANDS], COMMANDS,
+                 encode_command_rows(rows))]
     kind = command_type(parameters)
     return [(f'{namespace}/{command.name}/{COMMAND}', kind, COMMAND, command.cdr)
             for command in record.commands] + [
@@ -92,13 +125,14 @@ def after_step(record, namespace):
     """(topic, type, role, bytes) of the agents' odom, ground truth, /tf, /tf_static,
     bumpers and scans of this step."""
     frame = record.agents
-    if frame is None:
+    if frame is None or not frame.topics:
         return []
     messages = [(f'{namespace}/{name}/{ODOM}', TYPES[ODOM], ODOM, data)
                 for name, data in zip(frame.names, frame.odom_cdr)]
     messages += [(f'{namespace}/{name}/{GROUND_TRUTH}', TYPES[GROUND_TRUTH], GROUND_TRUTH,
                   data) for name, data in zip(frame.names, frame.ground_truth_cdr)]
-    messages.append((TF_TOPIC, TYPES[TF], TF, frame.tf_cdr))
+    if frame.tf_cdr:  # not at a step agent.odom.rate_hz skips
+        messages.append((TF_TOPIC, TYPES[TF], TF, frame.tf_cdr))
     if frame.tf_static_cdr is not None:
         messages.append((TF_STATIC_TOPIC, TYPES[TF_STATIC], TF_STATIC, frame.tf_static_cdr))
     messages += [(f'{namespace}/{bumper.name}/{BUMPER}', TYPES[BUMPER], BUMPER, bumper.cdr)
@@ -121,6 +155,9 @@ def agent_role(topic, namespaces):
     """(kind, agent name) of a recorded agent topic under one of `namespaces`, or None."""
     if topic == TF_TOPIC:
         return (TF, '')
+    namespace, _, last = topic.rpartition('/')
+    if last == COMMANDS and namespace in namespaces:
+        return (COMMANDS, '')
     match = _AGENT_TOPIC.fullmatch(topic)
     if match is None or match['namespace'] not in namespaces:
         return None

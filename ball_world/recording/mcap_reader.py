@@ -53,6 +53,7 @@ from ball_world.core.edits import NAME_PATTERN
 from ball_world.core.occupancy_map import load_map, MapError, MapFiles
 from ball_world.core.parameters import checked, ParameterError
 from ball_world.core.scenario import build_world, step_duration_ns
+from ball_world.msgs.agent_cdr import decode_command_rows
 from ball_world.msgs.cdr import (decode_pose_array, decode_state, decode_state_layout,
                                  decode_string, decode_vector3_stamped)
 from ball_world.msgs.map_cdr import encode_occupancy_grid
@@ -781,6 +782,9 @@ class RecordedStep:
     # Read with Recording.steps(agent_messages=True) only: {(kind, agent name): bytes} of the
     # step's scans, ground truth and bumpers (agent_topics.AGENT_MESSAGE_KINDS).
     agent_messages: Optional[dict] = None
+    # A swarm's commands (agent.topics none) taken before this step: (K, 4) rows (ball, vx,
+    # vy, wz), ball the row in this step's balls (agent_topics.COMMANDS); None without.
+    command_rows: Optional[np.ndarray] = None
 
     @property
     def complete(self):
@@ -1118,6 +1122,7 @@ class _StepBuilder:
         self.data = {}
         self.events = {role: [] for role in EVENT_ROLES}
         self.commands = []
+        self.command_rows = None  # a swarm's commands: the bytes of agent_commands
         self.drives = {}  # agent name -> the bytes of its drive's impulse
         self.odom = None
         self.tf = None
@@ -1128,6 +1133,8 @@ class _StepBuilder:
         kind, name, type_name = role
         if kind == agent_topics.COMMAND:
             self.commands.append((name, type_name, data))
+        elif kind == agent_topics.COMMANDS:
+            self.command_rows = data
         elif kind == agent_topics.DRIVE:
             self.drives[name] = data
         elif kind == agent_topics.ODOM:
@@ -1175,6 +1182,8 @@ class _StepBuilder:
                              for cdr in self.events['impulse'])
             commands = tuple((name, *agent_topics.decode_command(data, type_name), data)
                              for name, type_name, data in self.commands)
+            command_rows = (None if self.command_rows is None
+                            else decode_command_rows(self.command_rows))
         except ValueError as error:
             raise RecordingError(f'undecodable message at log time {self.log_time_ns} ns: '
                                  f'{error}') from None
@@ -1190,7 +1199,8 @@ class _StepBuilder:
             impulses=impulses, balls_cdr=self.data.get('balls'),
             state_cdr=self.data.get('state'), stats_cdr=self.data.get('stats'),
             balls_stamp_ns=balls_stamp, edits=edits, commands=commands,
-            odom=self.odom, tf_cdr=self.tf, agent_messages=self.agent_messages)
+            odom=self.odom, tf_cdr=self.tf, agent_messages=self.agent_messages,
+            command_rows=command_rows)
 
     def _drives_marked(self, impulses, edits):
         """The impulses with the drives' marked (RecordedImpulse.drive).

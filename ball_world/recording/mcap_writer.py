@@ -155,6 +155,7 @@ ROLE_QOS = {
     agent_topics.BUMPER: offered_qos_profiles(10),
     # Recorded only (the node publishes no drive topic): the step publishers' profile.
     agent_topics.DRIVE: offered_qos_profiles(10),
+    agent_topics.COMMANDS: offered_qos_profiles(10),  # a swarm's commands, recorded only
 }
 
 _SEQUENCE_MODULO = 2 ** 32  # MCAP message sequence numbers are uint32
@@ -558,7 +559,8 @@ class McapSink:
         log_time_ns = record.log_time_ns
         # Impulses and edits come first, in the order they were applied: all of them were
         # applied before the step whose stamp they carry.
-        self._write_events(log_time_ns, record.impulses, record.edits)
+        self._write_events(log_time_ns, agent_topics.recorded_impulses(
+            record.impulses, self._agent_parameters), record.edits)
         namespace = agent_topics.namespace_of(self._topics)
         for message in agent_topics.before_step(record, namespace, self._agent_parameters):
             self._add_agent(log_time_ns, *message)

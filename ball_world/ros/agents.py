@@ -26,6 +26,14 @@ a loaded 2-core machine: real-time factor 0.45 against 0.91 without agents). The
 made without rclpy's default QoS-event handlers (warnings about an incompatible QoS), which
 only an executor would run. That node takes no command-line arguments (a `__node:=` rename
 must not give two nodes one name): its namespace is the world node's.
+
+A per-agent topic nobody subscribes to costs nothing (INTERFACE.md, "Many robots"): each
+step looks at the subscriber count of SURVEY_PER_STEP publishers in turn (every one within
+publishers / SURVEY_PER_STEP steps; /tf and bumper_markers every step), publishes only to
+those that have subscribers, and tells the Simulation's agents which kinds of message
+someone takes (AgentPart.encode), so the others are not even encoded, unless the node
+records (an MCAP takes every one). With agent.topics none there are no per-agent topics
+and no /tf at all: this class makes nothing.
 """
 from dataclasses import dataclass
 import time
@@ -39,6 +47,7 @@ from sensor_msgs.msg import LaserScan
 from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
+from ball_world.agents import frames as kinds
 from ball_world.core.agents import CommandRejected
 from ball_world.msgs.bumper_markers import bumper_markers
 from ball_world.msgs.twist_cdr import decode_twist, decode_twist_stamped
@@ -51,6 +60,9 @@ WARN_PERIOD = 5.0
 MANY_AGENTS = 200
 #: Wall seconds between two looks at the graph for cmd_vel of another type (check_types).
 TYPE_CHECK_PERIOD = 2.0
+#: Publishers whose subscriber count is looked at per step (rcl's matched count: about a
+#: microsecond each).
+SURVEY_PER_STEP = 256
 #: Wall seconds the node spends leaving the graph entity by entity when it stops; what is
 #: left then goes with the process (see destroy).
 LEAVE_BUDGET = 5.0
@@ -77,12 +89,26 @@ class _AgentEntities:
         return [entity for entity in (self.odom, self.ground_truth, self.bumper, self.scan)
                 if entity is not None]
 
+    def by_kind(self):
+        """(kind, publisher) of each publisher (agents.frames' kinds)."""
+        return [(kind, entity) for kind, entity in (
+            (kinds.ODOM, self.odom), (kinds.GROUND_TRUTH, self.ground_truth),
+            (kinds.BUMPER, self.bumper), (kinds.SCAN, self.scan)) if entity is not None]
+
 
 class AgentTopics:
     """Subscriptions and publishers of every agent of the node's Simulation."""
 
-    def __init__(self, node, stamped):
+    def __init__(self, node, stamped, recording=False):
         self.node = node
+        # Whether an MCAP takes every agent message (then each is made whoever listens).
+        self.recording = recording
+        self.each = node.simulation.agents.each  # agent.topics, read at start only
+        # kind -> names of the agents whose publisher of that kind has subscribers
+        self._listened = {kind: set() for kind in (kinds.ODOM, kinds.GROUND_TRUTH,
+                                                   kinds.BUMPER, kinds.SCAN)}
+        self._survey = None  # [(name, kind, publisher)], made again when publishers change
+        self._cursor = 0
         self._io = None  # the node of the per-agent entities, made with the first agent
         self.stamped = stamped
         self._message_type = TwistStamped if stamped else Twist
@@ -105,8 +131,12 @@ class AgentTopics:
     def sync(self):
         """Topics for the agents the world has now: new agents get theirs, gone ones lose them.
 
-        A world without agents creates nothing, not even /tf: it speaks as before.
+        A world without agents creates nothing, not even /tf: it speaks as before; nor does
+        a swarm (agent.topics none).
         """
+        if not self.each:
+            return
+        self._survey = None
         names = self.simulation.agents.names
         if names and self._io is None:
             world = self.node
@@ -257,31 +287,75 @@ class AgentTopics:
         and /tf_static when it changed. tf False holds /tf back (the node publishes it
         later, publish_tf: a reset's first /tf waits for its /clock, see ros/node.py)."""
         frame = record.agents
-        if frame is None:
+        if frame is None or not frame.topics:
             return
-        if self._tf is None or any(name not in self._topics for name in frame.names):
+        if self._tf is None or len(self._topics) != len(frame.names) or any(
+                name not in self._topics for name in frame.names):
             self.sync()
         topics = self._topics
-        for name, data in zip(frame.names, frame.odom_cdr):
-            topics[name].odom.publish(data)
-        for name, data in zip(frame.names, frame.ground_truth_cdr):
-            topics[name].ground_truth.publish(data)
-        for bumper in frame.bumpers:
-            topics[bumper.name].bumper.publish(bumper.cdr)
-        markers = bumper_markers(record, self.simulation.frame_id)
-        if markers is not None:
-            self._bumper_markers.publish(markers)
         for scan in frame.scans:
             entities = topics[scan.name]
             if entities.scan is None:  # scanners turned on by a reset
                 entities.scan = self._publisher(LaserScan, f'{scan.name}/scan')
-            entities.scan.publish(scan.cdr)
+                self._survey = None
+        self._look_at_subscribers()
+        listened = self._listened
+        for kind, messages in ((kinds.ODOM, frame.odom_cdr),
+                               (kinds.GROUND_TRUTH, frame.ground_truth_cdr)):
+            wanted = listened[kind]
+            if wanted and messages:
+                for name, data in zip(frame.names, messages):
+                    if name in wanted:
+                        getattr(topics[name], kind).publish(data)
+        for bumper in frame.bumpers:
+            if bumper.name in listened[kinds.BUMPER]:
+                topics[bumper.name].bumper.publish(bumper.cdr)
+        if self._bumper_markers.get_subscription_count():
+            markers = bumper_markers(record, self.simulation.frame_id)
+            if markers is not None:
+                self._bumper_markers.publish(markers)
+        for scan in frame.scans:
+            if scan.name in listened[kinds.SCAN]:
+                topics[scan.name].scan.publish(scan.cdr)
         if frame.tf_static_cdr is not None:
             self._tf_static.publish(frame.tf_static_cdr)
         if tf:
             self.publish_tf(record)
+        self._tell_what_is_taken()
+
+    def _look_at_subscribers(self):
+        """Look at the subscriber counts of the next SURVEY_PER_STEP per-agent publishers."""
+        if self._survey is None:
+            self._survey = [(name, kind, publisher) for name, entities in self._topics.items()
+                            for kind, publisher in entities.by_kind()]
+            self._cursor = 0
+            for names in self._listened.values():
+                names.intersection_update(self._topics)
+        survey = self._survey
+        if not survey:
+            return
+        count = len(survey)
+        for offset in range(min(count, SURVEY_PER_STEP)):
+            name, kind, publisher = survey[(self._cursor + offset) % count]
+            if publisher.get_subscription_count():
+                self._listened[kind].add(name)
+            else:
+                self._listened[kind].discard(name)
+        self._cursor = (self._cursor + SURVEY_PER_STEP) % count
+
+    def _tell_what_is_taken(self):
+        """The kinds of agent message the next step must make: all when recording, else
+        those someone subscribes to (AgentPart.encode)."""
+        agents = self.simulation.agents
+        if self.recording:
+            agents.encode = None
+            return
+        taken = {kind for kind, names in self._listened.items() if names}
+        if self._tf is not None and self._tf.get_subscription_count():
+            taken.add(kinds.TF)
+        agents.encode = frozenset(taken)
 
     def publish_tf(self, record):
-        """Publish a step's /tf (every odom -> base_link)."""
-        if record.agents is not None:
+        """Publish a step's /tf (every odom -> base_link), if it has one."""
+        if record.agents is not None and record.agents.tf_cdr and self._tf is not None:
             self._tf.publish(record.agents.tf_cdr)

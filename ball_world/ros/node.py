@@ -309,7 +309,8 @@ class BallWorld(Node):
         self.create_service(SetBool, '~/pause', self._on_pause, qos_profile=SERVICE_QOS)
         self.create_service(Trigger, '~/step', self._on_step, qos_profile=SERVICE_QOS)
         self.interfaces = SimulationInterfaces(self)
-        self.agent_topics = AgentTopics(self, values['agent.cmd_vel_stamped'])
+        self.agent_topics = AgentTopics(self, values['agent.cmd_vel_stamped'],
+                                        recording=bool(values['record.mcap']))
         self.add_pre_set_parameters_callback(converted)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 

@@ -209,7 +209,7 @@ def _advance(simulation, step, comparison, segment_index):
     _make_edits(simulation, step, comparison, segment_index)
     result, rejected = simulation.step()
     _report_rejected(rejected, step.step, comparison, segment_index)
-    _compare_events(result, step, comparison, segment_index)
+    _compare_events(result, step, comparison, segment_index, not simulation.agents.each)
     return result
 
 
@@ -227,11 +227,30 @@ def _make_edits(simulation, step, comparison, segment_index):
             simulation.command(name, vx, vy, wz, cdr)
         except CommandRejected:
             pass  # an agent deleted after its command, as the node dropped it with the agent
+    _swarm_commands(simulation, step, comparison, segment_index)
     # The agents' drive comes right after the impulses the edits applied (see Simulation).
     driven, rejected = simulation.apply_drive()
     _report_rejected(rejected, step.step, comparison, segment_index)
+    if not simulation.agents.each:
+        driven = 0  # a swarm's drives are not recorded (recording.agent_topics)
     for impulse in impulses[queued + driven:]:
         simulation.queue_impulse(impulse.frame_id, impulse.x, impulse.y)
+
+
+def _swarm_commands(simulation, step, comparison, segment_index):
+    """A swarm's recorded commands (agent_commands rows), taken after the step's edits as
+    the node's were: each names a ball of the step that is an agent, or is a difference."""
+    if step.command_rows is None:
+        return
+    names = simulation.names
+    for ball, vx, vy, wz in step.command_rows.tolist():
+        ball = int(ball)
+        name = names[ball] if ball < len(names) else f'ball row {ball}'
+        try:
+            simulation.command(name, vx, vy, wz)
+        except CommandRejected as refusal:
+            comparison.add(Difference(segment_index, step.step, 'command refused', None,
+                                      'taken', str(refusal), math.inf))
 
 
 def _close(simulation, step, comparison, segment_index):
@@ -278,11 +297,13 @@ def _report_rejected(rejected, k, comparison, segment_index):
                                   str(rejection), math.inf))
 
 
-def _compare_events(record, step, comparison, segment_index):
-    """The impulse and edit messages the re-simulation made must be the recorded ones."""
+def _compare_events(record, step, comparison, segment_index, swarm=False):
+    """The impulse and edit messages the re-simulation made must be the recorded ones (but
+    a swarm's drives, which are not recorded)."""
     for what, recorded, resimulated, shown in (
             ('impulse message', [i.cdr for i in step.impulses],
-             [i.cdr for i in record.impulses], decode_vector3_stamped),
+             [i.cdr for i in record.impulses if not (swarm and i.drive)],
+             decode_vector3_stamped),
             ('edit message', [e.text for e in step.edits], [e.text for e in record.edits],
              str)):
         if recorded == resimulated:
@@ -318,8 +339,13 @@ def _compare_step(step, record, comparison, segment_index):
 
 
 def _compare_agents(step, record, comparison, segment_index):
-    """Each agent's odom (pose, heading, twist) and /tf must be the recorded bytes."""
+    """Each agent's odom (pose, heading, twist) and /tf must be the recorded bytes; a
+    swarm's headings, which only `balls` carries, its bytes."""
     frame = record.agents
+    if (frame is not None and not frame.topics and step.balls_cdr is not None
+            and step.balls_cdr != record.balls_cdr):
+        comparison.add(Difference(segment_index, step.step, 'balls message (headings)', None,
+                                  len(step.balls_cdr), len(record.balls_cdr), math.inf))
     resimulated = {} if frame is None else dict(zip(frame.names, frame.odom_cdr))
     recorded = step.odom or {}
     for name in sorted(set(recorded) | set(resimulated)):
@@ -496,7 +522,7 @@ class RecordedAgentMessages:
 def _agent_messages(record):
     """{(kind, agent name): bytes} of a re-simulated record's scans, ground truth, bumpers."""
     agents = getattr(record, 'agents', None)
-    if agents is None:
+    if agents is None or not agents.topics:  # a swarm's agents have no messages
         return {}
     found = {(agent_topics.SCAN, scan.name): scan.cdr for scan in agents.scans}
     found.update(((agent_topics.GROUND_TRUTH, name), data)

@@ -1,0 +1,94 @@
+"""A scanner for swarms: every agent's scan in one compiled call (core.lidar.scan_many).
+
+The short-range ring of few beams (ARGoS's proximity ring, Stage's sonar ring) is the lidar
+with another fan, so it is held to the lidar's rules: closed forms for what a beam meets,
+REP 117's infinities, and the compiled batch equal bit for bit to the numpy reference, one
+agent at a time, and to the single scanner, with balls in the cells around each scanner
+only (lidar.ball_cells) and walls and a map's cells.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from ball_world.core import lidar
+from ball_world.core.lidar import Fan, scan_many
+from ball_world.core.solid_cells import SolidCells
+from ball_world.core.static_geometry import ScanGrid
+from ball_world.simulation import Simulation
+
+RING = Fan.full_turn(8, 0.0, 2.0)  # beam k at -pi + k pi / 4: beam 4 ahead, beam 6 left
+BACKENDS = ['numpy', 'numba']
+
+
+@pytest.mark.parametrize('backend', BACKENDS)
+def test_a_ring_sees_the_closed_forms_and_nothing_beyond_its_range(backend):
+    # Scanner 0 at the origin heading +x; ball 1 ahead at 1.5 m (radius 0.5: its surface
+    # at 1.0); a wall on the left at y = 1.25, short enough that only the beam straight at it
+    # meets it (the 45-degree ones pass its ends); ball 2 behind at 2.75 (surface 2.5:
+    # beyond range_max 2). Scanner 3 at (10, 0) heading +y, a wall of its own ahead.
+    positions = np.array([[0.0, 0.0], [1.5, 0.0], [-2.75, 0.0], [10.0, 0.0]])
+    radii = np.array([0.25, 0.5, 0.25, 0.25])
+    walls = np.array([[-0.5, 1.25, 0.5, 1.25], [9.5, 1.25, 10.5, 1.25]])
+    out = scan_many(positions, radii, walls, [0, 3], [0.0, 0.5 * math.pi], RING, [0.3, 0.3],
+                    backend)
+    expected = np.full(8, np.inf)
+    expected[4] = 1.0  # ahead: 1.5 - 0.5
+    expected[6] = 1.25  # left: the wall
+    assert out[0].tolist() == expected.tolist()
+    assert out[1].tolist() == [math.inf] * 4 + [1.25] + [math.inf] * 3  # its wall ahead
+    # Closer than range_min: -inf (REP 117).
+    near = scan_many(positions, radii, walls, [0], [0.0], RING, [1.1], backend)
+    assert near[0, 4] == -math.inf and near[0, 6] == 1.25
+
+
+def random_world(seed, count=600, side=40.0):
+    rng = np.random.default_rng(seed)
+    positions = rng.uniform(0.0, side, (count, 2))
+    radii = rng.uniform(0.05, 0.3, count)
+    walls = np.array([[0.0, 0.0, side, 0.0], [side, 0.0, side, side], [5.0, 5.0, 15.0, 22.0]])
+    mask = (rng.random((60, 60)) < 0.03).astype(np.uint8)
+    grid = ScanGrid(SolidCells(-1.0, -1.0, 0.7, mask).checked())
+    agents = rng.choice(count, count // 2, replace=False)
+    yaws = rng.uniform(-math.pi, math.pi, len(agents))
+    return positions, radii, walls, grid, agents, yaws
+
+
+@pytest.mark.parametrize('seed', [1, 2, 3])
+@pytest.mark.parametrize('fan', [Fan.full_turn(16, 0.0, 2.0), Fan(-1.0, 0.25, 9, 0.0, 1.0),
+                                 Fan.full_turn(24, 0.0, 6.0)], ids=['ring16', 'arc9', 'ring24'])
+def test_the_batch_is_one_scan_per_agent_bit_for_bit(seed, fan):
+    positions, radii, walls, grid, agents, yaws = random_world(seed)
+    range_mins = radii[agents] + 0.05
+    compiled = scan_many(positions, radii, walls, agents, yaws, fan, range_mins, 'numba', grid)
+    reference = scan_many(positions, radii, walls, agents, yaws, fan, range_mins, 'numpy',
+                          grid)
+    assert compiled.tobytes() == reference.tobytes()
+    one = [lidar.Scanner(fan._replace(range_min=low), 'numba').distances(
+        positions, radii, walls, positions[ball], yaw, ball, grid)
+        for ball, yaw, low in zip(agents.tolist(), yaws.tolist(), range_mins.tolist())]
+    assert compiled.tobytes() == np.array(one).tobytes()
+    assert np.isfinite(compiled).any() and np.isinf(compiled).any()  # the scene is seen
+
+
+def test_balls_far_apart_make_few_cells_and_every_ball_one_cell():
+    positions = np.array([[0.0, 0.0], [1e5, 3.0], [5e4, -2e4]])
+    first, balls, grid = lidar.ball_cells(positions, np.array([0.1, 0.1, 0.1]), 2.0)
+    assert grid[3] * grid[4] <= 16 and first[-1] == 3 and sorted(balls.tolist()) == [0, 1, 2]
+    assert grid[2] >= 2.1
+
+
+def test_agents_scans_in_a_simulation_are_the_single_scanners():
+    parameters = {'random.count': 200, 'arena': [0.0, 0.0, 20.0, 20.0], 'random.seed': 9,
+                  'agents': [f'ball_{i}' for i in range(0, 200, 3)], 'agent.scan.samples': 16,
+                  'agent.scan.range_max': 2.0, 'agent.scan.angle_min': -math.pi,
+                  'agent.scan.angle_max': math.pi - 2.0 * math.pi / 16}
+    simulation = Simulation(parameters)
+    record, _ = simulation.step()
+    world = simulation.world
+    scans = simulation.agents.scans
+    for scan, index, yaw in zip(record.agents.scans, record.agents.indices, record.agents.yaws):
+        scanner = scans.scanner(scan.name, float(world.radii[index]))
+        alone = scanner.scan(world.positions, world.radii, world.walls, world.positions[index],
+                             float(yaw), int(index), record.step, world.static.scan_grid)
+        assert scan.ranges.tobytes() == alone.tobytes()
