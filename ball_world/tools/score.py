@@ -91,6 +91,8 @@ def parse_args(argv):
         score_bench.check_arguments(parser, args)
     elif args.tracker is not None:
         parser.error('--tracker runs on simulated scenes: give it with --seeds or --worlds')
+    elif args.ray is not None:
+        parser.error('--ray runs simulated scenes: give it with --seeds or --worlds')
     if args.stamp_tolerance and not (args.tracks or args.scenes):
         parser.error('--stamp-tolerance pairs recorded track messages: give --tracks')
     return args

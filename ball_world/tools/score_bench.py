@@ -12,15 +12,15 @@ drifts with agent.odom.noise), exactly as a recording of that scene would be sco
 class `update(scan, pose) -> rows (id, x, y, ...)` (tools.tracker.ScanTracker), made anew
 for each scene with no arguments (and given the scene's map first when it has `use_map(grid)`).
 
-Scenes run in worker processes (one per core by default; `executor` is where a Ray executor
-would plug in), each scene alone in one and all of its numbers its own, and results are
-gathered in scene order: the report is the same bit for bit whatever the number of
-processes or the machine's load. The tracker, user code, runs only there (with --jobs 1
-too): the workers are supervised (user_code.workers), so however it ends (an exception,
-SystemExit, os._exit, a segfault, a signal, a call past --timeout) the run stops with one
-line and no process left. Each figure is given
-as its mean over scenes with a 95% confidence interval (scoring.scenes), with the scenes
-pooled as TrackEval combines sequences, and the worst scenes by HOTA.
+Scenes run in worker processes (one per core by default; or with --ray as tasks on a Ray
+cluster: `executor`, user_code.ray_pool), each scene alone in one and all of its numbers its
+own, and results are gathered in scene order: the report is the same bit for bit whatever
+the number of processes or the machine's load. The tracker, user code, runs only there
+(with --jobs 1 too): the workers are supervised (user_code.workers), so however it ends (an
+exception, SystemExit, os._exit, a segfault, a signal, a call past --timeout) the run stops
+with one line and no process left. Each figure is given as its mean over scenes with a 95%
+confidence interval (scoring.scenes), with the scenes pooled as TrackEval combines
+sequences, and the worst scenes by HOTA.
 
 `--worlds FILE.yaml` lists worlds instead (docs/scoring.md):
 
@@ -85,6 +85,11 @@ def add_arguments(parser):
                             'the example tracker)')
     group.add_argument('--jobs', type=int, default=None, metavar='N',
                        help='worker processes (default: every core this process may use)')
+    group.add_argument('--ray', metavar='ADDRESS',
+                       help='run the scenes as tasks on the Ray cluster at ADDRESS (its '
+                            "head node's host:port, or auto for the one on this machine; "
+                            '--jobs: tasks at once, default its CPUs); the report is the '
+                            'local one (docs/scoring.md)')
     group.add_argument('--timeout', type=given_float,
                        default=given_float(f'{DEFAULT_TIMEOUT:g}'), metavar='S',
                        help='wall seconds one call of the tracker (import, making one, one '
@@ -120,6 +125,11 @@ def check_arguments(parser, args):
             args.seed_range = parse_seeds(args.seeds)
         except ValueError as error:
             parser.error(f'--seeds: {error}')
+    if args.ray is not None and args.scenes is not None:
+        parser.error('--ray runs simulated scenes (--seeds, --worlds); --scenes scores the '
+                     'recorded ones here')
+    if args.ray is not None and not args.ray.strip():
+        parser.error("--ray is empty; give the head node's HOST:PORT or auto")
     if args.scenes is not None and (args.tracker or args.duration is not None):
         parser.error('--tracker and --duration make scenes; --scenes scores recorded ones')
 
@@ -485,7 +495,8 @@ def run(args):
     work = [(position, scene, args.tracker, args.gate) for position, scene in
             enumerate(scenes)]
     results = [None] * len(scenes)
-    with executor(args, jobs) as pool:
+    with executor(args, jobs, len(scenes)) as pool:
+        jobs = pool.jobs
         if args.tracker is not None:  # a bad tracker: one line, once, not one per worker
             for _ in pool.map_unordered(check_tracker, [args.tracker],
                                         [f'--tracker {args.tracker}']):
@@ -498,11 +509,16 @@ def run(args):
                      args.worst)
 
 
-def executor(args, jobs):
-    """Where the jobs run (user_code's executor seam): the local pool of supervised workers
-    (a Ray executor would be chosen here). Every user call has --timeout s."""
+def executor(args, jobs, count=None):
+    """Where the jobs run (user_code's executor seam): the local pool of `jobs` supervised
+    workers, or with --ray tasks on a Ray cluster (--jobs of them at once, or as many as it
+    has CPUs, at most `count`). Every user call has --timeout s."""
+    text = f'the --timeout of {args.timeout:g} s'
+    if getattr(args, 'ray', None) is not None:
+        from ball_world.user_code.ray_pool import RayPool
+        return RayPool(args.ray.strip(), args.jobs, count, args.timeout, text)
     from ball_world.user_code.workers import LocalPool
-    return LocalPool(jobs, args.timeout, f'the --timeout of {args.timeout:g} s')
+    return LocalPool(jobs, args.timeout, text)
 
 
 def summarize(results, what, tracker, gate, jobs, seconds, worst_count):

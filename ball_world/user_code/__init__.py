@@ -31,9 +31,10 @@ Executors. A benchmark maps jobs to workers through an executor, an object with
 `function` is importable by name and `function(argument)` is deterministic, with every
 number its own: the caller puts results back in position order, so the report is the same
 bit for bit whatever runs the jobs. `LocalPool(jobs, deadline_s, deadline_text)` is the
-local one; a Ray executor (`--ray ADDRESS|auto`) is one more class with the same three
-methods (function as a Ray task, ray.wait for the next result, a task's worker crash or
-error as JobFailed), chosen where the tool makes its executor (tools.score_bench.executor).
+local one; `ray_pool.RayPool(address, jobs, most, deadline_s, deadline_text)` the same
+jobs as Ray tasks on a cluster (`--ray ADDRESS|auto`; each task runs its job in a
+LocalPool of one on its node, so failures are the same lines), chosen where the tool makes
+its executor (tools.score_bench.executor); ray is imported only there.
 
 Controllers (for the swarms' node; not wired yet). A controller is a class with act(obs)
 -> commands. Run it as
