@@ -423,7 +423,7 @@ def blueprint(world, parameters=None, plot_seconds=None):
         rrb.TimeSeriesView(origin=f'/{REAL_TIME_FACTOR}',
                            name=f'real-time factor (last {RTF_WINDOW:g} s)', plot_legend=hidden,
                            axis_y=real_time_factor_axis(parameters or {}), **window),
-        row_shares=[7, 4, 4, 4])
+        row_shares=[8, 4, 4, 4])
     return rrb.Blueprint(
         rrb.Horizontal(arena, plots, column_shares=[2, 1]),
         rrb.TimePanel(timeline=SIM_TIME, state='collapsed', play_state='following'),
