@@ -38,7 +38,7 @@ def legend_text(parameters, impulse_seconds, plot_period):
                   f'cells ({unknown})']
     lines += [
         "- **grey lines**: the arena's walls; ticks and numbers: a ruler in metres",
-        f'- **pink arrow and tag**: a push, an impulse from outside ({impulse_seconds:g} s)',
+        f'- **pink arrow, dark edge, and tag**: a push from outside ({impulse_seconds:g} s)',
         '- **plots**: energy' + (
             ", which the robots' drives put in and take out; the rest stays 0 unless pushed"
             if agents else ', which collisions keep: flat unless something pushes')
