@@ -32,12 +32,11 @@ from ball_world.recording.rerun_text import TAG_COLOR  # noqa: E402
 from ball_world.tools.view_tracks import TRACK_COLOR  # noqa: E402
 
 #: What is drawn in each colour (or any of a list): arrows on the view, texts on their tags.
-COLORS = {'push arrow': IMPULSE_COLOR,
-          'casings and tags': CASING_COLOR}
+COLORS = {'casings and tags': CASING_COLOR}
 #: Marks drawn over a dark casing (rerun_casing): measured against the casing beside them,
 #: as a tag's text against its pill; the casing itself against what lies around it.
 CASED = {'heading arrow': AGENT_COLOR, 'bumper arrow': BUMPER_VIEW_COLOR,
-         'track ring': TRACK_COLOR}
+         'track ring': TRACK_COLOR, 'push arrow': IMPULSE_COLOR}
 #: Texts, measured together (a pixel is the closest of their colours) against the tag's fill
 #: as drawn beside them: a pixel without it in its window is not a tag's (the names' light
 #: hues are also the highlights of shaded balls). The names: each ball's light hue.

@@ -25,6 +25,7 @@ import rerun as rr
 from ball_world.recording import rerun_log, rerun_outlet, rerun_text
 from ball_world.recording.files import claim_output
 from ball_world.recording.mcap_writer import McapSink
+from ball_world.recording.rerun_casing import CASING_COLOR
 from ball_world.recording.rerun_labels import box_of, LabelScale, TAG_INSET_PIXELS
 from ball_world.recording.rerun_log import (ARENA, ARROW_MAX_FRACTION, ARROW_MIN_FRACTION,
                                             ARROW_SECONDS, ball_color, BALLS, clip_arrow,
@@ -95,6 +96,12 @@ def shown_at(column, step):
     """What the viewer shows at `step`: the latest value logged at or before it."""
     logged = [s for s in column if s is not None and s <= step]
     return column[max(logged)] if logged else None
+
+
+def cores(column):
+    """A cased mark's column (rerun_casing: casings, then the marks) with the marks alone."""
+    return {step: value[len(value) // 2:] if value else value
+            for step, value in column.items()}
 
 
 def scalars(content, entity):
@@ -371,8 +378,12 @@ def test_impulse_stays_half_a_second_in_its_colour_with_the_ball_name(tmp_path):
     xmin, ymin, xmax, ymax = scene_bounds(world)
     span = max(xmax - xmin, ymax - ymin)
     _, content, _, _ = read(path)
-    vectors = content[(f'/{IMPULSES}', 'Arrows2D:vectors')]
-    origins = content[(f'/{IMPULSES}', 'Arrows2D:origins')]
+    # Each arrow is drawn twice, its dark casing then itself (rerun_casing): the cores are
+    # the second half of a batch, the casings the same arrows.
+    vectors = cores(content[(f'/{IMPULSES}', 'Arrows2D:vectors')])
+    origins = cores(content[(f'/{IMPULSES}', 'Arrows2D:origins')])
+    assert all(v[:len(v) // 2] == v[len(v) // 2:]
+               for v in content[(f'/{IMPULSES}', 'Arrows2D:vectors')].values() if v)
     labels = content[(f'/{IMPULSES}', 'Points2D:labels')]
     places = content[(f'/{IMPULSES}', 'Points2D:positions')]
     colors = content[(f'/{IMPULSES}', 'Arrows2D:colors')]
@@ -406,8 +417,11 @@ def test_impulse_stays_half_a_second_in_its_colour_with_the_ball_name(tmp_path):
             else:  # under the tail: under the pushed ball's own label as well
                 assert x == pytest.approx(x0, abs=1e-5)
                 assert y < y0 - world.radii[ball] - LABEL_LINE_FRACTION * span
-    packed = int.from_bytes(bytes((*IMPULSE_COLOR, 255)), 'big')
-    assert {tuple(color) for color in colors.values()} == {(packed,), ()}  # () = cleared
+    core, casing = (int.from_bytes(bytes((*c, 255)), 'big') for c in (IMPULSE_COLOR,
+                                                                      CASING_COLOR))
+    # One push on screen, or two, or none (cleared): casings first, then the cores.
+    assert {tuple(color) for color in colors.values()} == {
+        (casing, core), (casing, casing, core, core), ()}
     # 0.1 N s on a ball of ~0.1 kg is a small push: its arrow is lifted to the floor.
     assert np.hypot(*arrow(*first)[0:2]) == pytest.approx(ARROW_MIN_FRACTION * span, rel=1e-6)
 
@@ -425,8 +439,10 @@ def contrast(color, background):
 def test_balls_pushes_and_walls_are_seen_on_light_and_dark_themes():
     # The web viewer's light theme is white, the dark one near black (the white arrow of
     # old was invisible on the light one).
+    # A push's arrow is cased (rerun_casing): its dark casing or its light core keeps 4.5:1.
     for background in ((255, 255, 255), (0, 0, 0)):
-        assert contrast(IMPULSE_COLOR, background) >= 4.5
+        assert max(contrast(IMPULSE_COLOR, background),
+                   contrast(CASING_COLOR, background)) >= 4.5
         assert contrast(WALL_COLOR, background) >= 3.0
     # ...and no ball shares the arrow's colour; balls and their labels are seen on both.
     colours = {ball_color(f'ball_{i}') for i in range(10_000)} | {ball_color('red')}
@@ -454,8 +470,8 @@ def test_a_push_at_a_wall_keeps_its_arrow_head_in_view(tmp_path):
                   'balls.vy': [0.0], 'balls.radius': [0.2], 'balls.mass': [1.0]}
     run([RerunSink(path)], steps=3, parameters=parameters, impulses={1: (0, 5.0, 0.0)})
     _, content, _, _ = read(path)
-    (origin,) = content[(f'/{IMPULSES}', 'Arrows2D:origins')][1]
-    (vector,) = content[(f'/{IMPULSES}', 'Arrows2D:vectors')][1]
+    (_, origin) = content[(f'/{IMPULSES}', 'Arrows2D:origins')][1]  # casing, core
+    (_, vector) = content[(f'/{IMPULSES}', 'Arrows2D:vectors')][1]
     world_bounds = scene_bounds(SimpleNamespace(
         walls=np.array([[0, 0, 10, 0], [10, 0, 10, 10], [10, 10, 0, 10], [0, 10, 0, 0]]),
         radii=[0.2], positions=np.array([[9.5, 5.0]])))
@@ -964,7 +980,7 @@ def test_live_view_gets_frames_at_its_rate_with_balls_trails_and_pushes_in_step(
         if after <= k and (k - after) * WALL_STEP < VIEW_EVENT_SECONDS:
             assert pushed in shown_at(origins, k), k
     assert (90 - 1) * WALL_STEP > VIEW_EVENT_SECONDS
-    assert shown_at(origins, 90) == [pushed]
+    assert shown_at(origins, 90) == [pushed] * 2  # its casing and itself (rerun_casing)
     # What a page opened late needs is static: it outlives the frames a server drops.
     for key in ((f'/{WALLS}', 'LineStrips2D:strips'), (f'/{BALLS}', 'Points2D:radii'),
                 (f'/{BALLS}', 'Points2D:colors'), (f'/{BALLS}', 'Arrows2D:show_labels'),

@@ -172,14 +172,6 @@ def test_a_live_view_draws_no_text_in_rerun_label_boxes():
     assert colors <= set(hue) and {hue[c] for c in colors} >= {0, 1} and len(colors) >= 6
 
 
-@pytest.mark.parametrize('color', [IMPULSE_COLOR], ids=['push'])
-def test_arrows_keep_4_to_1_on_both_themes(color):
-    """A push's arrow keeps at least 4:1 against the view's background, light theme and
-    dark."""
-    for where, background in VIEW.items():
-        assert contrast(color, background) >= 4.0, where
-
-
 def backgrounds_of_marks():
     """What a heading or a ring lies on: both themes' views, a map's occupied and unknown
     cells (drawn over either theme), the scans' rays and hit points, every ball's colour."""
@@ -198,11 +190,12 @@ def backgrounds_of_marks():
     return found
 
 
-@pytest.mark.parametrize('color', [AGENT_COLOR, TRACK_COLOR, BUMPER_VIEW_COLOR],
-                         ids=['heading', 'track ring', 'bumper hit'])
+@pytest.mark.parametrize('color', [AGENT_COLOR, TRACK_COLOR, BUMPER_VIEW_COLOR, IMPULSE_COLOR],
+                         ids=['heading', 'track ring', 'bumper hit', 'push'])
 def test_headings_and_rings_keep_3_to_1_on_whatever_they_lie_on(color):
     """The orange heading had 1.19:1 on a pink robot, the green ring 1.13:1 on the map's
-    cells: no one colour has 3:1 on every disc, ray, cell and theme. Cased, the mark's light
+    cells: no one colour has 3:1 on every disc, ray, cell and theme (a push's deep pink
+    had 4.5:1 on both themes, but lay on the same discs, rays and cells). Cased, the mark's light
     core keeps 7:1 on its dark casing, and on anything it lies on the casing or the core
     keeps 3:1 (the casing on light things, the core on dark ones)."""
     from ball_world.recording.rerun_casing import CASING_COLOR, CORE_CONTRAST

@@ -17,34 +17,31 @@ def legend_text(parameters, impulse_seconds, plot_period):
     """Markdown naming each mark the view of a world of these parameters draws."""
     agents = bool(parameters.get('agents'))
     lines = ['**What the view draws**', '',
-             '- **discs**: the balls, in their own colours; names in dark tags'
-             + (' (robots always named)' if agents else '')]
+             '- **discs**: balls in their own colours, named in dark tags'
+             + (' (robots always)' if agents else '')]
     trail = float(parameters.get('rerun.trail_seconds') or 0.0)
     if trail:
-        lines.append('- **thin line behind a ball**, in its colour: its path over the last '
-                     f'{trail:g} s (trail)')
+        lines.append(f'- **thin line behind a ball**: its path over the last {trail:g} s (trail)')
     if parameters.get('rerun.velocities'):
         lines.append("- **arrow in a ball's colour**: its velocity")
     if agents:
         lines += [
             "- **light orange arrow, dark edge**: a robot's heading",
-            "- **blue dots**: where a robot's lidar beams hit (every second beam); "
-            '**faint blue lines**: some of its rays (fewer with more robots, none from 13 on)',
+            "- **blue dots**: a robot's lidar hits (every second beam); "
+            '**faint blue lines**: some rays (fewer with more robots, none from 13 on)',
             f'- **violet arrow and tag**: a bumper hit on a robot ({BUMPER_SHOWN:g} s)',
-            "- **green rings, dark edge**: a tracker's tracks (ball_world_view_tracks; the "
-            'demo tracks what `ball_1` sees)']
+            "- **green rings, dark edge**: a tracker's tracks (the demo's: what `ball_1` "
+            'sees)']
     if parameters.get('map'):
         unknown = ('solid' if parameters.get('map.unknown_solid', True) else 'free')
         lines += ["- **grey cells**: the map's walls; **faint grey cells**: its unknown "
                   f'cells ({unknown})']
     lines += [
         "- **grey lines**: the arena's walls; ticks and numbers: a ruler in metres",
-        f'- **pink arrow and tag**: a push, an impulse from outside ({impulse_seconds:g} s)',
-        '- **plots**: energy change since step 0' + (
-            " (the robots' drives put energy in and take it out; collisions keep it, so "
-            'the rest stays 0 unless something pushes)' if agents else
-            ' (collisions keep it: flat unless something pushes)')
-        + '; collisions since step 0 (flat at 0 until the first)'
+        f'- **pink arrow, dark edge, and tag**: a push from outside ({impulse_seconds:g} s)',
+        '- **plots**: energy' + (
+            ", which the robots' drives put in and take out; the rest stays 0 unless pushed"
+            if agents else ', which collisions keep: flat unless something pushes')
         + (f'; a live view gets them every {plot_period:g} s: empty until then'
            if plot_period else '')]
     return '\n'.join(lines)

@@ -32,9 +32,9 @@ Layout of the recording (application id 'ball_world'):
 - `arena/map` (a map's cells as a SegmentationImage under its origin and scale, rerun_map),
   static, once: the map cannot change during a run.
 - `arena/impulses` (Arrows2D): each push (an applied impulse that is not an agent's own drive,
-  AppliedImpulse.drive) for IMPULSE_SECONDS of simulated time,
-  in IMPULSE_COLOR (no ball has it; readable on the viewer's light and dark themes), at the
-  point where it was applied, pointing along the velocity change. Its length is the
+  AppliedImpulse.drive) for IMPULSE_SECONDS of simulated time, in IMPULSE_COLOR over a dark
+  casing (rerun_casing: seen on robots, rays, map cells and both themes), at the point where
+  it was applied, pointing along the velocity change. Its length is the
   velocity change times ARROW_SECONDS, kept between a floor (a tiny push is still seen) and
   a ceiling (a huge one stays on screen) set by the size of the scene, and shortened where
   it would leave the scene, so its head is always seen.
@@ -104,6 +104,7 @@ from ball_world.core.parameters import BY_NAME
 from ball_world.recording.files import claim_output, OutputClaim
 from ball_world.recording.rerun_agents import (AGENTS, BUMPER_TEXT_COLOR, BUMPERS, BumperView,
                                                heading_arrows, heading_discs)
+from ball_world.recording.rerun_casing import cased_arrows
 from ball_world.recording.rerun_energy import EnergyAccount
 from ball_world.recording.rerun_labels import boxes_overlap, LabelPlacer, tag_rect
 from ball_world.recording.rerun_legend import LEGEND, legend_document
@@ -209,9 +210,10 @@ ARROW_MIN_FRACTION = 0.12
 ARROW_MAX_FRACTION = 0.3
 #: ...and shortened so that its head stays this fraction of the scene inside its bounds.
 ARROW_INSET_FRACTION = 0.01
-#: Deep pink: no ball has it (their colours are lighter), and it keeps a contrast of at least
-#: 4.5 to 1 against both a white and a black background (the viewer's light and dark themes).
-IMPULSE_COLOR = (225, 0, 130)
+#: Light pink over its casing (rerun_casing: 7.5:1 on it): no ball has it (theirs are darker).
+#: Alone, the deep pink (225, 0, 130) of old had 4.5:1 on both themes but lay on robots' discs,
+#: rays and map cells, as the headings did.
+IMPULSE_COLOR = (255, 140, 200)
 
 #: A velocity arrow is the velocity times this many seconds.
 VELOCITY_SECONDS = 0.25
@@ -423,7 +425,7 @@ def blueprint(world, parameters=None, plot_seconds=None):
         rrb.TimeSeriesView(origin=f'/{REAL_TIME_FACTOR}',
                            name=f'real-time factor (last {RTF_WINDOW:g} s)', plot_legend=hidden,
                            axis_y=real_time_factor_axis(parameters or {}), **window),
-        row_shares=[7, 4, 4, 4])
+        row_shares=[8, 4, 4, 4])
     return rrb.Blueprint(
         rrb.Horizontal(arena, plots, column_shares=[2, 1]),
         rrb.TimePanel(timeline=SIM_TIME, state='collapsed', play_state='following'),
@@ -1325,9 +1327,8 @@ class _Feed:
         if not shown:
             self._emit('log', IMPULSES, *IMPULSES_CLEARED)
             return
-        arrows = rr.Arrows2D(
-            origins=[i[1] for i in shown], vectors=[i[2] for i in shown],
-            colors=IMPULSE_COLOR, radii=rr.Radius.ui_points(3.0), draw_order=40.0)
+        arrows = cased_arrows([i[1] for i in shown], [i[2] for i in shown], IMPULSE_COLOR,
+                              3.0, 40.0)
         # The label's text is kept (not shown); a tag draws it (rerun_text).
         labels = rr.Points2D(
             [i[4] for i in shown], radii=0.0, labels=[i[3] for i in shown], show_labels=False,
