@@ -164,3 +164,17 @@ def test_half_made_segments_are_told_from_made_ones_and_from_new_ones(tmp_path):
     assert found == [str(tmp_path / name) for name in (
         'fastrtps_0123456789abcdef', 'fastrtps_port7413', 'fastrtps_port7415')]
     assert 'no half-made Fast DDS segment' in node_watchdog.diagnosis(tmp_path / 'none')
+
+
+def test_the_port_of_this_domain_is_named_first_among_many_half_made_files():
+    """A machine where processes were killed holds many half-made files; the line names a
+    few, and the port segment of the process's own domain must be among them (the fresh-clone
+    suite failed: /dev/shm's other files sorted first and hid domain 201's port)."""
+    others = [f'/dev/shm/fastrtps_{index:016x}' for index in range(5)]
+    ports = ['/dev/shm/fastrtps_port7411', '/dev/shm/fastrtps_port57661',
+             '/dev/shm/fastrtps_port57899', '/dev/shm/fastrtps_port57900']
+    ordered = node_watchdog.likeliest_first(sorted(others + ports), 201)
+    # Domain 201's ports are 57650 to 57899; 57900 is domain 202's.
+    assert ordered[:2] == ['/dev/shm/fastrtps_port57661', '/dev/shm/fastrtps_port57899']
+    assert ordered[2:4] == ['/dev/shm/fastrtps_port57900', '/dev/shm/fastrtps_port7411']
+    assert ordered[4:] == others

@@ -60,9 +60,37 @@ def half_made(folder=SHM, before=None):
     return found
 
 
+def likeliest_first(found, domain):
+    """The half-made files in the order a reader should see them: port segments of `domain`
+    (RTPS ports 7400 + 250 d to 7649 + 250 d: the ones this process's participant opens),
+    then other port segments, then the rest.
+
+    Why: a machine where processes were killed may hold hundreds of half-made files, and a
+    line names only NAMED of them; sorted by name, participants' segments (fastrtps_0...)
+    came first and the port that hangs this process was left among the 'more'.
+    """
+    low = 7400 + 250 * domain
+
+    def rank(path):
+        name = os.path.basename(path)
+        port = name.removeprefix('fastrtps_port')
+        if port == name or not port.isdigit():
+            return 2
+        return 0 if low <= int(port) < low + 250 else 1
+
+    return sorted(found, key=rank)  # stable: by name within a rank
+
+
+def _domain():
+    try:
+        return int(os.environ.get('ROS_DOMAIN_ID', '0') or 0)
+    except ValueError:
+        return 0
+
+
 def diagnosis(folder=SHM, before=None):
     """The likely cause and the remedy, as the end of one line."""
-    found = half_made(folder, before)
+    found = likeliest_first(half_made(folder, before), _domain())
     if found:
         named = ', '.join(found[:NAMED]) + (f' and {len(found) - NAMED} more'
                                             if len(found) > NAMED else '')
