@@ -212,7 +212,7 @@ class _Uniform:
         return low + (high - low) * u
 
 
-def _clear_of_walls(x, y, r, walls):
+def clear_of_walls(x, y, r, walls):
     """Whether a ball at (x, y) of radius r keeps at least r from every wall segment."""
     start = walls[:, 0:2]
     edge = walls[:, 2:4] - start
@@ -309,7 +309,7 @@ def _random_balls(params, arena, walls, placed, cells=None):
                     continue
             if occupancy.overlaps(x, y, r):
                 continue
-            if len(walls) and not _clear_of_walls(x, y, r, walls):
+            if len(walls) and not clear_of_walls(x, y, r, walls):
                 continue
             break
         else:

@@ -19,6 +19,8 @@ import math
 
 import numpy as np
 
+from ball_world.core.scenario import clear_of_walls
+
 #: Gap between things placed at the start of an episode, m: nothing starts touching.
 CLEARANCE = 0.05
 #: A goal lies at least this far from its robot's start, m.
@@ -72,17 +74,7 @@ class EpisodeLayout:
                 return False
         if self.cells is not None and self.cells.first_overlap(x, y, radius) is not None:
             return False
-        walls = self.walls
-        if len(walls):
-            start = walls[:, 0:2]
-            edge = walls[:, 2:4] - start
-            t = np.clip(((x - start[:, 0]) * edge[:, 0] + (y - start[:, 1]) * edge[:, 1])
-                        / (edge[:, 0] ** 2 + edge[:, 1] ** 2), 0.0, 1.0)
-            dx = x - (start[:, 0] + t * edge[:, 0])
-            dy = y - (start[:, 1] + t * edge[:, 1])
-            if not np.all(dx * dx + dy * dy >= radius * radius):
-                return False
-        return True
+        return not len(self.walls) or clear_of_walls(x, y, radius, self.walls)
 
     @staticmethod
     def _discs_clear(x, y, radius, discs, count):
