@@ -163,6 +163,17 @@ def test_a_writer_hands_its_parts_over_to_a_spare_and_exits(tmp_path, monkeypatc
 
 
 def rerun_process_children():
+    """This process's live rerun_process writers. A zombie (an ended child not yet reaped,
+    here or by an earlier test of the same pytest process, as in `colcon test`) has no
+    command line to read: psutil raises for it, so its status is asked first, and a child
+    that ends between the two questions has ended."""
     import psutil
-    return [child for child in psutil.Process().children(recursive=True)
-            if 'rerun_process' in ' '.join(child.cmdline()) and child.status() != 'zombie']
+    found = []
+    for child in psutil.Process().children(recursive=True):
+        try:
+            if (child.status() != psutil.STATUS_ZOMBIE
+                    and 'rerun_process' in ' '.join(child.cmdline())):
+                found.append(child)
+        except (psutil.NoSuchProcess, psutil.ZombieProcess):
+            continue
+    return found
