@@ -11,7 +11,7 @@ converted .rrd must hold what the live one holds.
 from ball_world_testing.harness import rewrite_recording, without_messages
 import numpy as np
 import pytest
-from test_rerun import read
+from test_rerun import cores, read
 
 from ball_world.core.edits import Ball
 from ball_world.recording.mcap_reader import feed_sinks, Recording, RecordingError
@@ -86,8 +86,9 @@ def test_to_rrd_draws_what_the_live_view_drew(run, tmp_path):
     # the pushes only, as live: the drives (on every step a robot accelerates) are not there
     pushes = logged[(f'/{IMPULSES}', 'Arrows2D:vectors')]
     assert made[(f'/{IMPULSES}', 'Arrows2D:vectors')] == pushes
-    # on screen for 30 steps (IMPULSE_SECONDS): one push at 20, two more at 30, one at 40
-    assert {step: len(value or ()) for step, value in pushes.items()} == {
+    # on screen for 30 steps (IMPULSE_SECONDS): one push at 20, two more at 30, one at 40;
+    # each drawn twice, its dark casing then itself (rerun_casing): the cores count pushes
+    assert {step: len(value or ()) for step, value in cores(pushes).items()} == {
         0: 0, PUSH_AGENT: 1, SPAWN: 3, PUSH_BALL: 4, 50: 3, 60: 1, 70: 0}
     # bumper hits (ball_0 against the wall) at the same steps, along the same impulse
     bumpers = logged[(f'/{BUMPERS}', 'Arrows2D:vectors')]
