@@ -25,6 +25,8 @@ from simulation_interfaces.srv import DeleteEntity
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
+from ball_world.tools.goal import REPORT_SECONDS
+
 
 GOAL = (6.0, 7.0)
 MASS, KICKER_MASS, KICK_SPEED = 0.5, 0.1, 3.0
@@ -179,6 +181,7 @@ def test_goal_follows_its_ball_by_name_when_rows_move_and_holds_while_it_is_gone
     brings it back."""
     controller = processes.start([executable('ball_world_goal'), '--ros-args', *CONTROLLER,
                                   '-p', 'ball:=ball_1'])
+    started = time.monotonic()
     world = processes.start([executable('ball_world'), '--ros-args', *THREE])
     pushes = []  # (the world's time when it arrived, the ball pushed)
     watch.node.create_subscription(
@@ -205,6 +208,11 @@ def test_goal_follows_its_ball_by_name_when_rows_move_and_holds_while_it_is_gone
     assert max(math.dist(positions[1], (8.0, 3.0)) for positions in
                watch.positions[first:]) < 1e-12  # nothing pushed ball_2
 
+    # The controller reports its distance every REPORT_SECONDS of wall time while its ball
+    # is there: hold it at least one report (and a margin for a busy machine) before it goes.
+    # A quick run deleted it first, and the report asserted below never came.
+    watch.spin_until(lambda: time.monotonic() - started > REPORT_SECONDS + 2.0,
+                     'a report period of the controller', process=world)
     deleted = watch.call(DeleteEntity, '/ball_world/delete_entity',
                          DeleteEntity.Request(entity='ball_1'))
     assert deleted.result.result == Result.RESULT_OK, deleted.result.error_message
