@@ -29,7 +29,7 @@ import numpy as np
 
 from ball_world.core.orientation import yaw_to_quaternion
 from ball_world.msgs.cdr import (_HEADER_LEN, _header_payload, _pad, _Reader, _split_stamp,
-                                 _string_bytes, ENCAPSULATION)
+                                 _string_bytes, ENCAPSULATION, rows_layout)
 
 # Odometry after child_frame_id: pose (position 3, orientation 4), its covariance (36),
 # twist (linear 3, angular 3), its covariance (36): one float64 block.
@@ -336,14 +336,7 @@ def encode_command_rows(rows) -> bytes:
     """Float64MultiArray of (K, 4) rows (ball, vx, vy, wz): dims (command, K, 4K) and
     (ball_vx_vy_wz, 4, 4), data_offset 0, as `state` lays out its rows."""
     rows = np.ascontiguousarray(rows, dtype='<f8').reshape(-1, _COMMAND_COLUMNS)
-    count = len(rows)
-    dims = ((COMMAND_LABELS[0], count, count * _COMMAND_COLUMNS),
-            (COMMAND_LABELS[1], _COMMAND_COLUMNS, _COMMAND_COLUMNS))
-    out = _U32.pack(len(dims))
-    for label, size, stride in dims:
-        out += _string_bytes(label, len(out))
-        out += b'\x00' * _pad(len(out), 4) + struct.pack('<II', size, stride)
-    out += b'\x00' * _pad(len(out), 4) + struct.pack('<II', 0, rows.size)
+    out = rows_layout(COMMAND_LABELS, len(rows), _COMMAND_COLUMNS)
     out += b'\x00' * (_pad(len(out), 8) if rows.size else 0)
     return ENCAPSULATION + out + rows.tobytes()
 

@@ -149,16 +149,22 @@ def encode_pose_array(positions: np.ndarray, stamp_ns: int, frame_id: str,
         return data
 
 
-@functools.lru_cache(maxsize=8)
-def _state_prefix(n: int) -> bytes:
-    """The MultiArrayLayout and data length of a state message: they depend only on N."""
-    dims = ((STATE_LABELS[0], n, n * STATE_COLUMNS),
-            (STATE_LABELS[1], STATE_COLUMNS, STATE_COLUMNS))
+def rows_layout(labels, count: int, columns: int) -> bytes:
+    """The MultiArrayLayout and data length of a Float64MultiArray of `count` rows of
+    `columns`: dims (labels[0], count, count * columns), (labels[1], columns, columns),
+    data_offset 0 (how `state` and a swarm's `agent_commands` lay out their rows)."""
+    dims = ((labels[0], count, count * columns), (labels[1], columns, columns))
     out = _U32.pack(len(dims))
     for label, size, stride in dims:
         out += _string_bytes(label, len(out))
         out += b'\x00' * _pad(len(out), 4) + struct.pack('<II', size, stride)
-    return out + b'\x00' * _pad(len(out), 4) + struct.pack('<II', 0, n * STATE_COLUMNS)
+    return out + b'\x00' * _pad(len(out), 4) + struct.pack('<II', 0, count * columns)
+
+
+@functools.lru_cache(maxsize=8)
+def _state_prefix(n: int) -> bytes:
+    """The MultiArrayLayout and data length of a state message: they depend only on N."""
+    return rows_layout(STATE_LABELS, n, STATE_COLUMNS)
 
 
 def encode_state(positions: np.ndarray, velocities: np.ndarray, stamp_ns=None) -> bytes:
