@@ -14,6 +14,7 @@ would otherwise see its own ball's surface, which the exclusion already hides, a
 range_min below it means nothing). Bytes are made here once and shared by the publisher
 and the recording, like the other messages of a step.
 """
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -35,6 +36,31 @@ class AgentScan(NamedTuple):
     ranges: np.ndarray  # float64, REP 117, noise added
     fan: lidar.Fan
     cdr: bytes  # sensor_msgs/msg/LaserScan, as published on <name>/scan
+
+
+class ScanTable(Sequence):
+    """The scans of a step that nobody encodes (a swarm's, or scans nobody subscribes to):
+    every agent's ranges as one (N, beams) table, read as AgentScans (cdr b'') made only
+    when someone iterates them. Why: as step_record.TakenCommands, an object per robot a
+    step cost a 10,000-robot swarm more than its scans."""
+
+    __slots__ = ('names', 'frames', 'table', 'fans')
+
+    def __init__(self, names, frames, table, fans):
+        self.names = names
+        self.frames = frames
+        self.table = table  # float64 (N, beams), REP 117, noise added
+        self.fans = fans  # lidar.Fan per agent (range_min follows each radius)
+
+    def __iter__(self):
+        for name, frame_id, ranges, fan in zip(self.names, self.frames, self.table, self.fans):
+            yield AgentScan(name, frame_id, ranges, fan, b'')
+
+    def __len__(self):
+        return len(self.names)
+
+    def __getitem__(self, index):
+        return tuple(self)[index]
 
 
 def fan_from(parameters, radius):
@@ -93,6 +119,7 @@ class AgentScans:
         self.period_ns = max(1, round(1e9 / float(parameters['agent.scan.rate_hz'])))
         self.seed = int(parameters['random.seed'])
         self._scanners = {}  # name -> (radius, lidar.Scanner)
+        self._last = None  # (names, radii, scanners) of the last scan: most steps reuse it
 
     def due(self, step_index, dt_ns):
         """Whether step `step_index` (ending at step_index * dt_ns) is a scan step."""
@@ -116,7 +143,12 @@ class AgentScans:
         if not self.due(step_index, dt_ns):
             return ()
         radii = world.radii[indices].tolist()
-        scanners = [self.scanner(name, radius) for name, radius in zip(names, radii)]
+        last = self._last
+        if last is not None and last[0] == names and last[1] == radii:
+            scanners = last[2]
+        else:
+            scanners = [self.scanner(name, radius) for name, radius in zip(names, radii)]
+            self._last = (names, radii, scanners)
         if scanners and scanners[0].backend == 'numba':
             # Every agent's scan in one compiled call (lidar.scan_many: the same ranges as
             # one scan each, bit for bit, at a fraction of the cost when the range is short
@@ -125,6 +157,13 @@ class AgentScans:
                                     scanners[0].fan,
                                     [scanner.fan.range_min for scanner in scanners],
                                     'numba', world.static.scan_grid)
+            if not encode:
+                stddev = scanners[0].fan.noise_stddev
+                if stddev > 0.0:
+                    for ranges, scanner in zip(table, scanners):
+                        lidar.add_noise(ranges, stddev, scanner.noise.generator(step_index))
+                return ScanTable(names, base_frames, table,
+                                 [scanner.fan for scanner in scanners])
             ranges_of = iter(table)
         else:
             ranges_of = (scanner.distances(world.positions, world.radii, world.walls,

@@ -31,8 +31,10 @@ from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encod
                                  encode_vector3_stamped)
 from ball_world.msgs.impulse_batch import encode_impulses
 from ball_world.msgs.map_cdr import encode_occupancy_grid
-from ball_world.step_record import (AppliedEdit, AppliedImpulse, PendingEvents, RunInfo,
-                                    STATS_FIELDS, StepRecord, WorldSnapshot)
+from ball_world.step_record import (AppliedEdit, AppliedImpulse, DriveBatch, impulses_of,
+                                    PendingEvents, RunInfo, STATS_FIELDS, StepRecord,
+                                    WorldSnapshot)
+from ball_world.user_code.describe import UserCodeError
 
 DEFAULT_TOPICS = {'balls': '/balls', 'state': '/state', 'stats': '/stats',
                   'impulse': '/impulse', 'edits': '/edits'}
@@ -115,8 +117,12 @@ class Simulation:
     """
 
     def __init__(self, parameters, sinks=(), topics=None, on_sink_failure=None, built=None,
-                 occupancy_map=None):
+                 occupancy_map=None, controller=None):
         self.sinks = list(sinks)
+        # The controller (user_code.controller.ControllerProcess, or any object whose
+        # act(Observation) returns checked (N, 3) commands), or None; its agents refuse
+        # cmd_vel. A re-simulation has none: it takes the commands from the recording.
+        self.controller = controller
         # The map every build of this run uses (a recording's copy in re-simulation), so a
         # reset never reads the map's files again.
         self.occupancy_map = occupancy_map if built is None else built.occupancy_map
@@ -160,7 +166,8 @@ class Simulation:
         self._names = tuple(self.entities.names)
         # The agents as one part (ball_world.agents): their drive, odometry, bumpers, scans
         # and frames, made from the parameters; the Simulation orders its calls.
-        self.agents = AgentPart(parameters, check_agents(parameters, len(world)))
+        self.agents = AgentPart(parameters, check_agents(parameters, len(world)),
+                                controlled=self.controller is not None)
         self._drive = None  # the agents' impulses for the next step, once applied
         self._world_changed = False
         self._applied = []  # impulses applied since the last step
@@ -255,7 +262,7 @@ class Simulation:
         stamp_ns = step * self.dt_ns
         return PendingEvents(step=step, stamp_ns=stamp_ns,
                              log_time_ns=self.log_offset_ns + stamp_ns,
-                             impulses=tuple(self._applied), edits=tuple(self._edits))
+                             impulses=impulses_of(self._applied), edits=tuple(self._edits))
 
     def _hand_over_pending(self):
         """At the end of a segment (close, reset): record what changed after its last step.
@@ -344,10 +351,36 @@ class Simulation:
         (the message as received), or encoded here when given in code.
         """
         try:
+            if self.controller is not None and self.agents.controlled(name):
+                raise CommandRejected('controlled', f'{name[:64]} is driven by the controller '
+                                                    '(parameter controller.agents)')
             self.agents.command(name, vx, vy, wz, (self.step_index + 1) * self.dt_ns, cdr)
         except CommandRejected as rejection:
             self.count_rejection('cmd_vel_' + rejection.reason)
             raise
+
+    def control(self):
+        """Ask the controller for its agents' commands when it is due (after step k,
+        before step k + 1: agents/control.py); they are in force from the next step and
+        recorded with it, as cmd_vel is. step() does it first.
+
+        Raises UserCodeError (one line) for a controller that fails or returns commands
+        cmd_vel would refuse; the step is then not taken.
+        """
+        if self.controller is None:
+            return
+        observation = self.agents.observe(self.world, self.index_of, self.step_index,
+                                          self.dt_ns)
+        if observation is None:
+            return
+        commands = self.controller.act(observation)
+        try:
+            self.agents.command_many(observation.names, commands,
+                                     (self.step_index + 1) * self.dt_ns)
+        except CommandRejected as rejection:
+            raise UserCodeError(f'controller {self.parameters["controller"]} returned a '
+                                f'command at t = {observation.time:.9g} s that cmd_vel '
+                                f'would refuse: {rejection}') from None
 
     def apply_drive(self):
         """Apply the agents' impulses for the next step now, once: (applied, rejected).
@@ -361,10 +394,15 @@ class Simulation:
             return 0, []
         end_ns = (self.step_index + 1) * self.dt_ns
         self._drive = deque(self.agents.drive(self.world, self.index_of, self.dt_ns, end_ns))
-        before = len(self._applied)
+        before = self._applied_count()
         rejected = [] if self._apply_at_once(self._drive) else self._apply(self._drive,
                                                                            drive=True)
-        return len(self._applied) - before, rejected
+        return self._applied_count() - before, rejected
+
+    def _applied_count(self):
+        """How many impulses were applied since the last step (a DriveBatch counts each)."""
+        return sum(1 if isinstance(part, AppliedImpulse) else len(part.balls)
+                   for part in self._applied)
 
     def _apply_at_once(self, drive):
         """Apply the drive's impulses (distinct balls) together, if each would pass alone.
@@ -398,15 +436,17 @@ class Simulation:
         world.apply_impulses(balls, jx, jy)
         stamp_ns = (self.step_index + 1) * self.dt_ns
         xs, ys = jx.tolist(), jy.tolist()
-        # A swarm's drives are neither recorded nor published (recording.agent_topics): no
-        # bytes are made for them (half the cost of its drive at 10,000 agents).
-        messages = (encode_impulses(stamp_ns, names, xs, ys) if self.agents.each
-                    else [b''] * len(names))
+        self.drive_applied += len(names)
+        drive.clear()
+        if not self.agents.each:
+            # A swarm's drives are neither recorded nor published (recording.agent_topics):
+            # one batch, no bytes and no object per drive (step_record.AppliedImpulses).
+            self._applied.append(DriveBatch(balls.tolist(), xs, ys, names))
+            return True
+        messages = encode_impulses(stamp_ns, names, xs, ys)
         self._applied.extend(
             AppliedImpulse(ball=ball, jx=x, jy=y, frame_id=name, cdr=cdr, drive=True)
             for ball, x, y, name, cdr in zip(balls.tolist(), xs, ys, names, messages))
-        self.drive_applied += len(names)
-        drive.clear()
         return True
 
     # Edits ------------------------------------------------------------------------------
@@ -556,7 +596,7 @@ class Simulation:
                      agent=False, yaw=None):
         fields = dict(kind=kind, name=name, x=float(x), y=float(y), vx=float(vx),
                       vy=float(vy), radius=float(radius), mass=float(mass),
-                      impulses_before=len(self._applied))
+                      impulses_before=self._applied_count())
         text_fields = dict(fields)
         if agent:  # only edits of agents carry these keys: other edits read as before
             text_fields['agent'] = True
@@ -577,6 +617,7 @@ class Simulation:
 
         Returns (record, rejected impulses).
         """
+        self.control()
         _, rejected = self.apply_drive()
         rejected += self.apply_queued()
         self._drive = None
@@ -609,7 +650,7 @@ class Simulation:
             state_cdr=encode_state(positions, velocities),
             stats_cdr=encode_float64_vector(
                 (energy, momentum[0], momentum[1], ball_ball, ball_wall, rtf), STATS_FIELDS),
-            impulses=tuple(self._applied), real_time_factor=real_time_factor,
+            impulses=impulses_of(self._applied), real_time_factor=real_time_factor,
             edits=tuple(self._edits), names=self._names, radii=world.radii,
             masses=world.masses, world_changed=self._world_changed,
             agents=self.agents.frame(world, self.index_of, positions, velocities,

@@ -4,8 +4,9 @@ The flow is one-directional: the node steps the World, packs one StepRecord, and
 writes it. Sinks never touch the World or ROS, so the offline converter can feed them from a
 recording exactly as the live node does.
 """
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Optional, Protocol
+from typing import NamedTuple, Optional, Protocol
 
 import numpy as np
 
@@ -68,6 +69,106 @@ class AppliedCommand:
     vy: float  # m/s left
     wz: float  # rad/s
     cdr: bytes = b''
+
+
+class DriveBatch(NamedTuple):
+    """A swarm's drives of a step, applied together (Simulation._apply_at_once): the
+    balls' rows, the impulses (N s, world frame) and the agents' names."""
+
+    balls: list
+    jx: list
+    jy: list
+    names: list
+
+
+class AppliedImpulses(Sequence):
+    """The impulses applied before a step, in order, as AppliedImpulses: single ones and a
+    swarm's drives (DriveBatch), whose AppliedImpulses (drive=True, cdr b'': neither
+    recorded nor published, recording.agent_topics) are made only when someone reads them.
+    Why: as TakenCommands; `pushes()` gives the others without making them.
+    """
+
+    __slots__ = ('_parts', '_length')
+
+    def __init__(self, parts):
+        self._parts = tuple(parts)
+        self._length = sum(1 if isinstance(part, AppliedImpulse) else len(part.balls)
+                           for part in self._parts)
+
+    def pushes(self):
+        """The impulses that are not a swarm's batched drives, in order."""
+        return tuple(part for part in self._parts if isinstance(part, AppliedImpulse))
+
+    def __iter__(self):
+        for part in self._parts:
+            if isinstance(part, AppliedImpulse):
+                yield part
+                continue
+            for ball, jx, jy, name in zip(*part):
+                yield AppliedImpulse(ball=ball, jx=jx, jy=jy, frame_id=name, cdr=b'',
+                                     drive=True)
+
+    def __len__(self):
+        return self._length
+
+    def __getitem__(self, index):
+        return tuple(self)[index]
+
+    def __eq__(self, other):
+        return isinstance(other, (tuple, AppliedImpulses)) and tuple(self) == tuple(other)
+
+    __hash__ = None
+
+
+def impulses_of(parts):
+    """parts (AppliedImpulse and DriveBatch) as a record holds them: a tuple when every
+    part is one impulse (as always before swarms), else AppliedImpulses."""
+    if all(isinstance(part, AppliedImpulse) for part in parts):
+        return tuple(parts)
+    return AppliedImpulses(parts)
+
+
+class TakenCommands(Sequence):
+    """The commands taken before a step, in order, as AppliedCommands: single ones (a
+    cmd_vel message) and batches (a swarm's controller: names and an (N, 3) array), each
+    batch's AppliedCommands made only when someone reads them.
+
+    Why: a 10,000-robot swarm's controller gives 10,000 commands a call; its recording
+    holds them as one message of rows (AgentFrame.command_rows, made from the batches
+    directly), so most steps nobody reads them one by one, and making 10,000 objects a step
+    for nobody cost more than the step itself.
+    """
+
+    __slots__ = ('_parts', '_length')
+
+    def __init__(self, parts):
+        self._parts = tuple(parts)  # AppliedCommand or (names, (N, 3) float64 array)
+        self._length = sum(1 if isinstance(part, AppliedCommand) else len(part[0])
+                           for part in self._parts)
+
+    @property
+    def parts(self):
+        return self._parts
+
+    def __iter__(self):
+        for part in self._parts:
+            if isinstance(part, AppliedCommand):
+                yield part
+                continue
+            names, commands = part
+            for name, (vx, vy, wz) in zip(names, commands.tolist()):
+                yield AppliedCommand(name, vx, vy, wz)
+
+    def __len__(self):
+        return self._length
+
+    def __getitem__(self, index):
+        return tuple(self)[index]
+
+    def __eq__(self, other):
+        return isinstance(other, (tuple, TakenCommands)) and tuple(self) == tuple(other)
+
+    __hash__ = None
 
 
 @dataclass(frozen=True)

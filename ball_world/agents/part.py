@@ -22,6 +22,7 @@ once and kept until the balls move in the arrays (`balls_moved`: a spawn, a dele
 """
 import numpy as np
 
+from ball_world.agents import control as controller_view
 from ball_world.agents import frames as messages
 from ball_world.core import odometry
 from ball_world.core.agents import (agent_names, Agents, CommandRejected, frame_clash,
@@ -29,7 +30,7 @@ from ball_world.core.agents import (agent_names, Agents, CommandRejected, frame_
 from ball_world.core.parameters import MAX_AGENTS, MAX_AGENTS_EACH, ParameterError
 from ball_world.msgs.twist_cdr import encode_twist, encode_twist_stamped
 from ball_world.scans import AgentScans, check as check_scans
-from ball_world.step_record import AgentFrame, AppliedCommand
+from ball_world.step_record import AgentFrame, AppliedCommand, TakenCommands
 
 
 def check(parameters, count):
@@ -44,6 +45,7 @@ def check(parameters, count):
                                        f'(agent.topics each): at most {MAX_AGENTS_EACH:,}; '
                                        f'agent.topics none takes up to {MAX_AGENTS:,}')
     check_scans(parameters)
+    controller_view.check(parameters, names)
     return names
 
 
@@ -60,9 +62,13 @@ class _Contact:
 
 
 class AgentPart:
-    """The agents of one world (a segment of a run), made from its parameters."""
+    """The agents of one world (a segment of a run), made from its parameters.
 
-    def __init__(self, parameters, names):
+    controlled: a controller drives some of them (the Simulation has one), so the part
+    keeps what its observations need (control.Control); without one nothing is kept.
+    """
+
+    def __init__(self, parameters, names, controlled=False):
         self.state = Agents(names, Limits.from_parameters(parameters))
         self.prefix = str(parameters['frame_prefix'])
         self.stamped = bool(parameters['agent.cmd_vel_stamped'])
@@ -84,6 +90,7 @@ class AgentPart:
         self._before = None  # the agents as the step took them (before_step)
         self._contact = None  # what the last step did to them (_Contact), until its frame
         self._commands = []  # AppliedCommand taken since the last step
+        self.control = controller_view.Control(parameters) if controlled else None
 
     # The agents as a collection ---------------------------------------------------------
 
@@ -97,6 +104,11 @@ class AgentPart:
     def names(self):
         """Agent names in the order they became agents (the order of odom and /tf)."""
         return self.state.names
+
+    @property
+    def noisy(self):
+        """Whether the odometry drifts from the truth (agent.odom.noise)."""
+        return self._noise is not None
 
     def yaws(self):
         return self.state.yaws()
@@ -165,14 +177,18 @@ class AgentPart:
 
         A controller's way in: every row is checked first, and one bad row refuses them all
         (CommandRejected naming it), so a controller's step is taken whole or not at all.
+        A swarm (agent.topics none) keeps them as one batch (step_record.TakenCommands).
         """
-        commands = np.asarray(commands, dtype=np.float64)
+        commands = np.array(commands, dtype=np.float64)  # a copy: the caller's may change
         if commands.shape != (len(names), 3):
             raise CommandRejected('shape', f'{len(names)} agents need commands of shape '
                                            f'({len(names)}, 3), got {commands.shape}')
         self.state.command_many(names, commands, since_ns)
         stamped, each = self.stamped, self.each
         taken = self._commands
+        if not each:
+            taken.append((tuple(names), commands))
+            return
         for name, (vx, vy, wz) in zip(names, commands.tolist()):
             cdr = b''
             if each:
@@ -190,9 +206,20 @@ class AgentPart:
         deleted after it (which the deletion took away) is left out.
         """
         agents = self.state
-        rows = [(index_of[c.name], c.vx, c.vy, c.wz) for c in self._commands
-                if c.name in agents]
-        return np.array(rows, dtype=np.float64).reshape(-1, 4)
+        blocks = []
+        for part in self._commands:
+            if isinstance(part, AppliedCommand):
+                if part.name in agents:
+                    blocks.append(np.array([[index_of[part.name], part.vx, part.vy,
+                                             part.wz]]))
+                continue
+            names, commands = part
+            kept = [row for row, name in enumerate(names) if name in agents]
+            block = np.empty((len(kept), 4))
+            block[:, 0] = [index_of[names[row]] for row in kept]
+            block[:, 1:] = commands[kept] if len(kept) < len(names) else commands
+            blocks.append(block)
+        return np.concatenate(blocks) if blocks else np.empty((0, 4))
 
     def headings(self, index_of):
         """(rows, yaws) of the agents in the World's arrays, or None without agents: what
@@ -212,10 +239,25 @@ class AgentPart:
     def _wanted(self, kind):
         return self.each and (self.encode is None or kind in self.encode)
 
+    def controlled(self, name):
+        """Whether agent `name` is driven by the controller (its cmd_vel is refused)."""
+        return self.control is not None and self.control.drives(name)
+
+    def observe(self, world, index_of, step_index, dt_ns):
+        """The controller's Observation after step `step_index` when it is due then and
+        drives any agent, else None (agents/control.py)."""
+        control = self.control
+        if control is None or not len(self.state) or not control.due(step_index, dt_ns):
+            return None
+        observation = control.observe(self, world, self.rows(index_of), step_index * dt_ns)
+        return observation if observation.names else None
+
     def take_commands(self):
         """The commands taken since the last call, in order (for the step's record)."""
-        taken, self._commands = tuple(self._commands), []
-        return taken
+        taken, self._commands = self._commands, []
+        if all(isinstance(part, AppliedCommand) for part in taken):
+            return tuple(taken)
+        return TakenCommands(taken)
 
     # 2. Before the step -----------------------------------------------------------------
 
@@ -254,6 +296,8 @@ class AgentPart:
         agents = self.state
         agents.turn(dt_ns, step_index * dt_ns)
         impulses = world.masses[rows][:, None] * (world.velocities[rows] - velocities)
+        if self.control is not None:
+            self.control.note_contact(agents.names, agents.yaws(), impulses)
         advanced = None
         if self._noise is not None:
             before = np.column_stack((positions, yaws))
@@ -313,11 +357,14 @@ class AgentPart:
         hits = (() if contact is None or contact.names != names
                 else messages.bumpers(names, frame_names.base, yaws, contact.impulses,
                                       stamp_ns, self._wanted(messages.BUMPER)))
+        scans = self.scans.take(world, names, rows, yaws, frame_names.base, step_index,
+                                stamp_ns, dt_ns, self._wanted(messages.SCAN))
+        if self.control is not None:
+            self.control.note_scans(scans, stamp_ns)
         return AgentFrame(
             names=names, indices=rows, yaws=yaws, twists=twists,
             odom_frames=frame_names.odom, base_frames=frame_names.base, odom_cdr=odom,
             tf_cdr=tf, tf_static_cdr=static, ground_truth_cdr=truth, bumpers=hits,
-            scans=self.scans.take(world, names, rows, yaws, frame_names.base, step_index,
-                                  stamp_ns, dt_ns, self._wanted(messages.SCAN)),
+            scans=scans,
             odometry=poses, odometry_covariances=covariances, topics=self.each,
             command_rows=None if self.each else self._command_rows(index_of))

@@ -281,6 +281,16 @@ def _frame_text(text):
     return None
 
 
+def _controller_spec(spec):
+    """Why a controller spec is malformed (MODULE:CLASS or FILE.py:CLASS), or None."""
+    if not spec:
+        return None
+    module, _, name = spec.rpartition(':')
+    if not module or not name.isidentifier():
+        return "expected 'package.module:Class' or 'path/to/file.py:Class'"
+    return None
+
+
 def _min_max(pair):
     if pair[0] > pair[1]:
         return f'expected [min, max] with min <= max, got {list_text(pair)}'
@@ -378,6 +388,14 @@ PARAMETERS = (
               "topics (cmd_vel, odom, ground_truth, bumper, scan, /tf); 'none' gives them none "
               '(a swarm: balls, state and recordings carry it).', AT_START,
               choices=('each', 'none')),
+    Parameter('controller', STRING, '', 'A controller class driving agents beside the '
+              "physics, 'package.module:Class' or 'path/to/file.py:Class' (docs/agents.md); "
+              "'': none. Read at start only: a set at run time would run code named by anyone "
+              'on the graph.', AT_START, max_length=MAX_PATH_LENGTH, rule=_controller_spec),
+    Parameter('controller.rate_hz', DOUBLE, 10.0, 'Controller: calls per second of simulated '
+              'time.', ON_RESET, 1e-3, 1e6),
+    Parameter('controller.agents', STRING_ARRAY, [], 'Controller: the agents it drives ([]: '
+              'every agent); those refuse their cmd_vel.', ON_RESET, max_size=MAX_AGENTS),
     Parameter('agent.odom.tf_static', BOOL, True, 'Agents: publish frame_id -> <p><name>/odom '
               '(identity) on /tf_static; false when a localization node (AMCL, slam_toolbox) '
               'publishes map -> odom.'),

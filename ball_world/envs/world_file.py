@@ -26,8 +26,7 @@ import os
 from pathlib import Path
 import sys
 
-import yaml
-
+from ball_world import params_file
 from ball_world.core.agents import agent_names, DIFF, Limits
 from ball_world.core.parameters import checked, ParameterError
 from ball_world.core.scenario import build_scene, step_duration_ns
@@ -38,9 +37,6 @@ DEFAULT_WORLD = 'sandbox'
 #: The robot of a world without agents: a TurtleBot3 Burger's footprint radius and mass.
 ROBOT_RADIUS = 0.105
 ROBOT_MASS = 1.0
-#: The node names a parameters file may hold the node's parameters under, in the order rcl
-#: applies them (the wildcard first, the node's own name after it).
-NODE_KEYS = ('/**', '**', 'ball_world', '/ball_world')
 
 
 class WorldError(ValueError):
@@ -74,38 +70,12 @@ def _world_folders():
         return
 
 
-def flatten(node, prefix=''):
-    """Nested parameters ({'balls': {'x': [...]}}) as dotted names ({'balls.x': [...]})."""
-    flat = {}
-    for key, value in node.items():
-        name = f'{prefix}.{key}' if prefix else str(key)
-        if isinstance(value, dict):
-            flat.update(flatten(value, name))
-        else:
-            flat[name] = value
-    return flat
-
-
 def read_parameters(path):
     """The node's parameters in a ROS 2 parameters file, as dotted names (WorldError)."""
     try:
-        document = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as error:
-        reason = getattr(error, 'strerror', None) or str(error).splitlines()[0]
-        raise WorldError(f'world {str(path)[:200]}: cannot read it: {reason}') from None
-    found = {}
-    keys = [key for key in NODE_KEYS if isinstance(document, dict) and key in document]
-    for key in keys:
-        section = document[key]
-        if not isinstance(section, dict) or not isinstance(section.get('ros__parameters'),
-                                                           dict):
-            raise WorldError(f"world {str(path)[:200]}: '{key}' holds no ros__parameters "
-                             'mapping')
-        found.update(flatten(section['ros__parameters']))
-    if not keys:
-        raise WorldError(f"world {str(path)[:200]}: not a parameters file (no '/**:' or "
-                         "'ball_world:' with ros__parameters)")
-    return found
+        return params_file.read_parameters(path, 'world')
+    except params_file.ParamsFileError as error:
+        raise WorldError(str(error)) from None
 
 
 def resolve_map(parameters, path):

@@ -101,6 +101,8 @@ def recorded_impulses(impulses, parameters):
     """The impulses of a step that go on `impulse`: all, but a swarm's drives."""
     if not swarm(parameters):
         return impulses
+    if hasattr(impulses, 'pushes'):  # step_record.AppliedImpulses: drives batched
+        return tuple(impulse for impulse in impulses.pushes() if not impulse.drive)
     return tuple(impulse for impulse in impulses if not impulse.drive)
 
 

@@ -921,7 +921,8 @@ class _Feed:
             # Step 0 is the initial state, written when the world is built, not a step: the
             # pause before the first step (the node starting up) is no slowness.
             rtf = self._rtf.add(record.log_time_ns) if record.step else None
-        pushed = any(not getattr(impulse, 'drive', False) for impulse in record.impulses)
+        impulses = getattr(record.impulses, 'pushes', lambda: record.impulses)()
+        pushed = any(not getattr(impulse, 'drive', False) for impulse in impulses)
         if pushed:
             self._add_impulses(record)
         agents = getattr(record, 'agents', None)

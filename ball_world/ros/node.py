@@ -49,6 +49,8 @@ from ball_world.ros.rcl_init import creating_node, init_quietly
 from ball_world.ros.sim_interfaces import ACTION, SimulationInterfaces
 from ball_world.ros.stopping import stopped_by_signal
 from ball_world.simulation import build, Simulation
+from ball_world.user_code.controller import ControllerProcess
+from ball_world.user_code.describe import UserCodeError
 
 #: Seconds between the node's progress lines (achieved rate, real-time factor, impulses).
 REPORT_PERIOD = 10.0
@@ -221,6 +223,8 @@ class BallWorld(Node):
     def __init__(self, **kwargs):
         self._sinks = []
         self._node_made = False
+        self.controller = None  # user_code.controller.ControllerProcess, with `controller`
+        self.exit_code = 0  # 1 when the controller failed
         try:
             self._start(**kwargs)
         except BaseException:
@@ -243,6 +247,8 @@ class BallWorld(Node):
         else:
             for sink in self._sinks:
                 sink.close()
+        if self.controller is not None:
+            self.controller.close()
         if self._node_made:
             self.destroy_node()
 
@@ -270,9 +276,16 @@ class BallWorld(Node):
             built = build(values)
         except ScenarioError as error:
             raise StartupError(str(error)) from None
+        if values['controller']:
+            # Before any file is opened: a controller that cannot be made records nothing.
+            try:
+                self.controller = ControllerProcess(values['controller'])
+            except UserCodeError as error:
+                raise StartupError(f"parameter 'controller': {error}") from None
         sinks = self._sinks = open_sinks(values)
         self.simulation = Simulation(values, sinks, topics=topics,
-                                     on_sink_failure=failures.append, built=built)
+                                     on_sink_failure=failures.append, built=built,
+                                     controller=self.controller)
         if failures:
             # A recording that fails on its first segment is a bad path, not a run-time fault.
             self.simulation.close()
@@ -356,6 +369,10 @@ class BallWorld(Node):
         standard = ', '.join(self.interfaces.names)
         occupancy_map = simulation.occupancy_map
         map_text = '' if occupancy_map is None else f'; map {occupancy_map.describe()}'
+        if self.controller is not None:
+            driven = values['controller.agents'] or simulation.agents.names
+            map_text += (f"; controller {values['controller']} at "
+                         f"{values['controller.rate_hz']:g} Hz driving {len(driven):,} agents")
         summary = (f'world: {describe(simulation.world, simulation.dt_ns)}{map_text}; rate '
                    f"{values['rate_hz']:g} Hz{' (paused at step 0)' if self.paused else ''}; "
                    f'node {self.get_fully_qualified_name()}')
@@ -445,6 +462,13 @@ class BallWorld(Node):
         rtf = simulated / elapsed if elapsed > 0 else None
         try:
             record, rejected = simulation.step(real_time_factor=rtf)
+        except UserCodeError as error:
+            # The controller failed (agents/control.py): the run ends, its recording whole
+            # up to the last step taken, and the node exits 1.
+            self.get_logger().error(f'step {simulation.step_index + 1}: {error}; stopping')
+            self.finished = True
+            self.exit_code = 1
+            return simulation.last_record
         except (SubstepLimitExceeded, EventBudgetExceeded) as error:
             # Only a world built to jam (a ball wedged between walls) gets here. Stepping
             # stops until a reset; the node stays up and keeps answering.
@@ -822,6 +846,8 @@ class BallWorld(Node):
         waited = sum(getattr(sink, 'waited', 0.0) for sink in self._sinks)
         self.simulation.close()
         self.agent_topics.destroy()
+        if self.controller is not None:
+            self.controller.close()
         dropped = getattr(self, '_dropped_steps', 0)
         if not dropped:
             return None
@@ -886,6 +912,7 @@ def run(args=None):
                 rclpy.spin_once(node, timeout_sec=0.1)
             if rclpy.ok():  # QUITTING or max_steps: answer the calls and goals still running
                 node.interfaces.finish(lambda: rclpy.spin_once(node, timeout_sec=0.05))
+            code = node.exit_code
     except StartupError as error:
         print(f'ball_world: {error}', file=sys.stderr)
         code = 2

@@ -164,7 +164,8 @@ class _Worker:
             exit_text += f': {what.split(" called")[0]}'
         elif self.process.exitcode == -signal.SIGKILL:
             exit_text += ' (sent by another process, or by the kernel when memory ran out)'
-        return f'the worker for {label} {exit_text}{at}'
+        verb = 'was ' if exit_text.startswith('killed') else ''
+        return f'the worker for {label} {verb}{exit_text}{at}'
 
     def kill(self):
         """SIGKILL the worker and its process group (what user code started in it)."""
