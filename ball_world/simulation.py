@@ -29,7 +29,6 @@ from ball_world.core.scenario import build_scene, ScenarioError, step_duration_n
 from ball_world.core.world import World
 from ball_world.msgs.cdr import (encode_float64_vector, encode_pose_array, encode_state,
                                  encode_vector3_stamped)
-from ball_world.msgs.impulse_batch import encode_impulses
 from ball_world.msgs.map_cdr import encode_occupancy_grid
 from ball_world.step_record import (AppliedEdit, AppliedImpulse, DriveBatch, impulses_of,
                                     PendingEvents, RunInfo, STATS_FIELDS, StepRecord,
@@ -435,18 +434,13 @@ class Simulation:
             return False
         world.apply_impulses(balls, jx, jy)
         stamp_ns = (self.step_index + 1) * self.dt_ns
-        xs, ys = jx.tolist(), jy.tolist()
         self.drive_applied += len(names)
         drive.clear()
-        if not self.agents.each:
-            # A swarm's drives are neither recorded nor published (recording.agent_topics):
-            # one batch, no bytes and no object per drive (step_record.AppliedImpulses).
-            self._applied.append(DriveBatch(balls.tolist(), xs, ys, names))
-            return True
-        messages = encode_impulses(stamp_ns, names, xs, ys)
-        self._applied.extend(
-            AppliedImpulse(ball=ball, jx=x, jy=y, frame_id=name, cdr=cdr, drive=True)
-            for ball, x, y, name, cdr in zip(balls.tolist(), xs, ys, names, messages))
+        # One batch, no object per drive (step_record.AppliedImpulses); a swarm's drives are
+        # neither recorded nor published (recording.agent_topics): no bytes either, and
+        # the others' bytes are made when a recording reads them.
+        self._applied.append(DriveBatch(balls.tolist(), jx.tolist(), jy.tolist(), names,
+                                        stamp_ns if self.agents.each else None))
         return True
 
     # Edits ------------------------------------------------------------------------------

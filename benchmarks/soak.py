@@ -151,8 +151,9 @@ class Listener:
     100 Hz, taken from the node it measures.
     """
 
-    def __init__(self, namespace, stats=False):
+    def __init__(self, namespace, stats=False, dt=None):
         from geometry_msgs.msg import PoseArray
+        self.dt = DT if dt is None else dt
         from rclpy.qos import QoSProfile, ReliabilityPolicy
         from std_msgs.msg import Float64MultiArray
         self.probe = _harness().Probe('soak_listener')
@@ -172,7 +173,7 @@ class Listener:
         if len(self.first_arrivals) < 2:
             self.first_arrivals.append(time.perf_counter())
         stamp_ns = decode_pose_array(data)[0]
-        self.last_step = max(self.last_step, round(stamp_ns / (DT * 1e9)))
+        self.last_step = max(self.last_step, round(stamp_ns / (self.dt * 1e9)))
         self.heard += 1
 
     def _on_stats(self, data):
@@ -894,6 +895,7 @@ def rtf_parameters(args, path):
     if args.agents:
         parameters['agents'] = '[' + ', '.join(agent_names(args.agents)) + ']'
         parameters['agent.scan.samples'] = 0  # agents alone; --scanning-agents scan
+        parameters['agent.odom.rate_hz'] = getattr(args, 'odom_rate', 0.0)
     if getattr(args, 'scanning_agents', 0):
         parameters['agents'] = '[' + ', '.join(agent_names(args.scanning_agents)) + ']'
         parameters.pop('agent.scan.samples', None)
@@ -907,6 +909,21 @@ DROPPED_LINE = re.compile(r'behind the [^ ]+ Hz schedule: dropped \d+ steps of w
 
 def agent_names(count):
     return [f'ball_{i}' for i in range(count)]
+
+
+class OdomListener:
+    """Subscribes to the odometry of the first `count` agents (as a fleet monitor would) and
+    counts what arrives, taking the bytes raw."""
+
+    def __init__(self, node, namespace, count):
+        from nav_msgs.msg import Odometry
+        self.heard = 0
+        self.subscriptions = [node.create_subscription(
+            Odometry, f'{namespace}/{name}/odom', self._on_odom, 10, raw=True)
+            for name in agent_names(count)]
+
+    def _on_odom(self, data):
+        self.heard += 1
 
 
 class Commander:
@@ -943,6 +960,7 @@ def run_rtf(args, workdir):
     listener = Listener(ns, stats=True)
     commander = Commander(listener.probe.node, ns,
                           max(args.agents, getattr(args, 'scanning_agents', 0)))
+    odom = OdomListener(listener.probe.node, ns, min(args.listen, args.agents))
     me = psutil.Process()
     try:
         listener.spin_until(lambda: listener.heard > 0, 'the first step', node)
@@ -979,7 +997,10 @@ def run_rtf(args, workdir):
             f'dt {DT:g} s, markers at their default rate, a probe subscribed to `balls` and '
             '`stats`' + (f', recording MCAP ({size:,.0f} MB)' if args.record else '')
             + (f', {commander.count} agents commanded at {Commander.COMMAND_HZ:g} Hz '
-               f'({commander.sent:,} cmd_vel sent; each publishes odom and /tf)'
+               f'({commander.sent:,} cmd_vel sent; each publishes odom and /tf'
+               + (f' at {args.odom_rate:g} Hz' if args.odom_rate else ' every step')
+               + (f"; {len(odom.subscriptions)} agents' odom listened to, {odom.heard:,} "
+                  'messages heard' if odom.subscriptions else '') + ')'
                if commander.count else '')
             + (f', agent.drive {args.drive}' if getattr(args, 'drive', None) else '')
             + f'; {steps:,} steps in {elapsed:.1f} s; node exit {code}; CPU (share of one '
@@ -997,9 +1018,61 @@ def run_rtf(args, workdir):
         what += f'; {agents} agents, each scanning 360 beams at 10 Hz (recorded)'
     row(f'rtf --mode {args.mode} --balls {args.balls} --speed {args.speed:g}'
         + (f' --agents {args.agents}' if args.agents else '')
+        + (f' --odom-rate {args.odom_rate:g}' if args.odom_rate else '')
+        + (f' --listen {args.listen}' if args.listen else '')
         + (f' --scanning-agents {agents}' if agents else '')
         + (f' --map {args.map}' if getattr(args, 'map', None) else '')
         + (f' --drive {args.drive}' if getattr(args, 'drive', None) else ''), what, figure)
+    return 0 if code == 0 and overall >= args.target else 1
+
+
+def run_swarm(args, workdir):
+    """The swarm of benchmarks.swarm_speed in the node (agent.topics none, the wander
+    controller in its worker, 10 Hz), recording MCAP; its real-time factor from a probe."""
+    from benchmarks.swarm_speed import parameters as swarm_parameters
+    ns = namespace()
+    path = Path(workdir) / 'swarm.mcap'
+    values = swarm_parameters(args.robots, 0.0)
+    parameters = {name: (f"[{', '.join(str(v) for v in value)}]" if isinstance(value, list)
+                         else value) for name, value in values.items()}
+    if args.record:
+        parameters['record.mcap'] = path
+    started = time.monotonic()
+    node = NodeProcess(workdir, ns, 'swarm', parameters)
+    listener = Listener(ns, stats=True, dt=0.1)
+    try:
+        listener.spin_until(lambda: listener.heard > 0, 'the first step', node)
+        start_s = time.monotonic() - started
+        listener.probe.spin_for(2.0)
+        first_step, began = listener.last_step, time.monotonic()
+        threads_before = thread_cpu(node.pid)
+        while time.monotonic() < began + args.seconds:
+            node.check_alive()
+            listener.spin(0.05)
+        elapsed = time.monotonic() - began
+        steps = listener.last_step - first_step
+        threads_after = thread_cpu(node.pid)
+        stopping = time.monotonic()
+        code = node.stop(signal.SIGINT)
+        stop_s = time.monotonic() - stopping
+    finally:
+        node.kill()
+        listener.close()
+    parts = cpu_by_part(node.pid, threads_before, threads_after, elapsed)
+    size = _size_mb(path)
+    if path.exists() and not args.keep:
+        path.unlink()
+    overall = steps * 0.1 / elapsed
+    what = (f'{args.robots:,} diff-drive robots, agent.topics none, 16-beam 2 m ring at 10 Hz, '
+            f'wander at 10 Hz, rate_hz 10' + (f', recording MCAP ({size:,.0f} MB)'
+                                              if args.record else '')
+            + f'; first step heard {start_s:.1f} s after the start; {steps:,} steps in '
+            f'{elapsed:.1f} s; SIGINT to exit {stop_s:.1f} s (exit {code}); CPU (share of one '
+            'core): ' + ', '.join(f'{part} {share:.2f}' for part, share in sorted(parts.items()))
+            + f'; load average {os.getloadavg()[0]:.1f} at the end')
+    figure = (f'real-time factor {overall:.3f} over {elapsed:.0f} s (probe: steps heard x dt / '
+              'wall time)')
+    row(f'swarm --robots {args.robots}', what, figure)
     return 0 if code == 0 and overall >= args.target else 1
 
 
@@ -1490,6 +1563,17 @@ def main(argv=None):
                      '0.1-0.2 m), e.g. the warehouse `python -m benchmarks.warehouse DIR` '
                      'writes (issue 27: 1,000 balls, 100 scanning diff-drive agents)')
     rtf.add_argument('--drive', choices=('omni', 'diff'), help='agent.drive (default: omni)')
+    rtf.add_argument('--odom-rate', type=float, default=0.0,
+                     help='agent.odom.rate_hz of the --agents (default 0: every step)')
+    rtf.add_argument('--listen', type=int, default=0,
+                     help="subscribe to this many of the --agents' odom (issue 35: 100)")
+    swarm = cases.add_parser('swarm', help='real-time factor of a swarm node: '
+                                           'the world of benchmarks.swarm_speed at 10 Hz with '
+                                           'its wander controller, recording MCAP')
+    swarm.add_argument('--robots', type=int, default=10_000)
+    swarm.add_argument('--seconds', type=float, default=60.0)
+    swarm.add_argument('--no-record', dest='record', action='store_false')
+    swarm.add_argument('--target', type=float, default=0.99)
     startup = cases.add_parser('startup', help='process start to the first `balls` message of '
                                                'the default world, numba cached and cold, numpy')
     startup.add_argument('--repeats', type=int, default=3)
@@ -1535,7 +1619,8 @@ def main(argv=None):
             parser.error(f'--{name} must be at least 1')
     runs = {'kill': run_kill, 'flood': run_flood, 'steps': run_steps, 'memory': run_memory,
             'recordings': run_memory,
-            'sinkmemory': run_sink_memory, 'rtf': run_rtf, 'startup': run_startup,
+            'sinkmemory': run_sink_memory, 'rtf': run_rtf, 'swarm': run_swarm,
+            'startup': run_startup,
             'fulldisk': run_fulldisk, 'viewer': run_viewer, 'liveview': run_liveview}
     if args.dir:
         os.makedirs(args.dir, exist_ok=True)

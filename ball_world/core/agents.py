@@ -93,11 +93,12 @@ class Command:
 
 def check_command(name, vx, vy, wz):
     """(vx, vy, wz) as floats, or CommandRejected: not finite, or an absurd magnitude."""
-    values = (vx, vy, wz)
-    if not all(math.isfinite(value) for value in values):
+    # Written out, not as all() / max() over a generator: a node with 1,000 robots at
+    # 10 Hz checks 10,000 commands a second.
+    if not (math.isfinite(vx) and math.isfinite(vy) and math.isfinite(wz)):
         raise CommandRejected('non_finite', f'cmd_vel for {name} is not finite: '
                                             f'({vx}, {vy}, {wz})')
-    if max(abs(value) for value in values) > MAX_COMMAND:
+    if abs(vx) > MAX_COMMAND or abs(vy) > MAX_COMMAND or abs(wz) > MAX_COMMAND:
         raise CommandRejected('too_large', f'cmd_vel for {name} ({vx:.3g}, {vy:.3g}, '
                                            f'{wz:.3g}) exceeds {MAX_COMMAND:g} in magnitude')
     return float(vx), float(vy), float(wz)

@@ -46,7 +46,7 @@ from ball_world.msgs.agent_cdr import (decode_laser_scan, decode_odometry,
                                        encode_command_rows)
 from ball_world.msgs.cdr import decode_vector3_stamped
 from ball_world.msgs.twist_cdr import decode_twist, decode_twist_stamped
-from ball_world.step_record import AgentFrame, Bumper
+from ball_world.step_record import AgentFrame, Bumper, DriveBatch
 
 COMMAND = 'cmd_vel'
 COMMANDS = 'agent_commands'
@@ -119,8 +119,18 @@ def before_step(record, namespace, parameters):
     kind = command_type(parameters)
     return [(f'{namespace}/{command.name}/{COMMAND}', kind, COMMAND, command.cdr)
             for command in record.commands] + [
-        (f'{namespace}/{impulse.frame_id}/{DRIVE}', TYPES[DRIVE], DRIVE, impulse.cdr)
-        for impulse in record.impulses if impulse.drive]
+        (f'{namespace}/{name}/{DRIVE}', TYPES[DRIVE], DRIVE, cdr)
+        for name, cdr in _drives(record.impulses)]
+
+
+def _drives(impulses):
+    """(name, bytes) of the drives among a step's impulses, in order; a DriveBatch's from
+    the batch (step_record.AppliedImpulses), with no object per drive."""
+    for part in getattr(impulses, 'parts', impulses):
+        if isinstance(part, DriveBatch):
+            yield from zip(part.names, part.cdrs())
+        elif part.drive:
+            yield part.frame_id, part.cdr
 
 
 def after_step(record, namespace):
