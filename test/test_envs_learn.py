@@ -161,6 +161,11 @@ def test_a_policy_takes_the_envs_observation_and_returns_the_robots_units():
          observed['twist'][0] / 0.4, observed['twist'][1] / 2.0], rel=1e-6)
     with pytest.raises(ValueError, match='23 ranges for a policy of 24 beams'):
         policy({**observed, 'scan': observed['scan'][:-1]})
+    # Many robots at once (a swarm's controller): each row as alone.
+    model.action = np.array([[0.25, 1.0], [-1.5, 0.1]], np.float32)
+    both = {key: np.stack([value, value]) for key, value in observed.items()}
+    assert policy.commands(both).tolist() == [[0.1, 2.0], [-0.4, float(np.float32(0.1)) * 2.0]]
+    assert model.shown[-1][0].tobytes() == np.concatenate([inputs, inputs]).tobytes()
 
 
 def test_what_cannot_be_used_is_refused_in_one_line(tmp_path, monkeypatch, capsys):

@@ -49,14 +49,20 @@ class Policy:
         actions, _ = self.model.predict(inputs, deterministic=True)
         return actions
 
+    def commands(self, observations):
+        """(n, 2) commands (forward m/s, yaw rate rad/s) for n robots' observations (a dict
+        of arrays with a leading axis of n, as the vector env's or a swarm's)."""
+        observed = {key: np.asarray(observations[key], dtype=np.float32)
+                    for key in ('scan', 'goal', 'twist')}
+        if observed['scan'].ndim != 2 or observed['scan'].shape[1] != self.scale.beams:
+            raise ValueError(f'{observed["scan"].shape[-1]} ranges for a policy of '
+                             f'{self.scale.beams} beams')
+        return self.scale.commands(self.batch(self.scale.inputs(observed)))
+
     def __call__(self, observation):
         """The command (forward m/s, yaw rate rad/s) for one Navigate-v0 observation."""
-        observed = {key: np.asarray(observation[key], dtype=np.float32)[None]
-                    for key in ('scan', 'goal', 'twist')}
-        if observed['scan'].shape[1] != self.scale.beams:
-            raise ValueError(f'{observed["scan"].shape[1]} ranges for a policy of '
-                             f'{self.scale.beams} beams')
-        forward, yaw_rate = self.scale.commands(self.batch(self.scale.inputs(observed)))[0]
+        forward, yaw_rate = self.commands({key: np.asarray(observation[key])[None]
+                                           for key in ('scan', 'goal', 'twist')})[0]
         return float(forward), float(yaw_rate)
 
 
