@@ -1,6 +1,6 @@
 # The commands of the README. Each sets everything up first (scripts/setup.sh is fast when
 # nothing changed), so they work on a fresh clone.
-.PHONY: run view demo test setup setup-run bench soak
+.PHONY: run view demo test setup setup-run bench soak learn
 VENV := .venv
 # Steps of the main job (60 Hz): 1800 is 30 s; 0 runs until Ctrl-C.
 STEPS ?= 1800
@@ -48,3 +48,10 @@ bench: setup
 
 soak: setup
 	$(VENV)/bin/python -m benchmarks.soak $(ARGS)
+
+# PPO (stable-baselines3) on ball_world/Navigate-v0 in the sandbox, then its success rate over
+# 100 seeded episodes (docs/learning.md). Installs stable-baselines3 and torch first
+# (requirements/learn.txt; never part of make setup or make test). ARGS: ball_world_learn
+# train's options, e.g. make learn ARGS='--minutes 5 --out runs/mine.zip'.
+learn: setup
+	@scripts/learn.sh $(ARGS)

@@ -49,6 +49,7 @@ setup(
             'ball_world_demo = ball_world.tools.demo:main',
             'ball_world_wander = ball_world.tools.wander:main',
             'ball_world_view_tracks = ball_world.tools.view_tracks:main',
+            'ball_world_learn = ball_world.tools.learn:main',
         ],
     },
 )

@@ -7,7 +7,8 @@ same seeds and actions give the same bits in all three.
 import numpy as np
 
 from ball_world.envs.arenas import Arenas
-from ball_world.envs.observations import action_space, goal_terms, observation_space, observe
+from ball_world.envs.observations import (action_space, forward_speeds, goal_terms,
+                                          observation_space, observe)
 from ball_world.envs.rewards import outcome as step_outcome
 from ball_world.envs.world_file import load
 
@@ -53,8 +54,8 @@ class Task:
         distance, bearing = goal_terms(positions, yaws[rows], arenas.goals[rows])
         self.distances[rows] = distance
         return observe(arenas.scans(rows), arenas.fan.range_max, distance, bearing,
-                       yaws[rows], np.zeros((len(rows), 2)), np.zeros(len(rows)), self.reach,
-                       self.speed)
+                       forward_speeds(yaws[rows], np.zeros((len(rows), 2))),
+                       np.zeros(len(rows)), self.reach, self.speed)
 
     def step(self, worlds, rows, actions):
         """Command robot rows `rows` with `actions` ((n, 2): forward, yaw rate; clipped to
@@ -75,8 +76,8 @@ class Task:
                                self.terminate_on_collision)
         self.distances[rows] = distance
         observed = observe(arenas.scans(rows), arenas.fan.range_max, distance, bearing,
-                           yaws[rows], velocities[rows], arenas.yaw_rates()[rows], self.reach,
-                           self.speed)
+                           forward_speeds(yaws[rows], velocities[rows]),
+                           arenas.yaw_rates()[rows], self.reach, self.speed)
         return observed, outcome, impulses
 
 
