@@ -48,6 +48,7 @@ setup(
             'ball_world_view = ball_world.tools.view:main',
             'ball_world_demo = ball_world.tools.demo:main',
             'ball_world_wander = ball_world.tools.wander:main',
+            'ball_world_navigate = ball_world.tools.navigate:main',
             'ball_world_view_tracks = ball_world.tools.view_tracks:main',
             'ball_world_learn = ball_world.tools.learn:main',
         ],
