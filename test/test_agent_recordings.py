@@ -41,9 +41,11 @@ def command_bytes(vx, vy, wz, stamped):
     return serialize_message(message)
 
 
-def record_run(path, stamped=False, steps=70, **overrides):
+def record_run(path, stamped=False, steps=70, also=(), **overrides):
+    """A scripted run recorded to `path` (and to the sinks `also`): commands, a spawned
+    agent (rover, step 30), a heading set and a push (step 40), a deletion (step 60)."""
     parameters = {**BASE, 'agent.cmd_vel_stamped': stamped, **overrides}
-    simulation = Simulation(parameters, sinks=[McapSink(path)])
+    simulation = Simulation(parameters, sinks=[McapSink(path), *also])
     for k in range(1, steps + 1):
         if k == 30:
             x, y = 9.0, 9.0

@@ -14,10 +14,13 @@ from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
 from test_agent_recordings import record_run
+from test_rerun import read
 
 from ball_world.msgs.agent_cdr import encode_command_rows
 from ball_world.recording.mcap_reader import Recording
-from ball_world.tools import resim
+from ball_world.recording.rerun_agents import AGENTS
+from ball_world.recording.rerun_log import RerunSink
+from ball_world.tools import resim, to_rrd
 
 
 def decoded_topics(path):
@@ -92,3 +95,20 @@ def test_odometry_at_its_rate_is_recorded_at_those_steps_and_resimulates(tmp_pat
     assert [m.log_time for m, _ in topics['/tf'][1]] == times
     assert [m.log_time for m, _ in topics['/ball_3/ground_truth'][1]] == times
     assert len(topics['/ball_3/cmd_vel'][1]) == 2  # commands as every step takes them
+
+
+def test_to_rrd_draws_a_swarms_headings_as_the_live_view_did(tmp_path):
+    # The agents of a swarm are known from its parameters and edits (rover spawned at 30,
+    # ball_3 turned at 40, ball_0 deleted at 60), their headings from `balls`.
+    live = tmp_path / 'live.rrd'
+    path = record_run(tmp_path / 'swarm.mcap', also=[RerunSink(str(live))],
+                      **{'agent.topics': 'none', 'physics.backend': 'numpy'})
+    converted = tmp_path / 'converted.rrd'
+    assert to_rrd.main([str(path), '-o', str(converted)]) == 0
+    key = (f'/{AGENTS}', 'Arrows2D:vectors')
+    drawn, made = read(live)[1][key], read(converted)[1][key]
+    assert made.keys() == drawn.keys() and len(drawn) > 60
+    # two agents, then rover too, then without ball_0; each arrow over its dark casing
+    assert [len(drawn[step]) for step in (10, 35, 65)] == [4, 6, 4]
+    for step, vectors in drawn.items():
+        assert np.allclose(made[step], vectors, atol=1e-6), step

@@ -290,6 +290,16 @@ def decode_pose_array(data: bytes) -> tuple:
     return stamp_ns, frame_id, poses[:, :2].copy()
 
 
+def decode_pose_orientations(data: bytes) -> np.ndarray:
+    """PoseArray bytes -> each pose's orientation (N, 4) as (x, y, z, w)."""
+    reader = _Reader(data)
+    reader.stamp_ns()
+    reader.string()
+    n = reader.count(8 * _POSE_FIELDS)
+    poses = reader.f64(n * _POSE_FIELDS).reshape(n, _POSE_FIELDS)
+    return poses[:, 3:7].copy()
+
+
 def decode_state_layout(data: bytes) -> tuple:
     """Float64MultiArray bytes -> (dims [(label, size, stride)], data_offset, data (M,))."""
     reader = _Reader(data)

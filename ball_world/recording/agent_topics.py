@@ -44,7 +44,7 @@ from ball_world.core.lidar import Fan
 from ball_world.core.orientation import quaternion_to_yaw
 from ball_world.msgs.agent_cdr import (decode_laser_scan, decode_odometry,
                                        encode_command_rows)
-from ball_world.msgs.cdr import decode_vector3_stamped
+from ball_world.msgs.cdr import decode_pose_orientations, decode_vector3_stamped
 from ball_world.msgs.twist_cdr import decode_twist, decode_twist_stamped
 from ball_world.step_record import AgentFrame, Bumper, DriveBatch
 
@@ -218,6 +218,41 @@ def recorded_frame(odom, names, messages=None):
                       ground_truth_cdr=tuple(truth) if all(t is not None for t in truth)
                       else (),
                       bumpers=_recorded_bumpers(agents, messages))
+
+
+class SwarmAgents:
+    """Which balls of a swarm's recorded segment are agents, step by step: a swarm has no
+    per-agent topics to say so (agent.topics none), so they are the segment's `agents`
+    parameter, then each spawn of an agent added and each deletion taken away, as the
+    node made them. A split file's later part starts from the agents its parameters name
+    that are still there (agents spawned in an earlier part are not known there)."""
+
+    def __init__(self, parameters, names):
+        present = set(names)
+        self.names = [name for name in parameters.get('agents', []) if name in present]
+
+    def follow(self, edits):
+        for edit in edits:
+            if edit.kind == 'spawn' and edit.agent:
+                self.names.append(edit.name)
+            elif edit.kind == 'delete' and edit.name in self.names:
+                self.names.remove(edit.name)
+
+    def frame(self, balls_cdr, names):
+        """The AgentFrame of a recorded swarm step: each agent's row and heading (its
+        orientation in `balls`, which gives a swarm's agents theirs), for the views; None
+        without agents. ValueError for an orientation that is no rotation about z."""
+        row_of = {name: row for row, name in enumerate(names)}
+        agents = tuple(name for name in self.names if name in row_of)
+        if not agents:
+            return None
+        rows = np.array([row_of[name] for name in agents], dtype=np.int64)
+        yaws = quaternion_to_yaw(decode_pose_orientations(balls_cdr)[rows])
+        count = len(agents)
+        return AgentFrame(names=agents, indices=rows,
+                          yaws=np.asarray(yaws, dtype=np.float64).reshape(-1),
+                          twists=np.zeros((count, 3)), odom_frames=('',) * count,
+                          base_frames=('',) * count, odom_cdr=(), tf_cdr=b'', topics=False)
 
 
 def _recorded_bumpers(agents, messages):

@@ -1368,14 +1368,20 @@ def _count(step, name):
     return int(value)
 
 
-def step_record(step, impulses, roster):
+def step_record(step, impulses, roster, swarm=None):
     """The StepRecord the node wrote for a complete RecordedStep.
 
     impulses: what roster.follow(step) returned; the roster then holds the step's balls.
+    swarm: the segment's agent_topics.SwarmAgents when its agents are a swarm (their
+    headings come from `balls`), having followed the step's edits.
     """
     rtf = step.stat('real_time_factor')
     try:
-        agents = agent_topics.recorded_frame(step.odom, roster.names, step.agent_messages)
+        if swarm is not None:
+            agents = swarm.frame(step.balls_cdr, roster.names)
+        else:
+            agents = agent_topics.recorded_frame(step.odom, roster.names,
+                                                 step.agent_messages)
     except ValueError as error:
         raise RecordingError(f'step {step.step}: an agent message does not decode: '
                              f'{error}') from None
@@ -1395,6 +1401,14 @@ def _ignore(events):
     """write_pending of a sink that does not record edits."""
 
 
+def _swarm(info, snapshot):
+    """The SwarmAgents of a segment whose agents are a swarm (agent.topics none), else
+    None."""
+    if not agent_topics.swarm(info.parameters):
+        return None
+    return agent_topics.SwarmAgents(info.parameters, snapshot.names)
+
+
 def feed_sinks(path, sinks, close=True, passed_over=None):
     """Replay a recording into Sinks as the node would have: returns the steps fed.
 
@@ -1411,7 +1425,7 @@ def feed_sinks(path, sinks, close=True, passed_over=None):
     """
     recording = Recording(path) if isinstance(path, (str, os.PathLike)) else path
     current = started = None  # segment positions: followed, and begun in the sinks
-    roster = snapshot = info = None
+    roster = snapshot = info = swarm = None
     fed = 0
     last = skipping = None  # the last step followed; the steps being passed over
     for step in recording.steps(agent_messages=True):
@@ -1419,6 +1433,7 @@ def feed_sinks(path, sinks, close=True, passed_over=None):
             segment = recording.segments[step.segment]
             snapshot, info = snapshot_and_info(segment, step)
             roster = BallRoster(snapshot, segment.index)
+            swarm = _swarm(info, snapshot)
             current = step.segment
             last = skipping = None
         elif skipping is not None:
@@ -1431,6 +1446,7 @@ def feed_sinks(path, sinks, close=True, passed_over=None):
             # a later file of a set picks the segment up here: on from its state
             snapshot, info = snapshot_and_info(point, step)
             roster = BallRoster(snapshot, point.index)
+            swarm = _swarm(info, snapshot)
             started = skipping = None
         elif last is not None and step.step > last + 1 and not step.closing:
             skipping = [recording.segments[current].index, step.step, step.step]
@@ -1438,6 +1454,8 @@ def feed_sinks(path, sinks, close=True, passed_over=None):
                 passed_over.append(skipping)
             continue
         impulses = roster.follow(step)
+        if swarm is not None:
+            swarm.follow(step.edits)
         if not step.closing:
             last = step.step
         if step.closing and started == current:
@@ -1456,7 +1474,7 @@ def feed_sinks(path, sinks, close=True, passed_over=None):
             raise RecordingError(f'step {step.step} of segment '
                                  f'{recording.segments[current].index} has '
                                  f'{len(step.positions)} balls, not {len(roster)}')
-        record = step_record(step, impulses, roster)
+        record = step_record(step, impulses, roster, swarm)
         for sink in sinks:
             sink.write_step(record)
         fed += 1
