@@ -22,6 +22,7 @@ numpy (docs/scoring.md): each job's numbers are its own and the caller orders th
 """
 import atexit
 import logging
+import os
 import signal
 import socket
 import threading
@@ -78,6 +79,10 @@ def connect(address, connect_s=CONNECT_S):
     """The ray module, connected to the cluster at `address` (ClusterError, one line)."""
     if not _connected() and address != 'auto':
         _probe(address, connect_s)  # before importing ray: an unreachable address is quick
+    # gRPC's C core logs errors of its own shutdown on stderr at the process's exit
+    # ("backup_poller.cc ... Timer list shutdown"), which is the tool's report channel: it is
+    # told to keep quiet before Ray loads it (a user's own setting is kept).
+    os.environ.setdefault('GRPC_VERBOSITY', 'NONE')
     try:
         import ray
     except ImportError:
