@@ -34,9 +34,10 @@ run: setup-run
 view: setup-run
 	@STEPS=$(VIEW_STEPS) WORLD='$(WORLD)' ARGS='$(ARGS)' scripts/view.sh
 
-# Robots among balls live in a browser: one wandering, one tracking, yours to drive.
+# Robots among balls live in a browser: one wandering (or driven by POLICY=runs/navigate_ppo.zip
+# after make learn), one tracking, yours to drive.
 demo: setup-run
-	@set -f; $(VENV)/bin/ball_world_demo $(if $(WORLD),--world '$(WORLD)') --ros-args $(ARGS)
+	@set -f; $(VENV)/bin/ball_world_demo $(if $(WORLD),--world '$(WORLD)') $(if $(POLICY),--policy '$(POLICY)') --ros-args $(ARGS)
 
 # Two pytest workers: three were faster (453 s against 563 s) but, with DDS discovery slower
 # under the load, one run of three had two tests wait out their deadline (docs/performance.md).

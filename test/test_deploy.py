@@ -86,4 +86,4 @@ def test_a_missing_policy_is_one_line_for_the_controller_and_for_the_navigate_no
     assert code == 2 and err.count('\n') == 1 and 'no policy file' in err, err
     code, _, err = run_tool('ball_world_navigate', '--ros-args', '-p', 'goal:=[1.0]')
     assert code == 2 and err == ("ball_world_navigate: parameter 'goal': expected [x, y] in "
-                                 'm, got [1.0]\n'), err
+                                 'm (or more pairs x, y), got [1.0]\n'), err

@@ -8,7 +8,10 @@ view. ball_1 is yours to drive, from a second terminal: ball_world_teleop's arro
 ball_world_cli drive.
 
 The world is worlds/sandbox.yaml (a real map) when that file is there, else a walled room
-(DEMO_WALLS); --world takes another parameters file. Logs go to runs/demo/.
+(DEMO_WALLS); --world takes another parameters file. With --policy FILE (a policy `make
+learn` trained), ball_0 is driven by it instead (ball_world_navigate, to POLICY_GOALS in
+turn, for ever), and the world's lidar is the one the policy was trained on. Logs go to
+runs/demo/.
 """
 import os
 from pathlib import Path
@@ -33,6 +36,9 @@ DEMO_WALLS = [3.5, 0.0, 3.5, 4.0, 6.5, 10.0, 6.5, 6.0, 0.0, 7.0, 2.0, 7.0]
 #: room's 0.25 m robots and 0.1-0.3 m balls).
 SANDBOX_WANDER = ['-p', 'half_width:=0.25', '-p', 'avoid_distance:=0.5', '-p', 'speed:=0.22']
 SANDBOX_TRACKER = ['-p', 'radius:=[0.05,0.1]', '-p', 'gate:=0.3']
+#: Where a trained policy takes ball_0 in turn: the sandbox's free space around its pillars
+#: (controllers.navigate's goals).
+POLICY_GOALS = [1.5, 1.5, -1.5, 1.5, -1.5, -1.5, 1.5, -1.5]
 #: The robots as the first two balls (so they are ball_0 and ball_1), then slow random balls
 #: the tracker can follow.
 DEMO_BALLS = {'balls.x': [1.5, 8.5], 'balls.y': [1.5, 2.0], 'balls.vx': [0.0, 0.0],
@@ -60,6 +66,17 @@ def demo_parameters(world):
     return arguments
 
 
+def policy_arguments(path):
+    """(the world's -p arguments for the policy's lidar, the beams) of a policy file; one
+    line (PolicyError, FanMismatch's text) when it cannot be used."""
+    from ball_world.envs.arenas import scan_angles
+    from ball_world.envs.policy import load_policy
+    beams = int(load_policy(path).observation_space['scan'].shape[0])
+    angle_min, angle_max = scan_angles(beams)
+    return ['-p', f'agent.scan.samples:={beams}', '-p', f'agent.scan.angle_min:={angle_min!r}',
+            '-p', f'agent.scan.angle_max:={angle_max!r}'], beams
+
+
 def tool(name):
     return Path(sys.executable).parent / name
 
@@ -73,6 +90,10 @@ def shown(path):
 
 
 def instructions(args, world):
+    driver = (f'{WANDERER} wanders on its own (ball_world_wander reads its lidar and steers '
+              'clear).' if args.policy is None else
+              f'{WANDERER} is driven by the policy {args.policy} (ball_world_navigate) to four '
+              'goals in turn.')
     domain = os.environ.get('ROS_DOMAIN_ID')
     env = f'ROS_DOMAIN_ID={domain} ' if domain else ''
     what = f'the map {world}' if world is not None and world == SANDBOX else (
@@ -83,7 +104,7 @@ def instructions(args, world):
   Open  {page_url(args.web_port, args.grpc_port)}
         (the page takes 5-30 s to load)
 
-  {WANDERER} wanders on its own (ball_world_wander reads its lidar and steers clear).
+  {driver}
   {DRIVEN} is yours; ball_world_tracker follows the balls its lidar sees (the green rings).
   Drive {DRIVEN} from a second terminal:
     {env}{shown(tool('ball_world_teleop'))} --ros-args -p ball:={DRIVEN}    (arrow keys)
@@ -98,8 +119,18 @@ def main(argv=None):
     own, ros_args = split_ros_args(argv)
     command_line = parser(PROG, __doc__.splitlines()[0])
     command_line.set_defaults(log_dir=Path('runs/demo'))
+    command_line.add_argument('--policy', metavar='FILE',
+                              help='a trained Navigate-v0 policy (make learn) drives ball_0 '
+                                   'instead of ball_world_wander')
     args = command_line.parse_args(own)
     check_arguments(command_line, args)
+    lidar = []
+    if args.policy is not None:
+        from ball_world.envs.policy import PolicyError
+        try:
+            lidar, _ = policy_arguments(args.policy)
+        except PolicyError as error:
+            command_line.error(f'--policy: {error}')
     world = args.world if args.world is not None else (SANDBOX if SANDBOX.is_file() else None)
     recording = str(uuid.uuid4())
     children = Children(args.log_dir)
@@ -110,12 +141,18 @@ def main(argv=None):
         if start_server(children, args, PROG) is None:
             return 1
         children.start('world', world_command(
-            args.grpc_port, world, args.steps, demo_parameters(world) + ros_args[1:],
+            args.grpc_port, world, args.steps, demo_parameters(world) + lidar + ros_args[1:],
             recording))
         sandbox = world == SANDBOX
-        children.start('wander', [tool('ball_world_wander'), '--ros-args',
-                                  '-p', f'agent:={WANDERER}',
-                                  *(SANDBOX_WANDER if sandbox else [])])
+        if args.policy is None:
+            children.start('wander', [tool('ball_world_wander'), '--ros-args',
+                                      '-p', f'agent:={WANDERER}',
+                                      *(SANDBOX_WANDER if sandbox else [])])
+        else:
+            children.start('navigate', [tool('ball_world_navigate'), '--ros-args',
+                                        '-p', f'agent:={WANDERER}',
+                                        '-p', f'policy:={args.policy}', '-p', 'loop:=true',
+                                        '-p', f"goal:=[{','.join(map(str, POLICY_GOALS))}]"])
         children.start('tracker', [tool('ball_world_tracker'), '--ros-args',
                                    '-p', f'agent:={DRIVEN}',
                                    *(SANDBOX_TRACKER if sandbox else [])])
@@ -123,7 +160,8 @@ def main(argv=None):
                                        '-p', f'agent:={DRIVEN}',
                                        '-p', f'view:={proxy_url(args.grpc_port)}',
                                        '-p', f'recording_id:={recording}'])
-        print(f'  {PROG}: running (world, wander, tracker, view_tracks)', flush=True)
+        print(f"  {PROG}: running (world, {'wander' if args.policy is None else 'navigate'}, "
+              'tracker, view_tracks)', flush=True)
         code = watch(children, PROG)
     except Stop:
         code = 0
