@@ -143,6 +143,15 @@ def test_a_missing_world_file_is_refused_in_one_line(tmp_path):
         "ball_world_view: --world 'nope.yaml': no such file (see --help)"]
 
 
+def test_a_policy_the_demo_cannot_use_is_refused_in_one_line(tmp_path):
+    result = subprocess.run([executable('ball_world_demo'), '--policy', 'none.zip'],
+                            cwd=tmp_path, capture_output=True, text=True, timeout=DEADLINE)
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        "ball_world_demo: --policy: no policy file 'none.zip' (ball_world_learn train saves "
+        'one) (see --help)']
+
+
 # The wander example, headless -----------------------------------------------------------------
 
 ROOM = {'balls.x': [5.0], 'balls.y': [5.0], 'balls.vx': [0.0], 'balls.vy': [0.0],
