@@ -169,7 +169,8 @@ class Simulation:
                                 controlled=self.controller is not None)
         self._drive = None  # the agents' impulses for the next step, once applied
         self._world_changed = False
-        self._applied = []  # impulses applied since the last step
+        self._applied = []  # impulses applied since the last step (and DriveBatches)
+        self._batched = 0  # impulses the DriveBatches of _applied hold beyond one each
         self._edits = []  # edits applied since the last step
         self.step_index = 0
         self.last_discarded = len(self._queue)
@@ -274,6 +275,7 @@ class Simulation:
             return
         events = self.pending_events()
         self._applied = []
+        self._batched = 0
         self._edits = []
         self.last_log_ns = events.log_time_ns
         self._each_sink(lambda sink: getattr(sink, 'write_pending', _ignore)(events))
@@ -400,8 +402,7 @@ class Simulation:
 
     def _applied_count(self):
         """How many impulses were applied since the last step (a DriveBatch counts each)."""
-        return sum(1 if isinstance(part, AppliedImpulse) else len(part.balls)
-                   for part in self._applied)
+        return len(self._applied) + self._batched
 
     def _apply_at_once(self, drive):
         """Apply the drive's impulses (distinct balls) together, if each would pass alone.
@@ -441,6 +442,7 @@ class Simulation:
         # the others' bytes are made when a recording reads them.
         self._applied.append(DriveBatch(balls.tolist(), jx.tolist(), jy.tolist(), names,
                                         stamp_ns if self.agents.each else None))
+        self._batched += len(names) - 1
         return True
 
     # Edits ------------------------------------------------------------------------------
@@ -651,6 +653,7 @@ class Simulation:
                                      self.step_index, self.dt_ns, self.frame_id),
             commands=self.agents.take_commands(), exact=self._carried_state())
         self._applied = []
+        self._batched = 0
         self._edits = []
         self._world_changed = False
         self.last_log_ns = record.log_time_ns
