@@ -116,44 +116,12 @@ def _node_class():
 
 
 def main(args=None):
-    import rclpy
-    from rclpy.utilities import remove_ros_args
-
     from ball_world.envs.deploy import FanMismatch
     from ball_world.envs.policy import PolicyError
-    from ball_world.ros.rcl_init import creating_node
-    from ball_world.ros.stopping import stopped_by_signal
-    argv = sys.argv if args is None else args
-    try:
-        own = remove_ros_args(argv)[1:]
-    except Exception as error:  # noqa: B902 - rcl reports bad arguments as generic errors
-        return fail(f'bad ROS arguments: {error}')
-    if own in (['-h'], ['--help']):
-        print(f'usage: {PROG} [--ros-args -p NAME:=VALUE ...]\n\n{__doc__}\n{PARAMETERS}')
-        return 0
-    if own:
-        return fail(f"unrecognized arguments: {' '.join(own)} (see --help)")
-    node = None
-    try:
-        with stopped_by_signal():
-            rclpy.init(args=argv)
-            with creating_node(PROG):
-                node = _node_class()()
-            node.start()
-            while rclpy.ok():
-                rclpy.spin_once(node, timeout_sec=0.1)
-    except (ParameterError, PolicyError, FanMismatch) as error:
-        return fail(error)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
-
-
-def fail(message):
-    print(f'{PROG}: {message}', file=sys.stderr)
-    return 2
+    from ball_world.tools import node_tool
+    return node_tool.run(
+        PROG, f'usage: {PROG} [--ros-args -p NAME:=VALUE ...]\n\n{__doc__}\n{PARAMETERS}',
+        lambda: _node_class()(), (ParameterError, PolicyError, FanMismatch), args)
 
 
 if __name__ == '__main__':
