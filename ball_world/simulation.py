@@ -16,7 +16,7 @@ import numpy as np
 
 from ball_world import __version__
 from ball_world.agents.part import AgentPart, check as check_agents
-from ball_world.core import limits
+from ball_world.core import lidar, limits
 from ball_world.core.agents import CommandRejected
 from ball_world.core.edits import (check_placement, check_speeds, EditRefused, Entities,
                                    INVALID_POSE, MAX_SPAWN_BATCH, NAME_INVALID, Neighbours,
@@ -88,7 +88,12 @@ def build(parameters, occupancy_map=None):
     elif not parameters['map']:
         occupancy_map = None
     world, cells = build_scene(parameters, occupancy_map)
-    check_agents(parameters, len(world))
+    agents = check_agents(parameters, len(world))
+    if (agents and occupancy_map is not None and int(parameters['agent.scan.samples'])
+            and world.backend == 'numba'):
+        # The compiled lidar's free squares of the map, built with the world, not by the
+        # first scan (an agent spawned later into a world without agents builds them then).
+        lidar.prepare_grid(world.static.scan_grid)
     return BuiltWorld(parameters=parameters, world=world, dt_ns=step_duration_ns(parameters),
                       occupancy_map=occupancy_map, cells=cells)
 

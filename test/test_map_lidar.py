@@ -265,3 +265,18 @@ def test_the_compiled_walk_equals_the_cell_by_cell_walk_to_the_bit(seed):
         np.testing.assert_array_equal(out, expected, err_msg=f'scanner at {px}, {py}')
         starts += np.isfinite(walked).sum() > 0
     assert starts > 0
+
+
+def test_a_world_whose_agents_scan_a_map_has_its_free_squares_before_the_first_scan():
+    # Issue 33: what is built from input is built with the world, before the node's start
+    # line, not by the first step's scans; a world that never scans a map makes none.
+    from ball_world.simulation import build
+    world = {'map': str(MAPS / 'tb3_sandbox.yaml'), 'arena': [], 'random.count': 3,
+             'physics.backend': 'numba'}
+    scanning = build({**world, 'agents': ['ball_0']}).world.static.scan_grid
+    assert scanning.skips is not None
+    expected = lidar.lidar_kernel.free_squares(scanning.solid)
+    assert scanning.skips.tobytes() == expected.tobytes()
+    assert build(world).world.static.scan_grid.skips is None  # no agents
+    assert build({**world, 'agents': ['ball_0'], 'agent.scan.samples': 0}
+                 ).world.static.scan_grid.skips is None  # no scanners

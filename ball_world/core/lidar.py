@@ -287,10 +287,17 @@ def scan_many(positions, radii, walls, agents, yaws, fan, range_mins, backend='a
 
 def _skips(grid):
     """The grid's free squares (lidar_kernel.free_squares), made the first time the
-    compiled scan walks it and kept with it."""
+    compiled scan walks it (or prepare_grid asks) and kept with it."""
     if grid.skips is None:
         grid.skips = lidar_kernel.free_squares(grid.solid)
     return grid.skips
+
+
+def prepare_grid(grid):
+    """Make a map's free squares now (core.static_geometry.ScanGrid), so that the first
+    scan does not: a world whose agents scan builds them before the node says it started
+    (0.32 s at 4096 x 4096 cells)."""
+    _skips(grid)
 
 
 _DISTANCES = {'numpy': distances_numpy, 'numba': distances_numba}
