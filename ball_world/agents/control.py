@@ -80,7 +80,7 @@ class Control:
 
     def __init__(self, parameters):
         self.period_ns = max(1, round(1e9 / float(parameters['controller.rate_hz'])))
-        self.chosen = tuple(parameters['controller.agents'])  # () = every agent
+        self.chosen = frozenset(parameters['controller.agents'])  # empty: every agent
         self.samples = int(parameters['agent.scan.samples'])
         self.parameters = parameters
         self.calls = 0
@@ -99,7 +99,7 @@ class Control:
         every agent; one deleted since the start is left out)."""
         if not self.chosen:
             return tuple(names)
-        chosen = set(self.chosen)
+        chosen = self.chosen
         return tuple(name for name in names if name in chosen)
 
     def drives(self, name):
