@@ -232,11 +232,13 @@ def test_a_box_steps_the_same_by_its_direct_walls_and_by_the_static_index(
     same contacts in the same order: the same bits."""
     arrays = random_world(seed, n, layout, 3.0, 10.0, extra_walls)
     direct = make_pair(arrays)
-    assert direct[1]._stepper._prepared[-2]  # the direct path, prepared with the World
+    # the direct path, prepared with the World (a world the walls left no ball in is
+    # prepared by no step: a cluster can lose every ball to the walls)
+    assert not len(direct[1]) or direct[1]._stepper._prepared[-2]
     with monkeypatch.context() as patch:
         patch.setattr(numba_backend, 'DIRECT_WALLS', -1)
         indexed = World(*arrays[:4], walls=arrays[4], backend='numba')
-    assert not indexed._stepper._prepared[-2]
+    assert not len(indexed) or not indexed._stepper._prepared[-2]
     worlds = [*direct, indexed]
     rng = np.random.default_rng(seed)
     for k in range(120):
