@@ -27,7 +27,8 @@ import gymnasium
 from gymnasium.utils import seeding
 import numpy as np
 
-from ball_world.envs.task import BEAMS, check_steps, CONTROL_HZ, MAX_EPISODE_STEPS, Task
+from ball_world.envs.task import (BEAMS, check_num_envs, check_steps, CONTROL_HZ,
+                                  MAX_EPISODE_STEPS, Task)
 
 FLOAT = np.float32
 
@@ -74,10 +75,7 @@ class NavigateSB3Env:
 
     def __init__(self, num_envs=1, world=None, beams=BEAMS, control_hz=CONTROL_HZ,
                  terminate_on_collision=False, max_episode_steps=MAX_EPISODE_STEPS):
-        count = num_envs
-        if not isinstance(count, (int, np.integer)) or isinstance(count, bool) or count < 1:
-            raise ValueError(f'num_envs must be a whole number >= 1, got {count!r}')
-        self.num_envs = int(count)
+        self.num_envs = check_num_envs(num_envs)
         self.task = Task(world, self.num_envs, 1, beams, control_hz, terminate_on_collision)
         self.max_episode_steps = check_steps(max_episode_steps)
         self.scale = PolicyScale.of(self.task)

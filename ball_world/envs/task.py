@@ -88,3 +88,11 @@ def check_steps(max_episode_steps):
         raise ValueError(f'max_episode_steps must be a whole number >= 1, got '
                          f'{max_episode_steps!r}')
     return int(max_episode_steps)
+
+
+def check_num_envs(num_envs):
+    """num_envs (the worlds of a vector env) as an int >= 1 (ValueError otherwise)."""
+    if not isinstance(num_envs, (int, np.integer)) or isinstance(num_envs, bool) \
+            or num_envs < 1:
+        raise ValueError(f'num_envs must be a whole number >= 1, got {num_envs!r}')
+    return int(num_envs)

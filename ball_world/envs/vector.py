@@ -22,7 +22,8 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 import numpy as np
 
-from ball_world.envs.task import BEAMS, check_steps, CONTROL_HZ, MAX_EPISODE_STEPS, Task
+from ball_world.envs.task import (BEAMS, check_num_envs, check_steps, CONTROL_HZ,
+                                  MAX_EPISODE_STEPS, Task)
 
 
 class NavigateVectorEnv(gymnasium.vector.VectorEnv):
@@ -35,10 +36,7 @@ class NavigateVectorEnv(gymnasium.vector.VectorEnv):
                  render_mode=None):
         if render_mode is not None:
             raise ValueError(f'render_mode {render_mode!r}: Navigate-v0 does not render')
-        count = num_envs
-        if not isinstance(count, (int, np.integer)) or isinstance(count, bool) or count < 1:
-            raise ValueError(f'num_envs must be a whole number >= 1, got {count!r}')
-        self.num_envs = int(count)
+        self.num_envs = check_num_envs(num_envs)
         self.task = Task(world, self.num_envs, 1, beams, control_hz, terminate_on_collision)
         self.max_episode_steps = check_steps(max_episode_steps)
         self.single_observation_space = self.task.observation_space
