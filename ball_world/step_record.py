@@ -91,7 +91,35 @@ class DriveBatch(NamedTuple):
         return encode_impulses(self.stamp_ns, self.names, self.jx, self.jy)
 
 
-class AppliedImpulses(Sequence):
+class _Batched(Sequence):
+    """A step's items in order, kept as single items (`single`, a class) and batches whose
+    items are made only when someone iterates (AppliedImpulses, TakenCommands)."""
+
+    __slots__ = ('_parts', '_length')
+    single = None
+
+    def __init__(self, parts):
+        self._parts = tuple(parts)
+        self._length = sum(1 if isinstance(part, self.single) else self._batch_length(part)
+                           for part in self._parts)
+
+    @property
+    def parts(self):
+        return self._parts
+
+    def __len__(self):
+        return self._length
+
+    def __getitem__(self, index):
+        return tuple(self)[index]
+
+    def __eq__(self, other):
+        return isinstance(other, (tuple, type(self))) and tuple(self) == tuple(other)
+
+    __hash__ = None
+
+
+class AppliedImpulses(_Batched):
     """The impulses applied before a step, in order, as AppliedImpulses: single ones and the
     agents' drives (DriveBatch), whose AppliedImpulses (drive=True) and bytes are made only
     when someone reads them. Why: as TakenCommands (a node of 1,000 robots at 100 Hz spent
@@ -99,16 +127,12 @@ class AppliedImpulses(Sequence):
     `pushes()` gives the others without making them, `parts` the batches as they are.
     """
 
-    __slots__ = ('_parts', '_length')
+    __slots__ = ()
+    single = AppliedImpulse
 
-    def __init__(self, parts):
-        self._parts = tuple(parts)
-        self._length = sum(1 if isinstance(part, AppliedImpulse) else len(part.balls)
-                           for part in self._parts)
-
-    @property
-    def parts(self):
-        return self._parts
+    @staticmethod
+    def _batch_length(part):
+        return len(part.balls)
 
     def pushes(self):
         """The impulses that are not a swarm's batched drives, in order."""
@@ -124,17 +148,6 @@ class AppliedImpulses(Sequence):
                 yield AppliedImpulse(ball=ball, jx=jx, jy=jy, frame_id=name, cdr=cdr,
                                      drive=True)
 
-    def __len__(self):
-        return self._length
-
-    def __getitem__(self, index):
-        return tuple(self)[index]
-
-    def __eq__(self, other):
-        return isinstance(other, (tuple, AppliedImpulses)) and tuple(self) == tuple(other)
-
-    __hash__ = None
-
 
 def impulses_of(parts):
     """parts (AppliedImpulse and DriveBatch) as a record holds them: a tuple when every
@@ -144,7 +157,7 @@ def impulses_of(parts):
     return AppliedImpulses(parts)
 
 
-class TakenCommands(Sequence):
+class TakenCommands(_Batched):
     """The commands taken before a step, in order, as AppliedCommands: single ones (a
     cmd_vel message) and batches (a swarm's controller: names and an (N, 3) array), each
     batch's AppliedCommands made only when someone reads them.
@@ -155,16 +168,12 @@ class TakenCommands(Sequence):
     for nobody cost more than the step itself.
     """
 
-    __slots__ = ('_parts', '_length')
+    __slots__ = ()
+    single = AppliedCommand  # or a batch: (names, (N, 3) float64 array)
 
-    def __init__(self, parts):
-        self._parts = tuple(parts)  # AppliedCommand or (names, (N, 3) float64 array)
-        self._length = sum(1 if isinstance(part, AppliedCommand) else len(part[0])
-                           for part in self._parts)
-
-    @property
-    def parts(self):
-        return self._parts
+    @staticmethod
+    def _batch_length(part):
+        return len(part[0])
 
     def __iter__(self):
         for part in self._parts:
@@ -174,17 +183,6 @@ class TakenCommands(Sequence):
             names, commands = part
             for name, (vx, vy, wz) in zip(names, commands.tolist()):
                 yield AppliedCommand(name, vx, vy, wz)
-
-    def __len__(self):
-        return self._length
-
-    def __getitem__(self, index):
-        return tuple(self)[index]
-
-    def __eq__(self, other):
-        return isinstance(other, (tuple, TakenCommands)) and tuple(self) == tuple(other)
-
-    __hash__ = None
 
 
 @dataclass(frozen=True)
