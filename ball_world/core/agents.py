@@ -285,12 +285,16 @@ class Agents:
         if None in rows:
             name = names[rows.index(None)]
             raise CommandRejected('unknown_agent', f"no agent named '{name[:64]}'")
+        self.command_rows(np.array(rows, dtype=np.int64), commands, since_ns)
+
+    def command_rows(self, rows, commands, since_ns):
+        """command_many for agents given by their indices in agent order (int64 array), for
+        callers that hold every agent's row already (envs.arenas: no name looked up)."""
         commands = np.asarray(commands, dtype=np.float64)
         bad = ~(np.isfinite(commands) & (np.abs(commands) <= MAX_COMMAND)).all(axis=1)
         if bad.any():
             row = int(np.flatnonzero(bad)[0])
-            check_command(names[row], *commands[row].tolist())  # raises, saying why
-        rows = np.array(rows, dtype=np.int64)
+            check_command(self._names[rows[row]], *commands[row].tolist())  # raises, saying why
         self._commands[rows] = commands
         self._since[rows] = int(since_ns)
         self.commands_taken += len(rows)
@@ -331,9 +335,18 @@ class Agents:
         """
         if not self._names:
             return []
-        limits = self.limits
         if rows is None:
             rows = np.array([index_of.get(name, -1) for name in self._names], dtype=np.int64)
+        due, jx, jy = self.impulse_arrays(velocities, masses, rows, dt_ns, end_ns)
+        names = self._names
+        due, jx, jy = due.tolist(), jx.tolist(), jy.tolist()
+        return [(names[agent], x, y) for agent, x, y in zip(due, jx, jy)]
+
+    def impulse_arrays(self, velocities, masses, rows, dt_ns, end_ns):
+        """impulses() as arrays, for callers that step many agents (envs.arenas): (the
+        agents due, in agent order, jx, jy); `rows` are the agents' indices into velocities
+        and masses (-1: not in the world)."""
+        limits = self.limits
         present = rows >= 0
         active = self._in_force(end_ns)
         forward = np.where(active, self._commands[:, 0], 0.0)
@@ -349,10 +362,8 @@ class Agents:
             dvx, dvy, change, target = _holonomic(forward, left, cos, sin, moving,
                                                   limits.max_speed, reach)
         mass = masses[np.where(present, rows, 0)]
-        due = present & ~(change <= _SETTLED * target)
-        jx, jy = (mass * dvx).tolist(), (mass * dvy).tolist()
-        names = self._names
-        return [(names[row], jx[row], jy[row]) for row in np.flatnonzero(due).tolist()]
+        due = np.flatnonzero(present & ~(change <= _SETTLED * target))
+        return due, mass[due] * dvx[due], mass[due] * dvy[due]
 
     def turn(self, dt_ns, end_ns):
         """Advance every heading over the step ending end_ns by its clamped yaw rate."""

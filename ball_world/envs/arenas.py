@@ -33,6 +33,7 @@ from ball_world.core import lidar
 from ball_world.core.agents import Agents
 from ball_world.core.stepping import reachable_speed, speed_limit, travel_per_substep
 from ball_world.core.world import World
+from ball_world.core.world_batch import supports, WorldBatch
 from ball_world.envs.batch_scan import BatchScanner, scan_worlds
 from ball_world.envs.layout import EpisodeLayout
 from ball_world.envs.world_file import fixed_balls, random_sizes
@@ -131,6 +132,9 @@ class Arenas:
                        if scan_worlds is not None else None)
         self._radii_rows = np.ascontiguousarray(np.broadcast_to(self.radii,
                                                                 (rows, len(self.radii))))
+        #: The worlds' physics in one compiled call (core.world_batch), made at the first
+        #: step, when every world has its balls; None without numba or in exact mode.
+        self._world_batch = None
 
     # Episodes ---------------------------------------------------------------------------
 
@@ -154,6 +158,8 @@ class Arenas:
         self.goals[first:first + robots] = goals
         self.commands[first:first + robots] = 0.0
         self.steps[world] = 0
+        if self._world_batch is not None:
+            self._world_batch.bind(world)
         self.layouts[world] = (noise_seed, starts, self.agents.yaws()[first:first + robots],
                                goals, positions, velocities)
 
@@ -167,12 +173,9 @@ class Arenas:
         turn = np.clip(actions[:, 1], -limits.max_yaw_rate, limits.max_yaw_rate)
         self.commands[rows, 0] = forward
         self.commands[rows, 1] = turn
-        forward, turn = forward.tolist(), turn.tolist()
-        names = self.names
-        command = self.agents.command
-        since = self.dt_ns
-        for row, vx, wz in zip(rows, forward, turn):
-            command(names[row], vx, 0.0, wz, since)
+        self.agents.command_rows(np.asarray(rows, dtype=np.int64),
+                                 np.column_stack((forward, np.zeros(len(forward)), turn)),
+                                 self.dt_ns)
 
     def advance(self, worlds):
         """Step the worlds `worlds` (a list of indices) by one environment step; returns
@@ -186,32 +189,33 @@ class Arenas:
         agents = self.agents
         dt_ns = self.dt_ns
         dt = self.dt
-        active = [self.worlds[world] for world in worlds]
-        rows = np.concatenate([np.arange(world * robots, (world + 1) * robots)
-                               for world in worlds]) if worlds else np.zeros(0, np.int64)
-        names = self.names
-        slots = {names[row]: slot for slot, row in enumerate(rows.tolist())}
+        rows = (np.concatenate([np.arange(world * robots, (world + 1) * robots)
+                                for world in worlds]) if worlds else np.zeros(0, np.int64))
+        slots = np.full(len(self.names), -1, dtype=np.int64)  # agent row -> its slot
+        slots[rows] = np.arange(len(rows))
         masses = self._robot_masses[rows]
         impulses = np.zeros(len(rows))
+        batch = self._batch_of_worlds()
+        if batch is not None:
+            read, write, step = _batch_access(batch, np.asarray(worlds, np.int64), robots, dt)
+        else:
+            read, write, step = _world_access([self.worlds[world] for world in worlds],
+                                              robots, dt)
         # The velocities as the next physics step takes them (then after the drive): nothing
         # changes them between one physics step's end and the next one's drive.
-        moving = np.concatenate([state.velocities[:robots] for state in active])
+        moving = read()
         for substep in range(self.substeps):
             end_ns = (substep + 1) * dt_ns
             driven = moving
-            due = agents.impulses(driven, masses, slots, dt_ns, end_ns)
-            if due:
-                names_due, jx, jy = zip(*due)
-                where = [slots[name] for name in names_due]
+            due, jx, jy = agents.impulse_arrays(driven, masses, slots, dt_ns, end_ns)
+            if len(due):
+                where = slots[due]
                 mass = masses[where]
-                driven[where, 0] += np.array(jx) / mass
-                driven[where, 1] += np.array(jy) / mass
-            first = 0
-            for state in active:
-                state.velocities[:robots] = driven[first:first + robots]
-                first += robots
-                state.step(dt)
-            moving = np.concatenate([state.velocities[:robots] for state in active])
+                driven[where, 0] += jx / mass
+                driven[where, 1] += jy / mass
+            write(driven)
+            step()
+            moving = read()
             change = moving - driven
             impulses += masses * np.hypot(change[:, 0], change[:, 1])
             agents.turn(dt_ns, end_ns)
@@ -220,13 +224,26 @@ class Arenas:
         out[rows] = impulses
         return out
 
+    def _batch_of_worlds(self):
+        """The WorldBatch of every world, made on the first step (when each has its balls),
+        or None where the worlds cannot be batched (numpy backend, exact mode)."""
+        if self._world_batch is None and supports(self.worlds[0]):
+            self._world_batch = WorldBatch(self.worlds)
+        return self._world_batch
+
     # Observations -----------------------------------------------------------------------
 
     def robot_state(self):
         """(positions (rows, 2), headings (rows,), world velocities (rows, 2))."""
         robots = self.robots
-        positions = np.concatenate([state.positions[:robots] for state in self.worlds])
-        velocities = np.concatenate([state.velocities[:robots] for state in self.worlds])
+        batch = self._world_batch
+        if batch is not None:  # every world's arrays are rows of the batch's
+            positions = batch.positions[:, :robots].reshape(-1, 2).copy()
+            velocities = batch.velocities[:, :robots].reshape(-1, 2).copy()
+        else:
+            positions = np.concatenate([state.positions[:robots] for state in self.worlds])
+            velocities = np.concatenate([state.velocities[:robots]
+                                         for state in self.worlds])
         return positions, self.agents.yaws(), velocities
 
     def scans(self, rows):
@@ -247,8 +264,11 @@ class Arenas:
             return out
         rows = np.asarray(rows, dtype=np.int64)
         worlds, excludes = np.divmod(rows, robots)
-        states = self.worlds
-        positions = np.stack([states[world].positions for world in worlds.tolist()])
+        if self._world_batch is not None:
+            positions = self._world_batch.positions[worlds]
+        else:
+            states = self.worlds
+            positions = np.stack([states[world].positions for world in worlds.tolist()])
         origins = positions[np.arange(len(rows)), excludes]
         out = self._batch.ranges(positions, self._radii_rows[:len(rows)], origins, yaws[rows],
                                  excludes)
@@ -263,3 +283,40 @@ class Arenas:
     def yaw_rates(self):
         """The yaw rate each robot turned at in its last physics step, rad/s."""
         return self.agents.yaw_rates(self.substeps * self.dt_ns)
+
+
+def _batch_access(batch, indices, robots, dt):
+    """(read, write, step) of the worlds `indices` of a WorldBatch: their robots'
+    velocities (rows, 2) gathered and scattered over its (K, balls, 2) array in one
+    operation each, the worlds stepped by dt in one call."""
+    velocities = batch.velocities
+    count = len(indices)
+
+    def read():
+        return velocities[indices, :robots].reshape(count * robots, 2)
+
+    def write(driven):
+        velocities[indices, :robots] = driven.reshape(count, robots, 2)
+
+    def step():
+        batch.step(indices, dt)
+
+    return read, write, step
+
+
+def _world_access(active, robots, dt):
+    """(read, write, step) of the Worlds `active` stepped one by one (World.step)."""
+    def read():
+        return np.concatenate([state.velocities[:robots] for state in active])
+
+    def write(driven):
+        first = 0
+        for state in active:
+            state.velocities[:robots] = driven[first:first + robots]
+            first += robots
+
+    def step():
+        for state in active:
+            state.step(dt)
+
+    return read, write, step
