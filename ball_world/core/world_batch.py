@@ -46,6 +46,7 @@ class WorldBatch:
         self.positions = np.zeros((count, balls, 2))
         self.velocities = np.zeros((count, balls, 2))
         self._shared = None  # what every world's step shares (from its stepper's prepare)
+        self._checked = [None] * count  # each world's shared part last found equal to it
         self._pair_rows = np.empty((count, 4 * balls, 2), dtype=np.int64)
         self._wall_rows = np.empty((count, balls, 2), dtype=np.int64)
         self._lists = np.zeros((count, 3), dtype=np.int64)
@@ -73,9 +74,12 @@ class WorldBatch:
         shared = self._shared_of(world)
         if self._shared is None:
             self._shared = shared
-        elif not _same(shared, self._shared):
+        elif not _same(shared, self._checked[index]) and not _same(shared, self._shared):
             raise ValueError(f'world {index} has other static geometry (or needs another '
                              'index reach) than the batch')
+        # A World keeps its index between edits: comparing it by identity next time spares
+        # comparing a large map's index by value at every reset.
+        self._checked[index] = shared
         self.positions[index] = world.positions
         self.velocities[index] = world.velocities
         world.positions = self.positions[index]
@@ -131,6 +135,9 @@ class WorldBatch:
 
 
 def _same(first, second):
-    """Whether two _shared_of tuples are equal, arrays by value."""
-    return all(np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b
+    """Whether two _shared_of tuples are equal, arrays by identity or else by value (False
+    when `second` is None)."""
+    if second is None:
+        return False
+    return all(a is b or (np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b)
                for a, b in zip(first, second))
