@@ -408,7 +408,7 @@ def hit_points(origin, yaw, fan, ranges):
 
 
 def warm():
-    """Compile (or load) the numba scan kernel and noise seeding, when numba is installed."""
+    """Compile (or load) the numba scan kernel and noise kernels, when numba is installed."""
     if lidar_kernel.available():
         lidar_kernel.warm()
         noise_seed.warm()

@@ -5,31 +5,24 @@ re-simulation draws it again (core.lidar). Making that generator the documented 
 about 11 us (SeedSequence's entropy coercion and hashing, then a new PCG64 and Generator),
 a third of a whole scan at 1,000 balls. The numbers must stay the ones recordings hold, so
 this does numpy's own arithmetic, only cheaper: SeedSequence's pool mixing and state
-generation (uint32 multiply-xorshift hashing, as numpy documents it for SeedSequence) in a
-compiled function, then PCG64's seeding (two steps of its 128-bit LCG) in Python integers,
-set into one PCG64 the scanner keeps and reuses. `test/test_lidar.py` checks the draws
-against `default_rng` bit for bit over many seeds, keys and steps. Without numba it is
-`default_rng` itself.
+generation compiled (core.noise_kernel.seed_words), then PCG64's seeding (two steps of its
+128-bit LCG) in Python integers, set into one PCG64 the scanner keeps and reuses.
+`test/test_lidar.py` checks the draws against `default_rng` bit for bit over many seeds,
+keys and steps. Without numba it is `default_rng` itself.
+
+Many scans at once (a swarm's, a vector env's) skip the Generator altogether: EntropyRows
+holds each scanner's seed words and noises all their ranges in one compiled call
+(core.noise_kernel.add_noise, the same bits).
 """
 import numpy as np
 
-try:
-    from numba import njit
-except ImportError:  # the documented, slower construction is used instead
-    njit = None
+from ball_world.core import noise_kernel
+from ball_world.core.noise_kernel import PCG_MULTIPLIER
 
 MASK32 = 0xFFFFFFFF
 MASK128 = (1 << 128) - 1
-#: SeedSequence's constants (pool of 4 words; hash multipliers A and B; mix multipliers).
-POOL_SIZE = 4
-INIT_A = 0x43b0d7e5
-MULT_A = 0x931e8875
-INIT_B = 0x8b51f9dd
-MULT_B = 0x58f38ded
-MIX_MULT_L = 0xca01f9dd
-MIX_MULT_R = 0x4973f715
-#: PCG64's 128-bit LCG multiplier.
-PCG_MULTIPLIER = (2549297995355413924 << 64) | 4865540595714422341
+#: Entropy words an EntropyRows row holds at first: a seed and a key below 2**64 need 4.
+WORDS = 4
 
 
 def int_words(value):
@@ -44,61 +37,6 @@ def int_words(value):
         words.append(value & MASK32)
         value >>= 32
     return words
-
-
-def _seed_words(fixed, step):
-    """SeedSequence(entropy).generate_state(4, uint64) for the entropy words `fixed` (uint64
-    array of 32-bit words) followed by the words of `step` (int_words): the pool mixed from
-    the entropy, then hashed out into 8 words, read as 4 little-endian uint64."""
-    mask = np.uint64(MASK32)
-    shift = np.uint64(16)
-    high = np.uint64(step) >> np.uint64(32)
-    entropy = np.empty(len(fixed) + (2 if high else 1), dtype=np.uint64)
-    entropy[:len(fixed)] = fixed
-    entropy[len(fixed)] = np.uint64(step) & mask
-    if high:
-        entropy[len(fixed) + 1] = high
-    pool = np.zeros(POOL_SIZE, dtype=np.uint64)
-    hash_a = np.uint64(INIT_A)
-    mult_a = np.uint64(MULT_A)
-    left = np.uint64(MIX_MULT_L)
-    right = np.uint64(MIX_MULT_R)
-
-    def hashmix(value, hash_const):
-        value = (value ^ hash_const) & mask
-        hash_const = (hash_const * mult_a) & mask
-        value = (value * hash_const) & mask
-        return value ^ (value >> shift), hash_const
-
-    def mix(x, y):
-        result = (left * x - right * y) & mask
-        return result ^ (result >> shift)
-
-    for i in range(POOL_SIZE):
-        word = entropy[i] if i < len(entropy) else np.uint64(0)
-        pool[i], hash_a = hashmix(word, hash_a)
-    for i_src in range(POOL_SIZE):
-        for i_dst in range(POOL_SIZE):
-            if i_src != i_dst:
-                hashed, hash_a = hashmix(pool[i_src], hash_a)
-                pool[i_dst] = mix(pool[i_dst], hashed)
-    for i_src in range(POOL_SIZE, len(entropy)):
-        for i_dst in range(POOL_SIZE):
-            hashed, hash_a = hashmix(entropy[i_src], hash_a)
-            pool[i_dst] = mix(pool[i_dst], hashed)
-    out = np.zeros(4, dtype=np.uint64)
-    hash_b = np.uint64(INIT_B)
-    mult_b = np.uint64(MULT_B)
-    for i in range(8):
-        value = (pool[i % POOL_SIZE] ^ hash_b) & mask
-        hash_b = (hash_b * mult_b) & mask
-        value = (value * hash_b) & mask
-        out[i // 2] |= (value ^ (value >> shift)) << np.uint64(32 * (i % 2))
-    return out
-
-
-if njit is not None:
-    _seed_words = njit(cache=True, nogil=True)(_seed_words)
 
 
 def pcg64_state(words):
@@ -127,12 +65,55 @@ class NoiseSeeds:
     def generator(self, step):
         """The Generator of this step's noise."""
         step = int(step)
-        if njit is None or not 0 <= step < 2**63:  # (a negative step is refused there)
-            return np.random.default_rng([self.seed, self.key, step])
-        self._bits.state = pcg64_state(_seed_words(self._fixed, step).tolist())
+        if not noise_kernel.available() or not 0 <= step < 2**63:  # (default_rng refuses
+            return np.random.default_rng([self.seed, self.key, step])  # a negative step)
+        self._bits.state = pcg64_state(noise_kernel.seed_words(self._fixed, step).tolist())
         return self._generator
 
 
+class EntropyRows:
+    """The noise seeds of many scanners, one row each, for noising many scans in one
+    compiled call (`add_noise`): row k draws as `default_rng([seed_k, key_k, step])`."""
+
+    def __init__(self, rows):
+        self.words = np.zeros((rows, WORDS), dtype=np.uint64)  # seed's words, then key's
+        self.lengths = np.zeros(rows, dtype=np.int64)
+
+    @classmethod
+    def of(cls, pairs):
+        """Rows of the (seed, key) pairs, in order."""
+        pairs = list(pairs)
+        table = cls(len(pairs))
+        for row, (seed, key) in enumerate(pairs):
+            table.set(row, seed, key)
+        return table
+
+    def set(self, row, seed, key):
+        """Row `row` draws as default_rng([seed, key, step]) (ValueError for a negative seed
+        or key, as SeedSequence refuses them)."""
+        words = int_words(seed) + int_words(key)
+        if len(words) > self.words.shape[1]:  # a seed or key beyond 2**64: rare, so grown
+            wider = np.zeros((len(self.words), len(words)), dtype=np.uint64)
+            wider[:, :self.words.shape[1]] = self.words
+            self.words = wider
+        self.words[row, :len(words)] = words
+        self.lengths[row] = len(words)
+
+    def add_noise(self, ranges, rows, steps, stddev):
+        """Noise of `stddev` m on ranges (N, beams) float64 C-contiguous, in place: row k as
+        core.lidar.add_noise noises the scan of entropy row rows[k] at step steps[k] (the
+        same bits). Needs numba (noise_kernel.available()); returns ranges."""
+        if stddev > 0.0 and len(ranges):
+            steps = np.asarray(steps, dtype=np.int64)
+            if steps.min() < 0:
+                raise ValueError(f'a noise step must be a non-negative integer, not '
+                                 f'{steps.min()}')
+            noise_kernel.add_noise(ranges, self.words[rows], self.lengths[rows], steps,
+                                   float(stddev))
+        return ranges
+
+
 def warm():
-    """Compile (or load from numba's cache) the seeding, so a first noisy scan does not."""
-    return NoiseSeeds(0, 0).generator(0)
+    """Compile (or load from numba's cache) the seeding and the batched draws, so a first
+    noisy scan does not."""
+    noise_kernel.warm()
