@@ -20,6 +20,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ball_world.core import lidar
+from ball_world.core.noise_seed import EntropyRows
 from ball_world.core.parameters import ParameterError
 from ball_world.core.static_geometry import ScanGrid
 from ball_world.msgs.agent_cdr import encode_laser_scan
@@ -119,7 +120,8 @@ class AgentScans:
         self.period_ns = max(1, round(1e9 / float(parameters['agent.scan.rate_hz'])))
         self.seed = int(parameters['random.seed'])
         self._scanners = {}  # name -> (radius, lidar.Scanner)
-        self._last = None  # (names, radii, scanners) of the last scan: most steps reuse it
+        self._last = None  # [names, radii, scanners, their EntropyRows or None] of the last
+        # scan: most steps reuse it
 
     def due(self, step_index, dt_ns):
         """Whether step `step_index` (ending at step_index * dt_ns) is a scan step."""
@@ -145,10 +147,12 @@ class AgentScans:
         radii = world.radii[indices].tolist()
         last = self._last
         if last is not None and last[0] == names and last[1] == radii:
-            scanners = last[2]
+            scanners, entropy = last[2], last[3]
         else:
             scanners = [self.scanner(name, radius) for name, radius in zip(names, radii)]
-            self._last = (names, radii, scanners)
+            entropy = None  # made at the first noisy batch
+            self._last = [names, radii, scanners, entropy]
+        noised = False
         if scanners and scanners[0].backend == 'numba':
             # Every agent's scan in one compiled call (lidar.scan_many: the same ranges as
             # one scan each, bit for bit, at a fraction of the cost when the range is short
@@ -157,11 +161,16 @@ class AgentScans:
                                     scanners[0].fan,
                                     [scanner.fan.range_min for scanner in scanners],
                                     'numba', world.static.scan_grid)
+            stddev = scanners[0].fan.noise_stddev
+            if stddev > 0.0:
+                # And every agent's noise in one (core.noise_kernel: each scanner's
+                # default_rng([seed, key, step]) draws, bit for bit).
+                if entropy is None:
+                    entropy = self._last[3] = EntropyRows.of(
+                        (scanner.seed, scanner.key) for scanner in scanners)
+                entropy.add_noise(table, slice(None), np.full(len(table), step_index), stddev)
+                noised = True
             if not encode:
-                stddev = scanners[0].fan.noise_stddev
-                if stddev > 0.0:
-                    for ranges, scanner in zip(table, scanners):
-                        lidar.add_noise(ranges, stddev, scanner.noise.generator(step_index))
                 return ScanTable(names, base_frames, table,
                                  [scanner.fan for scanner in scanners])
             ranges_of = iter(table)
@@ -174,7 +183,7 @@ class AgentScans:
         period = self.period_ns * 1e-9
         for name, scanner, frame_id, ranges in zip(names, scanners, base_frames, ranges_of):
             fan = scanner.fan
-            if fan.noise_stddev > 0.0:
+            if fan.noise_stddev > 0.0 and not noised:
                 lidar.add_noise(ranges, fan.noise_stddev, scanner.noise.generator(step_index))
             cdr = encode_laser_scan(stamp_ns, frame_id, fan.angle_min, fan.angle_max,
                                     fan.angle_increment, 0.0, period, fan.range_min,

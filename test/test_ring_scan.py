@@ -92,3 +92,33 @@ def test_agents_scans_in_a_simulation_are_the_single_scanners():
         alone = scanner.scan(world.positions, world.radii, world.walls, world.positions[index],
                              float(yaw), int(index), record.step, world.static.scan_grid)
         assert scan.ranges.tobytes() == alone.tobytes()
+
+
+def test_a_swarms_noisy_scans_are_the_single_scanners_encoded_or_not():
+    # Every agent's noise in one compiled call (core.noise_kernel) draws what each agent's
+    # Scanner draws, whether the scans are encoded or kept as a table, at a step past 2**32
+    # (two entropy words) too.
+    parameters = {'random.count': 60, 'arena': [0.0, 0.0, 10.0, 10.0], 'random.seed': 2**40,
+                  'agents': [f'ball_{i}' for i in range(0, 60, 4)], 'agent.scan.samples': 24,
+                  'agent.scan.range_max': 3.0, 'agent.scan.noise_stddev': 0.03,
+                  'agent.scan.rate_hz': 1000.0}
+    simulation = Simulation(parameters)
+    simulation.step()
+    world = simulation.world
+    scans = simulation.agents.scans
+    names = list(parameters['agents'])
+    indices = np.array([int(name[5:]) for name in names])
+    yaws = np.linspace(-3.0, 3.0, len(names))
+    frames = [f'{name}/base_link' for name in names]
+    for step in (7, 2**32 + 3):
+        table = scans.take(world, names, indices, yaws, frames, step, step * 10**6, 10**6,
+                           encode=False)
+        encoded = scans.take(world, names, indices, yaws, frames, step, step * 10**6, 10**6)
+        assert len(table) == len(encoded) == len(names)
+        for kept, sent, index, yaw in zip(table, encoded, indices, yaws):
+            scanner = scans.scanner(kept.name, float(world.radii[index]))
+            alone = scanner.scan(world.positions, world.radii, world.walls,
+                                 world.positions[index], float(yaw), int(index), step,
+                                 world.static.scan_grid)
+            assert kept.ranges.tobytes() == sent.ranges.tobytes() == alone.tobytes()
+            assert np.isfinite(alone).any() and sent.cdr

@@ -31,6 +31,7 @@ import numpy as np
 
 from ball_world.core import lidar
 from ball_world.core.agents import Agents
+from ball_world.core.noise_seed import EntropyRows
 from ball_world.core.stepping import reachable_speed, speed_limit, travel_per_substep
 from ball_world.core.world import World
 from ball_world.core.world_batch import supports, WorldBatch
@@ -126,6 +127,7 @@ class Arenas:
         self.commands = np.zeros((rows, 2))  # the last (forward, yaw rate) each robot took
         self.steps = np.zeros(self.count, dtype=np.int64)  # physics steps since reset
         self.scanners = [None] * rows
+        self._entropy = EntropyRows(rows)  # each row's noise seed and name key
         self.layouts = [None] * self.count  # what each episode started from (recording)
         grid = self.worlds[0].static.scan_grid  # every world's map cells are these
         self._batch = (BatchScanner(self.fan, base.walls.segments, grid)
@@ -153,8 +155,9 @@ class Arenas:
             name = self.names[first + robot]
             self.agents.set_yaw(name, yaws[robot])
             self.agents.command(name, 0.0, 0.0, 0.0, 0)
-            self.scanners[first + robot] = lidar.Scanner(self.fan, 'auto', noise_seed,
-                                                         robot_name(robot))
+            scanner = self.scanners[first + robot] = lidar.Scanner(
+                self.fan, 'auto', noise_seed, robot_name(robot))
+            self._entropy.set(first + robot, scanner.seed, scanner.key)
         self.goals[first:first + robots] = goals
         self.commands[first:first + robots] = 0.0
         self.steps[world] = 0
@@ -249,7 +252,8 @@ class Arenas:
     def scans(self, rows):
         """The lidar ranges (len(rows), beams) of robot rows `rows`, REP 117 with noise:
         the node's scan (core.lidar.Scanner.scan), all rows in one compiled call where
-        numba is installed (envs.batch_scan: the same bits)."""
+        numba is installed (envs.batch_scan: the same bits), their noise in another
+        (core.noise_kernel: the same draws)."""
         robots = self.robots
         yaws = self.agents.yaws()
         steps = self.steps
@@ -273,11 +277,8 @@ class Arenas:
         out = self._batch.ranges(positions, self._radii_rows[:len(rows)], origins, yaws[rows],
                                  excludes)
         stddev = self.fan.noise_stddev
-        if stddev > 0.0:
-            scanners = self.scanners
-            for slot, (row, world) in enumerate(zip(rows.tolist(), worlds.tolist())):
-                lidar.add_noise(out[slot], stddev,
-                                scanners[row].noise.generator(int(steps[world])))
+        if stddev > 0.0:  # each row's default_rng([seed, key, step]) draws, in one call
+            self._entropy.add_noise(out, rows, steps[worlds], stddev)
         return out
 
     def yaw_rates(self):

@@ -5,8 +5,9 @@ pays a few microseconds of Python and of numba's dispatch around a kernel of abo
 one call for all K pays them once. Each world's scan is the same kernel call with the same
 arguments Scanner.distances gives it (the heading's cos and sin by math.cos and math.sin, the
 scanner's body directions, the world's walls and map cells), so the ranges are the node's bit
-for bit; the noise is added after, per robot, by Scanner's own generator (seeded by the
-episode's noise seed, the robot's name and the physics step), as Scanner.scan adds it.
+for bit; the noise is added after, all robots in one call (core.noise_kernel: the draws of
+Scanner's own generator, seeded by the episode's noise seed, the robot's name and the physics
+step, as Scanner.scan adds them).
 
 Without numba (core.lidar's numpy reference), `scan_worlds` is None and the caller scans
 robot by robot through Scanner.scan: the same ranges.
