@@ -11,17 +11,24 @@ node would write. It reports steps per second and the real-time factor (simulate
 per wall second), and the share of a step the controller's round trip took.
 
 Scan noise: ARGoS's proximity sensors have none unless asked; the node's lidar has 1 cm by
-default, seeded per robot and step (core.noise_seed), which costs about 7 us a robot a scan
-(one generator each, to keep the draws numpy's own): --noise 0.01 measures it.
+default, seeded per robot and step (core.noise_seed): --noise 0.01 measures it. All robots'
+noise is drawn in one compiled call (core.noise_kernel); --per-scan-noise runs each size
+again, in the same process, the way it was drawn before: a reseeded Generator per robot per
+scan (about 7 us each), the same numbers.
 Wall time on a shared 2-core machine: the load average is printed with the figures; never a
 timed assertion.
 """
 import argparse
+import contextlib
 import math
 import os
 import tempfile
 import time
 
+import numpy as np
+
+from ball_world.core import lidar
+from ball_world.core.noise_seed import EntropyRows, NoiseSeeds
 from ball_world.simulation import Simulation
 from ball_world.user_code.controller import ControllerProcess
 
@@ -54,6 +61,54 @@ def parameters(robots, noise, seed=0):
             'controller': WANDER, 'controller.rate_hz': 10.0}
 
 
+#: per_scan_noise's generators: (id of an EntropyRows, row) -> NoiseSeeds.
+_PER_SCAN = {}
+
+
+@contextlib.contextmanager
+def per_scan_noise():
+    """While open, EntropyRows noise their rows as the callers did before core.noise_kernel
+    (the same numbers): each row's scan through core.lidar.add_noise with its scanner's
+    reseeded Generator (core.noise_seed.NoiseSeeds, one kept per row, as each Scanner kept
+    one). Rows must be set while it is open (it may be opened again: they are kept). For
+    timing the two side by side."""
+    kept = _PER_SCAN
+    batched_set, batched_noise = EntropyRows.set, EntropyRows.add_noise
+
+    def set_row(rows, row, seed, key):
+        batched_set(rows, row, seed, key)
+        kept[id(rows), row] = NoiseSeeds(seed, key)
+
+    def add_noise(rows, ranges, which, steps, stddev):
+        which = np.arange(len(rows.lengths))[which].tolist()
+        steps = np.broadcast_to(steps, len(which)).tolist()
+        for out, row, step in zip(ranges, which, steps):
+            lidar.add_noise(out, stddev, kept[id(rows), row].generator(step))
+        return ranges
+
+    EntropyRows.set, EntropyRows.add_noise = set_row, add_noise
+    try:
+        yield
+    finally:
+        EntropyRows.set, EntropyRows.add_noise = batched_set, batched_noise
+
+
+def noise_alone(robots, noise, rounds=7, beams=16):
+    """Milliseconds of CPU time (median of `rounds`, alternating) to noise one step's scans
+    of `robots` robots: (in one call, scan by scan) on the same table of ranges."""
+    table = np.full((robots, beams), 1.0)
+    pairs = [(0, lidar.name_key(f'ball_{robot}')) for robot in range(robots)]
+    times = {False: [], True: []}
+    for step in range(rounds):
+        for per_scan in (False, True):
+            with per_scan_noise() if per_scan else contextlib.nullcontext():
+                rows = EntropyRows.of(pairs)
+                began = time.thread_time()
+                rows.add_noise(table, slice(None), np.full(robots, step), noise)
+                times[per_scan].append(time.thread_time() - began)
+    return tuple(1e3 * sorted(times[path])[rounds // 2] for path in (False, True))
+
+
 class _Timed:
     """The controller with the wall time of its round trips summed."""
 
@@ -69,9 +124,10 @@ class _Timed:
             self.seconds += time.perf_counter() - began
 
 
-def run(robots, steps, warm_up, noise, record):
+def run(robots, steps, warm_up, noise, record, per_scan=False):
     values = parameters(robots, noise)
-    with ControllerProcess(WANDER) as process, tempfile.TemporaryDirectory() as folder:
+    with ControllerProcess(WANDER) as process, tempfile.TemporaryDirectory() as folder, \
+            (per_scan_noise() if per_scan else contextlib.nullcontext()):
         controller = _Timed(process)
         sinks = []
         if record:
@@ -101,15 +157,28 @@ def main(argv=None):
     parser.add_argument('--noise', type=float, default=0.0,
                         help='scan noise stddev, m (default 0, as ARGoS)')
     parser.add_argument('--record', action='store_true', help='record the MCAP too')
+    parser.add_argument('--per-scan-noise', action='store_true',
+                        help='run each size again with the noise drawn scan by scan, as '
+                             'before core.noise_kernel (needs --noise)')
     args = parser.parse_args(argv)
+    paths = [False, True] if args.per_scan_noise and args.noise > 0.0 else [False]
     print(f'load average {" ".join(f"{v:.2f}" for v in os.getloadavg())}')
-    print('| robots | arena m | walls | steps | steps/s | real-time factor | controller share |')
-    print('|---:|---:|---:|---:|---:|---:|---:|')
+    print('| robots | arena m | walls | steps | noise drawn | steps/s | real-time factor | '
+          'controller share |')
+    print('|---:|---:|---:|---:|---|---:|---:|---:|')
     for robots in args.robots:
-        result = run(robots, args.steps, args.warm_up, args.noise, args.record)
-        print(f"| {robots:,} | {result['side']:g} | {result['walls']} | {args.steps} | "
-              f"{result['steps_per_s']:.1f} | {result['rtf']:.2f} | "
-              f"{result['controller_share']:.0%} |", flush=True)
+        for per_scan in paths:
+            result = run(robots, args.steps, args.warm_up, args.noise, args.record, per_scan)
+            drawn = ('-' if args.noise <= 0.0 else 'scan by scan' if per_scan
+                     else 'one call')
+            print(f"| {robots:,} | {result['side']:g} | {result['walls']} | {args.steps} | "
+                  f"{drawn} | {result['steps_per_s']:.1f} | {result['rtf']:.2f} | "
+                  f"{result['controller_share']:.0%} |", flush=True)
+    if len(paths) > 1:
+        for robots in args.robots:
+            batched, each = noise_alone(robots, args.noise)
+            print(f'the noise of one step of {robots:,} scans alone (CPU): {batched:.2f} ms in '
+                  f'one call, {each:.1f} ms scan by scan ({each / batched:.0f}x)')
     print(f'16-beam 2 m ring at 10 Hz, scan noise {args.noise:g} m, wander at 10 Hz, 10 Hz '
           f"steps{', recording MCAP' if args.record else ''}; load average "
           f'{" ".join(f"{v:.2f}" for v in os.getloadavg())}')
