@@ -442,9 +442,9 @@ class Simulation:
         stamp_ns = (self.step_index + 1) * self.dt_ns
         self.drive_applied += len(names)
         drive.clear()
-        # One batch, no object per drive (step_record.AppliedImpulses); a swarm's drives are
-        # neither recorded nor published (recording.agent_topics): no bytes either, and
-        # the others' bytes are made when a recording reads them.
+        # One batch, no object per drive (step_record.AppliedImpulses); drives are neither
+        # recorded (recording.agent_topics) nor published: a swarm's have no bytes, the
+        # others' are made when someone reads them.
         self._applied.append(DriveBatch(balls.tolist(), jx.tolist(), jy.tolist(), names,
                                         stamp_ns if self.agents.each else None))
         self._batched += len(names) - 1

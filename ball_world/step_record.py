@@ -27,8 +27,8 @@ class AppliedImpulse:
     jx: float  # N*s along world x
     jy: float  # N*s along world y
     frame_id: str  # 'ball_<i>', as it arrived
-    # the Vector3Stamped as recorded: CDR, header.stamp = sim time of the step (b'' for a
-    # swarm's drive, agent.topics none: neither recorded nor published)
+    # the Vector3Stamped as recorded on `impulse`: CDR, header.stamp = sim time of the step
+    # (a drive's is never recorded, recording.agent_topics; b'' for a swarm's drive)
     cdr: bytes
     # An agent's own drive (core.agents: its cmd_vel turned into an impulse), not a push from
     # outside; views draw and count the two apart.
@@ -74,8 +74,8 @@ class AppliedCommand:
 class DriveBatch(NamedTuple):
     """The agents' drives of a step, applied together (Simulation._apply_at_once): the
     balls' rows, the impulses (N s, world frame) and the agents' names; stamp_ns, the step's
-    stamp, when their Vector3Stamped bytes are recorded (agent.topics each: made only when
-    read, `cdrs`), None for a swarm's (neither recorded nor published)."""
+    stamp, for their Vector3Stamped bytes (agent.topics each: made only when read, `cdrs`;
+    no recording holds them, recording.agent_topics), None for a swarm's (no bytes)."""
 
     balls: list
     jx: list
@@ -84,7 +84,8 @@ class DriveBatch(NamedTuple):
     stamp_ns: Optional[int] = None
 
     def cdrs(self):
-        """The drives' Vector3Stamped bytes, as recorded on <name>/drive (b'' for a swarm)."""
+        """The drives' Vector3Stamped bytes, as <name>/drive held them in recordings made
+        before drives were left out (b'' for a swarm)."""
         if self.stamp_ns is None:
             return [b''] * len(self.names)
         from ball_world.msgs.impulse_batch import encode_impulses

@@ -2,9 +2,9 @@
 
 A Simulation with an McapSink is driven directly, as the node drives it: commands given as
 the bytes a cmd_vel subscription receives, world edits of agents between steps, impulses on
-agents. ball_world_resim must then rebuild every drive impulse from the recorded commands
-and match odom (pose, heading, twist) and /tf to the bit, with either backend and in exact
-mode.
+agents. The drive impulses are not recorded (recording.agent_topics): ball_world_resim must
+rebuild every one from the recorded commands and match balls, state, odom (pose, heading,
+twist) and /tf to the bit, with either backend and in exact mode.
 """
 import math
 
@@ -27,6 +27,25 @@ BASE = {'rate_hz': 50.0, 'random.count': 12, 'random.seed': 5, 'agents': ['ball_
 SCRIPT = {2: [('ball_0', 1.5, 0.0, 2.0)], 3: [('ball_3', -0.5, 0.5, 0.0)],
           20: [('ball_0', 0.0, 0.0, -1.0), ('ball_0', 0.8, -0.2, 0.5)],
           35: [('rover', 1.0, 0.0, 1.0)], 50: [('ball_3', 3.0, 0.0, -5.0)]}
+
+
+class Records:
+    """A sink that keeps the records of a run, as it was live."""
+
+    def __init__(self):
+        self.records = []
+
+    def start_segment(self, world, info):
+        pass
+
+    def write_step(self, record):
+        self.records.append(record)
+
+    def flush(self):
+        pass
+
+    def close(self):
+        pass
 
 
 def command_bytes(vx, vy, wz, stamped):
@@ -72,13 +91,16 @@ def record_run(path, stamped=False, steps=70, also=(), **overrides):
     ids=['numpy', 'numba', 'exact', 'stamped'])
 def test_a_run_with_agents_resimulates_bit_for_bit(tmp_path, capsys, overrides):
     stamped = overrides.pop('agent.cmd_vel_stamped', False)
-    path = record_run(tmp_path / 'agents.mcap', stamped=stamped, **overrides)
+    live = Records()
+    path = record_run(tmp_path / 'agents.mcap', stamped=stamped, also=[live], **overrides)
     assert resim.main([str(path)]) == 0, capsys.readouterr()
     out = capsys.readouterr().out
     assert 'all 71 recorded steps re-simulate bit-identically' in out
     steps = list(Recording(path).steps())
     assert sum(len(step.commands) for step in steps) == 6
-    assert sum(len(step.impulses) for step in steps) > 50  # the drive's, recorded
+    # the push of step 40 only: the drives' impulses (many) were made again from the commands
+    assert sum(len(step.impulses) for step in steps) == 1
+    assert sum(i.drive for record in live.records for i in record.impulses) > 50
     assert set(steps[35].odom) == {'ball_0', 'ball_3', 'rover'}
     assert set(steps[61].odom) == {'ball_3', 'rover'}
 
@@ -91,7 +113,8 @@ def test_resim_notices_a_changed_command(tmp_path, capsys):
                       data=lambda topic, log_time, data: faster if data == changed else data)
     assert resim.main([str(tmp_path / 'tampered.mcap')]) == 1
     out = capsys.readouterr().out
-    assert 'first difference: segment 0 step 2 impulse message 0' in out
+    # the drive made from it moves ball_0 otherwise (in the last bit) in the step it acts on
+    assert 'first difference: segment 0 step 2 ball 0 state' in out
 
 
 def test_other_readers_see_cmd_vel_odom_and_tf_with_their_types(tmp_path):
@@ -115,13 +138,10 @@ def test_other_readers_see_cmd_vel_odom_and_tf_with_their_types(tmp_path):
         # The truth beside the odometry (Stage's base_pose_ground_truth).
         '/ball_0/ground_truth': 'nav_msgs/msg/Odometry',
         '/ball_3/ground_truth': 'nav_msgs/msg/Odometry',
-        '/rover/ground_truth': 'nav_msgs/msg/Odometry',
-        # Each drive's impulse again (it is on `impulse` too), so readers tell it from a push.
-        '/ball_0/drive': 'geometry_msgs/msg/Vector3Stamped',
-        '/ball_3/drive': 'geometry_msgs/msg/Vector3Stamped',
-        '/rover/drive': 'geometry_msgs/msg/Vector3Stamped'}
-    drive = decoded['/ball_0/drive'][1][0]
-    assert drive[1].header.frame_id == 'ball_0' and drive[0].log_time == 20_000_000
+        '/rover/ground_truth': 'nav_msgs/msg/Odometry'}
+    # `impulse` holds the push of step 40 alone: the drives' impulses are not recorded
+    assert [(message.log_time, ros.header.frame_id) for message, ros in
+            decoded['/impulse'][1]] == [(40 * 20_000_000, 'ball_0')]
     truth = decoded['/ball_3/ground_truth'][1][-1][1]
     assert (truth.header.frame_id, truth.child_frame_id) == ('world', 'ball_3/base_link')
     first_command = decoded['/ball_0/cmd_vel'][1][0]

@@ -19,7 +19,7 @@ from test_rerun import read
 from ball_world.msgs.agent_cdr import encode_command_rows
 from ball_world.recording.mcap_reader import Recording
 from ball_world.recording.rerun_agents import AGENTS
-from ball_world.recording.rerun_log import RerunSink
+from ball_world.recording.rerun_log import ENERGY, RerunSink
 from ball_world.tools import resim, to_rrd
 
 
@@ -105,8 +105,14 @@ def test_to_rrd_draws_a_swarms_headings_as_the_live_view_did(tmp_path):
                       **{'agent.topics': 'none', 'physics.backend': 'numpy'})
     converted = tmp_path / 'converted.rrd'
     assert to_rrd.main([str(path), '-o', str(converted)]) == 0
+    logged, converted = read(live)[1], read(converted)[1]
+    # the energy plot as live: its drives' part from the drives made again (not recorded)
+    energy = {key: column for key, column in logged.items() if key[0].startswith(f'/{ENERGY}')}
+    assert len(energy) >= 3
+    for key, column in energy.items():
+        assert converted[key] == column, key
     key = (f'/{AGENTS}', 'Arrows2D:vectors')
-    drawn, made = read(live)[1][key], read(converted)[1][key]
+    drawn, made = logged[key], converted[key]
     assert made.keys() == drawn.keys() and len(drawn) > 60
     # two agents, then rover too, then without ball_0; each arrow over its dark casing
     assert [len(drawn[step]) for step in (10, 35, 65)] == [4, 6, 4]

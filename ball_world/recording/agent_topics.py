@@ -7,14 +7,7 @@ files are what they were before agents existed.
 Per step, with `<ns>` the node's namespace (that of `balls`):
 - before the step's `balls`: every command an agent took, as received, on
   `<ns>/<name>/cmd_vel` (Twist, or TwistStamped with agent.cmd_vel_stamped), at the log time
-  of the first step it acted on; and the impulse the agent's own drive applied before the
-  step (AppliedImpulse.drive), on `<ns>/<name>/drive` (Vector3Stamped, the very bytes of
-  its entry on `impulse`, which holds every applied impulse as before). Why a topic of its
-  own: on `impulse` a drive and a push on the agent are the same message (frame_id the
-  ball's name), and a viewer fed from the recording must draw and count pushes only. The
-  node does not publish it: a recording keeps it for the tools (`ros2 bag play` plays it
-  to no subscriber). A recording made before it existed has none: its drives read as
-  pushes, as they always did;
+  of the first step it acted on;
 - after it: `<ns>/<name>/odom` and `<ns>/<name>/ground_truth` of every agent, `/tf`, and
   `/tf_static` when the set of agents changed (a segment's first step included; never with
   agent.odom.tf_static false), as the node publishes them; `<ns>/<name>/bumper` of every
@@ -24,16 +17,26 @@ Per step, with `<ns>` the node's namespace (that of `balls`):
 With agent.topics none (a swarm) there are no per-agent topics: the commands taken before
 a step go, all of them, into one message at its log time, `<ns>/agent_commands`
 (std_msgs/msg/Float64MultiArray, rows (ball, vx, vy, wz), ball the row in the step's
-`balls`, msgs.agent_cdr.encode_command_rows), and the drives' impulses are not recorded
-at all: neither on `<name>/drive` nor on `impulse`, which keeps every other impulse.
-Why: 10,000 agents driving would make 20,000 messages a step; re-simulation makes the
-drives again from the commands, as it always did, and compares everything they move. With
-agent.odom.rate_hz, odom, ground truth and /tf are recorded at the steps that send them.
+`balls`, msgs.agent_cdr.encode_command_rows). With agent.odom.rate_hz, odom, ground truth
+and /tf are recorded at the steps that send them.
 
-The reader's step roles (agent_role) are cmd_vel, agent_commands, drive, odom and /tf;
-scans, ground
-truth and bumpers are read as topics of their own (AGENT_MESSAGE_KINDS), beside the steps,
-and handed to the sinks fed from a recording (recorded_frame) when they draw them.
+The drives' impulses (an agent's cmd_vel turned into an impulse before each step it
+accelerates, AppliedImpulse.drive) are not recorded, with either agent.topics: neither on
+`impulse`, which keeps every other impulse, nor anywhere else. The commands are, and the
+drive is a function of them and of the state recorded at the step before, so
+re-simulation makes the drives again (as it always did) and compares everything they
+move, and a recording fed to sinks gets them again from recording.remade_drives. Why:
+1,000 robots at 100 Hz drive up to 100,000 times a second, which an MCAP writer in Python
+cannot keep up with (docs/performance.md); 10,000 a swarm's. The segment metadata says so
+(DRIVES_KEY). Recordings made before kept every drive on `impulse` and, from when drives
+were recorded apart, again on `<ns>/<name>/drive` (geometry_msgs/msg/Vector3Stamped, the
+same bytes), from which the reader marks them; a recording older still has its drives on
+`impulse` alone, read as pushes, as they always were. Both re-simulate as before.
+
+The reader's step roles (agent_role) are cmd_vel, agent_commands, drive (older files), odom
+and /tf; scans, ground truth and bumpers are read as topics of their own
+(AGENT_MESSAGE_KINDS), beside the steps, and handed to the sinks fed from a recording
+(recorded_frame) when they draw them.
 """
 import re
 from typing import NamedTuple
@@ -46,7 +49,7 @@ from ball_world.msgs.agent_cdr import (decode_laser_scan, decode_odometry,
                                        encode_command_rows)
 from ball_world.msgs.cdr import decode_pose_orientations, decode_vector3_stamped
 from ball_world.msgs.twist_cdr import decode_twist, decode_twist_stamped
-from ball_world.step_record import AgentFrame, Bumper, DriveBatch
+from ball_world.step_record import AgentFrame, Bumper
 
 COMMAND = 'cmd_vel'
 COMMANDS = 'agent_commands'
@@ -67,6 +70,10 @@ TYPES = {COMMAND: 'geometry_msgs/msg/Twist', ODOM: 'nav_msgs/msg/Odometry',
          BUMPER: 'geometry_msgs/msg/Vector3Stamped', DRIVE: 'geometry_msgs/msg/Vector3Stamped',
          COMMANDS: 'std_msgs/msg/Float64MultiArray'}
 STAMPED_COMMAND = 'geometry_msgs/msg/TwistStamped'
+#: The segment metadata entry (all values strings) that says a segment's drive impulses are
+#: not recorded; files written before it have none (drives_recorded).
+DRIVES_KEY = 'agent_drives'
+DRIVES_NOT_RECORDED = 'made from the commands'
 _NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*')
 _AGENT_TOPIC = re.compile(r'(?P<namespace>.*)/(?P<name>[A-Za-z][A-Za-z0-9_]*)/'
                           r'(?P<kind>cmd_vel|drive|odom)')
@@ -97,18 +104,16 @@ def swarm(parameters):
     return parameters.get('agent.topics', 'each') == 'none'
 
 
-def recorded_impulses(impulses, parameters):
-    """The impulses of a step that go on `impulse`: all, but a swarm's drives."""
-    if not swarm(parameters):
-        return impulses
+def recorded_impulses(impulses):
+    """The impulses of a step that go on `impulse`: all but the drives'."""
     if hasattr(impulses, 'pushes'):  # step_record.AppliedImpulses: drives batched
-        return tuple(impulse for impulse in impulses.pushes() if not impulse.drive)
+        impulses = impulses.pushes()
     return tuple(impulse for impulse in impulses if not impulse.drive)
 
 
 def before_step(record, namespace, parameters):
-    """(topic, type, role, bytes) of the commands taken before this step, in order, then of
-    the drives' impulses applied before it; a swarm's commands as one message."""
+    """(topic, type, role, bytes) of the commands taken before this step, in order; a
+    swarm's as one message."""
     frame = record.agents
     if frame is not None and not frame.topics:
         rows = frame.command_rows
@@ -118,19 +123,18 @@ def before_step(record, namespace, parameters):
                  encode_command_rows(rows))]
     kind = command_type(parameters)
     return [(f'{namespace}/{command.name}/{COMMAND}', kind, COMMAND, command.cdr)
-            for command in record.commands] + [
-        (f'{namespace}/{name}/{DRIVE}', TYPES[DRIVE], DRIVE, cdr)
-        for name, cdr in _drives(record.impulses)]
+            for command in record.commands]
 
 
-def _drives(impulses):
-    """(name, bytes) of the drives among a step's impulses, in order; a DriveBatch's from
-    the batch (step_record.AppliedImpulses), with no object per drive."""
-    for part in getattr(impulses, 'parts', impulses):
-        if isinstance(part, DriveBatch):
-            yield from zip(part.names, part.cdrs())
-        elif part.drive:
-            yield part.frame_id, part.cdr
+def drives_recorded(metadata, parameters):
+    """Whether a segment's drive impulses are on `impulse` (files written before they were
+    left out, but a swarm's), from its metadata values; ValueError for a value not known."""
+    value = metadata.get(DRIVES_KEY)
+    if value is None:
+        return not swarm(parameters)
+    if value != DRIVES_NOT_RECORDED:
+        raise ValueError(f"'{DRIVES_KEY}' is {value[:64]!r}, not {DRIVES_NOT_RECORDED!r}")
+    return False
 
 
 def after_step(record, namespace):

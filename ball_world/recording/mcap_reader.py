@@ -22,7 +22,10 @@ feed_sinks() turns a recording back into the WorldSnapshot / RunInfo / StepRecor
 node produced, so any Sink (the Rerun logger, a second MCAP) can be fed from a file. It
 follows each segment's balls through its edits (BallRoster): which names exist, in which
 order, with which radii and masses, so impulses find their ball by name and every record
-carries the balls as they were at its step.
+carries the balls as they were at its step; and where the agents' drives were not recorded
+(agent_topics: every file written since they were left out, and a swarm's), it makes them
+again from the recorded commands (remade_drives), so each record holds the impulses the
+node applied, drives marked, as the live one did.
 """
 import bisect
 import dataclasses
@@ -61,6 +64,7 @@ from ball_world.recording import agent_topics
 from ball_world.recording.files import open_regular
 from ball_world.recording.mcap_writer import (EVENT_ROLES, flatten_parameters, MAP_KEYS,
                                               METADATA_NAME, NODE_NAME, STEP_TOPICS)
+from ball_world.recording.remade_drives import RemadeDrives
 from ball_world.recording.resume import parse_resume, ResumeState
 from ball_world.step_record import (AppliedEdit, AppliedImpulse, PendingEvents, RunInfo,
                                     STATS_FIELDS, StepRecord, WorldSnapshot)
@@ -630,6 +634,9 @@ class Segment:
     # from the metadata, and their bytes, found among the file's attachments.
     map_reference: Optional[tuple] = None
     map_files: Optional[MapFiles] = None
+    # Whether the agents' drive impulses are on `impulse`: in files written before they were
+    # left out (agent_topics.drives_recorded), but a swarm's; re-simulation makes them again.
+    drives_recorded: bool = True
 
     @property
     def occupancy_map(self):
@@ -696,9 +703,13 @@ class Segment:
                 f"the parameters name the map {_text(parameters['map'])} but it keeps no copy "
                 "of the map's files" if parameters['map'] else
                 "it names map files but its parameters have no 'map'")
+        try:
+            drives = agent_topics.drives_recorded(values, parameters)
+        except ValueError as error:
+            raise RecordingError(str(error)) from None
         return cls(index=index, log_offset_ns=log_offset_ns, dt_ns=dt_ns, frame_id=frame_id,
                    package_version=version, parameters=parameters, topics=_topics(values),
-                   resume=resume, map_reference=map_reference)
+                   resume=resume, map_reference=map_reference, drives_recorded=drives)
 
     def expected_balls(self):
         """How many balls the parameters make (explicit and random), without building."""
@@ -749,8 +760,9 @@ class RecordedImpulse:
     y: float
     z: float
     cdr: bytes
-    # An agent's own drive, not a push (its bytes are also on <name>/drive: agent_topics);
-    # False in a recording made before drives were recorded apart.
+    # An agent's own drive, not a push: only in a recording made while drives were recorded
+    # (their bytes also on <name>/drive: agent_topics); False in one made before that, and
+    # now never (drives are not recorded; feed_sinks makes them again: remade_drives).
     drive: bool = False
 
 
@@ -1409,6 +1421,16 @@ def _swarm(info, snapshot):
     return agent_topics.SwarmAgents(info.parameters, snapshot.names)
 
 
+def _remade_drives(segment, snapshot):
+    """The RemadeDrives of a segment whose drives are not recorded, else None."""
+    if segment.drives_recorded:
+        return None
+    try:
+        return RemadeDrives(segment.parameters, snapshot, segment.dt_ns, segment.resume)
+    except ParameterError as error:
+        raise RecordingError(f'segment {segment.index}: {error}') from None
+
+
 def feed_sinks(path, sinks, close=True, passed_over=None):
     """Replay a recording into Sinks as the node would have: returns the steps fed.
 
@@ -1425,7 +1447,7 @@ def feed_sinks(path, sinks, close=True, passed_over=None):
     """
     recording = Recording(path) if isinstance(path, (str, os.PathLike)) else path
     current = started = None  # segment positions: followed, and begun in the sinks
-    roster = snapshot = info = swarm = None
+    roster = snapshot = info = swarm = drives = None
     fed = 0
     last = skipping = None  # the last step followed; the steps being passed over
     for step in recording.steps(agent_messages=True):
@@ -1434,6 +1456,7 @@ def feed_sinks(path, sinks, close=True, passed_over=None):
             snapshot, info = snapshot_and_info(segment, step)
             roster = BallRoster(snapshot, segment.index)
             swarm = _swarm(info, snapshot)
+            drives = _remade_drives(segment, snapshot)
             current = step.segment
             last = skipping = None
         elif skipping is not None:
@@ -1447,6 +1470,7 @@ def feed_sinks(path, sinks, close=True, passed_over=None):
             snapshot, info = snapshot_and_info(point, step)
             roster = BallRoster(snapshot, point.index)
             swarm = _swarm(info, snapshot)
+            drives = _remade_drives(point, snapshot)
             started = skipping = None
         elif last is not None and step.step > last + 1 and not step.closing:
             skipping = [recording.segments[current].index, step.step, step.step]
@@ -1456,6 +1480,8 @@ def feed_sinks(path, sinks, close=True, passed_over=None):
         impulses = roster.follow(step)
         if swarm is not None:
             swarm.follow(step.edits)
+        if drives is not None and not step.closing:
+            impulses = drives.follow(step, impulses, roster)
         if not step.closing:
             last = step.step
         if step.closing and started == current:

@@ -153,8 +153,6 @@ ROLE_QOS = {
     agent_topics.SCAN: offered_qos_profiles(10),
     agent_topics.GROUND_TRUTH: offered_qos_profiles(10),
     agent_topics.BUMPER: offered_qos_profiles(10),
-    # Recorded only (the node publishes no drive topic): the step publishers' profile.
-    agent_topics.DRIVE: offered_qos_profiles(10),
     agent_topics.COMMANDS: offered_qos_profiles(10),  # a swarm's commands, recorded only
 }
 
@@ -283,6 +281,9 @@ def segment_metadata(world, info, topics):
         'parameters': yaml.dump(document, Dumper=_ParamsDumper, sort_keys=False),
         'parameters_json': json.dumps(document),
         'topics': json.dumps(topics),
+        # The agents' drive impulses are left out (recording.agent_topics): say so, for the
+        # readers of files from before that kept them.
+        agent_topics.DRIVES_KEY: agent_topics.DRIVES_NOT_RECORDED,
         **(map_metadata(occupancy_map.files) if occupancy_map is not None else {}),
         **(info.resume or {}),
     }
@@ -559,8 +560,8 @@ class McapSink:
         log_time_ns = record.log_time_ns
         # Impulses and edits come first, in the order they were applied: all of them were
         # applied before the step whose stamp they carry.
-        self._write_events(log_time_ns, agent_topics.recorded_impulses(
-            record.impulses, self._agent_parameters), record.edits)
+        self._write_events(log_time_ns, agent_topics.recorded_impulses(record.impulses),
+                           record.edits)
         namespace = agent_topics.namespace_of(self._topics)
         for message in agent_topics.before_step(record, namespace, self._agent_parameters):
             self._add_agent(log_time_ns, *message)

@@ -231,14 +231,18 @@ def _energy_lines(recording):
 
 
 def _impulse_lines(recording, shown=10):
-    """How many impulses were applied, how many of them the agents' drives (recorded again
-    on <name>/drive: agent_topics), and the first few pushes."""
+    """How many impulses were recorded and the first few pushes: in a file from before the
+    agents' drives were left out (agent_topics), how many were drives (recorded again on
+    <name>/drive); since, that its drives are not among them."""
     topic = recording.topic_of('impulse')
     count = recording.topics[topic].message_count if topic in recording.topics else 0
     drive_topics = [name for name, (kind, _, _) in recording.agent_roles.items()
                     if kind == agent_topics.DRIVE]
     drives = sum(recording.topics[name].message_count for name in drive_topics)
     split = f" ({count - drives} pushes, {drives} by the agents' drives)" if drives else ''
+    if not drives and _drives_left_out(recording):
+        split = (" (pushes; the agents' drives are not recorded: resim makes them again "
+                 'from the commands)')
     lines = [f'impulses:    {count}{split}']
     listed = 0
     for message in _pushes(recording, topic, drive_topics) if count > drives else ():
@@ -252,6 +256,13 @@ def _impulse_lines(recording, shown=10):
                      'N s')
         listed += 1
     return lines
+
+
+def _drives_left_out(recording):
+    """Whether a segment with agents (named at its start, or recorded) left its drives out."""
+    segments = [segment for segment in recording.segments if not segment.drives_recorded]
+    return bool(segments) and (bool(recording.agent_roles) or any(
+        segment.parameters['agents'] for segment in segments))
 
 
 def _pushes(recording, topic, drive_topics):

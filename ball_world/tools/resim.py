@@ -6,9 +6,12 @@ edits (spawn, delete, set_state) are applied in the order the node applied them 
 impulses_before says how many of the step's impulses came before it), through the same
 Simulation calls the node makes; and every recorded pose, state row and stats entry (except
 the real-time factor, which depends on the wall clock), every impulse and every edit
-message, and every agent's recorded scan (<name>/scan, its seeded noise included), ground
-truth and bumper, must be bit-identical to the re-simulated one; odom and /tf too (with
-agent.odom.noise the drifting odometry, its seeded noise included). A segment's closing
+message (the agents' drive impulses are not recorded: they are made again from the
+recorded commands, as the node made them, and checked through everything they move; a file
+from before, which recorded them, has them compared too), and every agent's recorded scan
+(<name>/scan, its seeded noise included), ground truth and bumper, must be bit-identical to
+the re-simulated one; odom and /tf too (with agent.odom.noise the drifting odometry, its
+seeded noise included). A segment's closing
 record (edits, and the impulses they applied, made after its last step:
 mcap_reader.RecordedStep.closing) is made the same way, without a step, and checked the same
 way. An edit the re-simulation refuses,
@@ -197,23 +200,25 @@ def _resume(segment):
     return simulation
 
 
-def _advance(simulation, step, comparison, segment_index):
+def _advance(simulation, step, comparison, segment_index, drives_recorded=True):
     """Step the simulation once to `step` (the next one), its impulses and edits applied first.
 
     Impulses are queued up to each edit's impulses_before, then the edit is made (which
     applies them first, as in the node); the rest are applied by the step.
+    drives_recorded: the segment's drive impulses are among the recorded ones
+    (mcap_reader.Segment.drives_recorded); either way the simulation makes them again.
     """
     if step.step == 0:
         _compare_events(simulation.last_record, step, comparison, segment_index)
         return simulation.last_record
-    _make_edits(simulation, step, comparison, segment_index)
+    _make_edits(simulation, step, comparison, segment_index, drives_recorded)
     result, rejected = simulation.step()
     _report_rejected(rejected, step.step, comparison, segment_index)
-    _compare_events(result, step, comparison, segment_index, not simulation.agents.each)
+    _compare_events(result, step, comparison, segment_index, drives_recorded)
     return result
 
 
-def _make_edits(simulation, step, comparison, segment_index):
+def _make_edits(simulation, step, comparison, segment_index, drives_recorded=True):
     """Queue the step's impulses and make its edits, in the order the node applied them."""
     impulses = step.impulses
     queued = 0
@@ -231,8 +236,8 @@ def _make_edits(simulation, step, comparison, segment_index):
     # The agents' drive comes right after the impulses the edits applied (see Simulation).
     driven, rejected = simulation.apply_drive()
     _report_rejected(rejected, step.step, comparison, segment_index)
-    if not simulation.agents.each:
-        driven = 0  # a swarm's drives are not recorded (recording.agent_topics)
+    if not drives_recorded:
+        driven = 0  # not among the recorded impulses (recording.agent_topics)
     for impulse in impulses[queued + driven:]:
         simulation.queue_impulse(impulse.frame_id, impulse.x, impulse.y)
 
@@ -253,14 +258,14 @@ def _swarm_commands(simulation, step, comparison, segment_index):
                                       'taken', str(refusal), math.inf))
 
 
-def _close(simulation, step, comparison, segment_index):
+def _close(simulation, step, comparison, segment_index, drives_recorded=True):
     """A closing record: the edits and impulses applied after the segment's last step.
 
     They are made as the node made them, and applied without a step; each must be accepted
     as recorded, and the impulse and edit messages the re-simulation makes must be the
     recorded ones (stamped with the step they would have preceded).
     """
-    _make_edits(simulation, step, comparison, segment_index)
+    _make_edits(simulation, step, comparison, segment_index, drives_recorded)
     _report_rejected(simulation.apply_queued(), step.step, comparison, segment_index)
     _compare_events(simulation.pending_events(), step, comparison, segment_index)
 
@@ -297,12 +302,15 @@ def _report_rejected(rejected, k, comparison, segment_index):
                                   str(rejection), math.inf))
 
 
-def _compare_events(record, step, comparison, segment_index, swarm=False):
-    """The impulse and edit messages the re-simulation made must be the recorded ones (but
-    a swarm's drives, which are not recorded)."""
+def _compare_events(record, step, comparison, segment_index, drives_recorded=True):
+    """The impulse and edit messages the re-simulation made must be the recorded ones (the
+    drives' among them only where they were recorded: an older file)."""
+    impulses = record.impulses
+    if not drives_recorded:
+        impulses = impulses.pushes() if hasattr(impulses, 'pushes') else impulses
     for what, recorded, resimulated, shown in (
             ('impulse message', [i.cdr for i in step.impulses],
-             [i.cdr for i in record.impulses if not (swarm and i.drive)],
+             [i.cdr for i in impulses if drives_recorded or not i.drive],
              decode_vector3_stamped),
             ('edit message', [e.text for e in step.edits], [e.text for e in record.edits],
              str)):
@@ -426,12 +434,13 @@ def resimulate(recording, progress=None):
             continue
         if step.closing:
             before = comparison.count
-            _close(simulation, step, comparison, segment.index)
+            _close(simulation, step, comparison, segment.index, segment.drives_recorded)
             result.closing = (len(step.impulses), len(step.edits))
             if comparison.count != before:
                 result.differing_steps += 1
             continue
-        record = _advance(simulation, step, comparison, segment.index)
+        record = _advance(simulation, step, comparison, segment.index,
+                          segment.drives_recorded)
         result.steps += 1
         result.impulses += len(step.impulses)
         result.edits += len(step.edits)
