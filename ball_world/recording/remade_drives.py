@@ -46,6 +46,7 @@ class RemadeDrives:
         # The drives' bytes are made (when read) as the node made them: a swarm's have none.
         self.each = parameters['agent.topics'] == 'each'
         self._step = -1 if resume is None else resume.step  # the last step followed
+        self._lost = False  # a step could not be followed: no drives from there on
         self._names = tuple(snapshot.names)
         self._masses = np.asarray(snapshot.masses, dtype=np.float64)
         self._velocities = np.asarray(snapshot.velocities, dtype=np.float64)
@@ -56,9 +57,10 @@ class RemadeDrives:
         then holds the step's balls) with its drives among them where the node applied
         them: after the impulses its edits applied, before the rest. Steps must come in
         order; a closing record is not one (it has no drive)."""
-        known = step.step == self._step + 1 and self._velocities is not None
+        if step.step != self._step + 1 or self._velocities is None:
+            self._lost = True  # the headings and velocities from here on are not known
         self._step = step.step
-        if known and step.step > 0:
+        if not self._lost and step.step > 0:
             velocities = self._before_drive(step)
             self._follow_edits(step.edits)
             index_of = self._indices(roster.names)
