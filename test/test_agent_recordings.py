@@ -8,7 +8,7 @@ twist) and /tf to the bit, with either backend and in exact mode.
 """
 import math
 
-from ball_world_testing.harness import rewrite_recording
+from ball_world_testing.harness import rewrite_recording, Truth
 from geometry_msgs.msg import Twist, TwistStamped
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
@@ -27,25 +27,6 @@ BASE = {'rate_hz': 50.0, 'random.count': 12, 'random.seed': 5, 'agents': ['ball_
 SCRIPT = {2: [('ball_0', 1.5, 0.0, 2.0)], 3: [('ball_3', -0.5, 0.5, 0.0)],
           20: [('ball_0', 0.0, 0.0, -1.0), ('ball_0', 0.8, -0.2, 0.5)],
           35: [('rover', 1.0, 0.0, 1.0)], 50: [('ball_3', 3.0, 0.0, -5.0)]}
-
-
-class Records:
-    """A sink that keeps the records of a run, as it was live."""
-
-    def __init__(self):
-        self.records = []
-
-    def start_segment(self, world, info):
-        pass
-
-    def write_step(self, record):
-        self.records.append(record)
-
-    def flush(self):
-        pass
-
-    def close(self):
-        pass
 
 
 def command_bytes(vx, vy, wz, stamped):
@@ -91,7 +72,7 @@ def record_run(path, stamped=False, steps=70, also=(), **overrides):
     ids=['numpy', 'numba', 'exact', 'stamped'])
 def test_a_run_with_agents_resimulates_bit_for_bit(tmp_path, capsys, overrides):
     stamped = overrides.pop('agent.cmd_vel_stamped', False)
-    live = Records()
+    live = Truth()
     path = record_run(tmp_path / 'agents.mcap', stamped=stamped, also=[live], **overrides)
     assert resim.main([str(path)]) == 0, capsys.readouterr()
     out = capsys.readouterr().out

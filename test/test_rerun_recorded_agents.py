@@ -13,7 +13,7 @@ one holds. The same run recorded in the layout of the files made before (every d
 """
 import contextlib
 
-from ball_world_testing.harness import rewrite_recording, without_messages
+from ball_world_testing.harness import rewrite_recording, Truth, without_messages
 import numpy as np
 import pytest
 from test_rerun import cores, read
@@ -103,27 +103,8 @@ def old(tmp_path_factory):
     return mcap, records
 
 
-class Records:
-    """A sink that keeps the records fed to it."""
-
-    def __init__(self):
-        self.records = []
-
-    def start_segment(self, world, info):
-        pass
-
-    def write_step(self, record):
-        self.records.append(record)
-
-    def flush(self):
-        pass
-
-    def close(self):
-        pass
-
-
 def fed(mcap):
-    sink = Records()
+    sink = Truth()
     feed_sinks(mcap, [sink])
     return sink.records
 

@@ -11,7 +11,8 @@ import math
 import re
 import struct
 
-from ball_world_testing.harness import finish, node_command, rewrite_recording, run_tool
+from ball_world_testing.harness import (finish, node_command, rewrite_recording, run_tool,
+                                        Truth)
 from geometry_msgs.msg import Twist
 from mcap.reader import make_reader
 from nav_msgs.msg import Odometry
@@ -25,6 +26,7 @@ import yaml
 
 from ball_world.core.agents import Command
 from ball_world.core.edits import Ball
+from ball_world.recording.mcap_reader import feed_sinks
 from ball_world.recording.mcap_writer import McapSink
 from ball_world.recording.recording_set import open_recording
 from ball_world.recording.split_writer import SplitMcapSink
@@ -130,11 +132,12 @@ SCRIPT = {2: [('ball_0', 1.5, 0.0, 2.0)], 3: [('ball_3', -0.5, 0.5, 0.0)],
           80: [('ball_3', 0.3, 0.1, 0.7)]}
 
 
-def agents_run(directory, steps=110, **overrides):
+def agents_run(directory, steps=110, also=(), **overrides):
     """A split run with agents driven through Simulation.command, as the node drives them:
-    a spawned agent, a heading set, a deleted agent, commands before several rolls."""
+    a spawned agent, a heading set, a deleted agent, commands before several rolls; `also`,
+    more sinks."""
     simulation = Simulation({**AGENTS, **overrides},
-                            sinks=[SplitMcapSink(directory, max_seconds=0.5)])
+                            sinks=[SplitMcapSink(directory, max_seconds=0.5), *also])
     for k in range(1, steps + 1):
         if k == 30:
             [name], _ = simulation.spawn([SpawnRequest('rover', False,
@@ -187,6 +190,28 @@ def test_each_file_of_a_split_run_with_agents_resimulates_alone(tmp_path, capsys
         'ball_3': Command(3.0, 0.0, -5.0, 48 * 20_000_000),
         'rover': Command(1.0, 0.0, 1.0, 48 * 20_000_000)}
     assert resume.yaws[1] != 2.5 and abs(resume.yaws[1]) <= math.pi  # turned since set
+
+
+def test_each_file_of_a_split_run_with_agents_gives_the_sinks_its_drives_again(tmp_path):
+    # the drives are not recorded: a file that resumes mid-segment makes them again from the
+    # headings and commands of its resume state (recording.remade_drives), as the live run
+    # applied them, bit for bit; so does the whole directory
+    live = Truth()
+    directory = tmp_path / 'agents'
+    names = agents_run(directory, also=[live])
+    by_step = {record.step: record for record in live.records}
+
+    def applied(impulses):
+        return [(i.ball, i.frame_id, i.drive, i.jx, i.jy, i.cdr) for i in impulses]
+
+    for path in (directory, *(directory / name for name in names)):
+        fed = Truth()
+        feed_sinks(open_recording(path), [fed])
+        assert any(i.drive for record in fed.records for i in record.impulses), path
+        for record in fed.records:
+            assert applied(record.impulses) == applied(by_step[record.step].impulses), (
+                path, record.step)
+    assert sum(i.drive for record in live.records for i in record.impulses) > 50
 
 
 def test_a_file_resumed_without_its_commands_differs(tmp_path, capsys):
