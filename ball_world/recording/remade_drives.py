@@ -61,8 +61,9 @@ class RemadeDrives:
             self._lost = True  # the headings and velocities from here on are not known
         self._step = step.step
         if not self._lost and step.step > 0:
-            velocities = self._before_drive(step)
             self._follow_edits(step.edits)
+        if not self._lost and step.step > 0 and len(self.agents):  # a world without: nothing
+            velocities = self._before_drive(step)
             index_of = self._indices(roster.names)
             self._take_commands(step, roster.names)
             drive = self.agents.impulses(velocities, roster.masses, index_of, self.dt_ns,
