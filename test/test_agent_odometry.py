@@ -279,3 +279,20 @@ def test_the_largest_alphas_step_finite_and_re_simulate(tmp_path, capsys):
         odom = decode_odometry(data)
         assert np.isfinite(odom.pose).all() and np.isfinite(odom.pose_covariance).all()
     assert resim.main([str(path)]) == 0, capsys.readouterr()
+
+
+@pytest.mark.skipif(not odometry.noise_kernel.available(), reason='compiled draws need numba')
+def test_every_agents_noise_in_one_call_is_its_own_generators_draws():
+    # Reference: numpy's default_rng([seed, key, step]).standard_normal(3), as the recording
+    # format documents each agent's draws; names change between calls (spawn, delete).
+    from ball_world.core.lidar import name_key
+    noise = odometry.OdometryNoise(2**40 + 3)
+    for names, step in ((['ball_0', 'ball_1', 'ball_7'], 0), (['ball_0', 'ball_7'], 5),
+                        ([f'robot_{k}' for k in range(40)], 2**32 + 9)):
+        rows = list(range(0, len(names), 2))
+        drawn = noise.normals(names, step, rows)
+        for row, name in enumerate(names):
+            key = name_key(name + odometry.NOISE_KEY_SUFFIX)
+            expected = (np.random.default_rng([2**40 + 3, key, step]).standard_normal(3)
+                        if row in rows else np.zeros(3))
+            assert drawn[row].tobytes() == expected.tobytes(), (name, step)

@@ -239,6 +239,23 @@ def _add_noise(ranges, words, lengths, steps, scale):
     return rare[0], rare[1]
 
 
+def _standard_normals(out, words, lengths, steps):
+    """Row k of `out` (N, count) gets default_rng([*words[k, :lengths[k]], steps[k]])
+    .standard_normal(count): each agent's odometry noise of a step (core.odometry), all rows
+    in one call."""
+    entropy = np.empty(words.shape[1] + 2, dtype=np.uint64)
+    pool = np.empty(POOL_SIZE, dtype=np.uint64)
+    state = np.empty(4, dtype=np.uint64)
+    bits = np.empty(4, dtype=np.uint64)
+    rare = np.zeros(2, dtype=np.int64)
+    for row in range(out.shape[0]):
+        count = _with_step(entropy, words[row], lengths[row], steps[row])
+        _state_words(entropy, count, pool, state)
+        _seed_pcg(bits, state)
+        for column in range(out.shape[1]):
+            out[row, column] = _standard_normal(bits, rare)
+
+
 if njit is not None:
     # The helpers compile where the two kernels call them (numba inlines what LLVM likes).
     _hashmix = njit(nogil=True)(_hashmix)
@@ -253,8 +270,9 @@ if njit is not None:
     _standard_normal = njit(nogil=True)(_standard_normal)
     seed_words = njit(cache=True, nogil=True)(seed_words)
     add_noise = njit(cache=True, nogil=True)(_add_noise)
+    standard_normals = njit(cache=True, nogil=True)(_standard_normals)
 else:
-    add_noise = None
+    add_noise = standard_normals = None
 
 
 def available():
@@ -268,3 +286,5 @@ def warm():
         seed_words(np.zeros(1, dtype=np.uint64), 2**32)
         add_noise(np.zeros((1, 2)), np.zeros((1, 2), dtype=np.uint64),
                   np.ones(1, dtype=np.int64), np.ones(1, dtype=np.int64), 0.01)
+        standard_normals(np.zeros((1, 3)), np.zeros((1, 2), dtype=np.uint64),
+                         np.ones(1, dtype=np.int64), np.ones(1, dtype=np.int64))

@@ -112,6 +112,16 @@ class EntropyRows:
                                    float(stddev))
         return ranges
 
+    def standard_normals(self, rows, step, count):
+        """(len(rows), count) standard normals, row k default_rng([seed, key, step])
+        .standard_normal(count) of entropy row rows[k] (the same bits). Needs numba; a
+        step from 0 to 2**63 - 1."""
+        out = np.empty((len(rows), count))
+        if len(rows):
+            noise_kernel.standard_normals(out, self.words[rows], self.lengths[rows],
+                                          np.full(len(rows), step, dtype=np.int64))
+        return out
+
 
 def warm():
     """Compile (or load from numba's cache) the seeding and the batched draws, so a first
