@@ -7,6 +7,7 @@ agent at a time, and to the single scanner, with balls in the cells around each 
 only (lidar.ball_cells) and walls and a map's cells.
 """
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,8 +16,10 @@ from ball_world.core import lidar
 from ball_world.core.lidar import Fan, scan_many
 from ball_world.core.solid_cells import SolidCells
 from ball_world.core.static_geometry import ScanGrid
+from ball_world.map_files import load_map_file
 from ball_world.simulation import Simulation
 
+MAPS = Path(__file__).resolve().parents[1] / 'maps'
 RING = Fan.full_turn(8, 0.0, 2.0)  # beam k at -pi + k pi / 4: beam 4 ahead, beam 6 left
 BACKENDS = ['numpy', 'numba']
 
@@ -122,3 +125,45 @@ def test_a_swarms_noisy_scans_are_the_single_scanners_encoded_or_not():
                                  world.static.scan_grid)
             assert kept.ranges.tobytes() == sent.ranges.tobytes() == alone.tobytes()
             assert np.isfinite(alone).any() and sent.cdr
+
+
+@pytest.mark.parametrize('name', ['depot', 'tb3_sandbox'])
+def test_long_scans_in_a_crowd_on_a_real_map_are_one_scan_per_agent(name):
+    """The default lidar (360 beams, 12 m) of many robots among many balls in a shipped
+    nav2 map, as scan_many gathers each scan's balls within reach and tests their windows
+    (lidar_kernel._near_balls): equal bit for bit to the numpy reference and to one
+    Scanner each; with a scanner inside another ball (every range 0) and a fan of one
+    direction (every beam against every ball) among them."""
+    cells = load_map_file(str(MAPS / f'{name}.yaml')).solid_cells().checked()
+    grid = ScanGrid(cells)
+    rng = np.random.default_rng(len(name))
+    free = np.argwhere(~cells.solid)
+    count = int(min(max(len(free) * cells.resolution ** 2 / 2.0, 40), 400))  # 2 m^2 each
+    picked = free[rng.integers(len(free), size=count)]
+    positions = np.column_stack((cells.origin_x + (picked[:, 1] + rng.random(count))
+                                 * cells.resolution,
+                                 cells.origin_y + (picked[:, 0] + rng.random(count))
+                                 * cells.resolution))
+    radii = rng.uniform(0.05, 0.15, count)
+    positions[1] = positions[0] + 0.1  # ball 1's disk holds scanner 0
+    radii[1] = 0.2
+    walls = np.array([[positions[2, 0] - 1.0, positions[2, 1] + 0.7,
+                       positions[2, 0] + 1.0, positions[2, 1] + 0.7]])
+    agents = np.concatenate(([0], rng.choice(np.arange(2, count), count // 2, replace=False)))
+    yaws = rng.uniform(-math.pi, math.pi, len(agents))
+    range_mins = radii[agents] + 0.05
+    for fan in (Fan.full_turn(360), Fan(-0.5, 1e-13, 5, 0.0, 12.0)):
+        compiled = scan_many(positions, radii, walls, agents, yaws, fan, range_mins, 'numba',
+                             grid)
+        reference = scan_many(positions, radii, walls, agents, yaws, fan, range_mins, 'numpy',
+                              grid)
+        assert compiled.tobytes() == reference.tobytes()
+        assert compiled[0].tolist() == [-math.inf] * fan.samples  # inside ball 1: 0 < min
+        finite = np.isfinite(compiled[1:])
+        assert finite.mean() > 0.2 and not finite.all()
+    one = [lidar.Scanner(Fan.full_turn(360)._replace(range_min=low), 'numba').distances(
+        positions, radii, walls, positions[ball], yaw, ball, grid)
+        for ball, yaw, low in zip(agents.tolist(), yaws.tolist(), range_mins.tolist())]
+    assert np.array(one).tobytes() == scan_many(
+        positions, radii, walls, agents, yaws, Fan.full_turn(360), range_mins, 'numba',
+        grid).tobytes()
