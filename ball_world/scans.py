@@ -15,6 +15,9 @@ range_min below it means nothing). Bytes are made here once and shared by the pu
 and the recording, like the other messages of a step.
 """
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
+import os
+import threading
 from typing import NamedTuple
 
 import numpy as np
@@ -111,6 +114,43 @@ def check(parameters):
             raise ParameterError('agent.scan', str(error)) from None
 
 
+#: Most threads the scans of a step share (the cores this process may use, at most this).
+MAX_SCAN_THREADS = 8
+
+
+class ScanPool:
+    """Threads that scan runs of agents at once (lidar.scan_many's `pool`), one per core
+    this process may use: the compiled scan holds no GIL, so 1,000 robots' lidars take both
+    cores of a 2-core machine for the scan step's burst instead of one (docs/performance.md).
+    One a process (`shared`); its threads start when a step first has scans enough to
+    share (lidar.agent_runs: never for one robot's scan), wait idle between scan steps and
+    end with the interpreter. The ranges are the same bits with or without it
+    (test_ring_scan)."""
+
+    _shared = None
+    _lock = threading.Lock()
+
+    def __init__(self, threads):
+        self.threads = threads
+        self._executor = ThreadPoolExecutor(threads, thread_name_prefix='ball_world_scan')
+
+    def map(self, function, items):
+        return self._executor.map(function, items)
+
+    @classmethod
+    def shared(cls):
+        """The process's pool, or None on one core."""
+        with cls._lock:
+            if cls._shared is None:
+                try:
+                    cores = len(os.sched_getaffinity(0))
+                except AttributeError:  # not Linux
+                    cores = os.cpu_count() or 1
+                threads = min(cores, MAX_SCAN_THREADS)
+                cls._shared = cls(threads) if threads > 1 else False
+            return cls._shared or None
+
+
 class AgentScans:
     """The scanners of a Simulation's agents, made from its parameters."""
 
@@ -122,6 +162,7 @@ class AgentScans:
         self._scanners = {}  # name -> (radius, lidar.Scanner)
         self._last = None  # [names, radii, scanners, their EntropyRows or None] of the last
         # scan: most steps reuse it
+        self.pool = ScanPool.shared  # () -> lidar.scan_many's pool (None: one thread)
 
     def due(self, step_index, dt_ns):
         """Whether step `step_index` (ending at step_index * dt_ns) is a scan step."""
@@ -160,7 +201,7 @@ class AgentScans:
             table = lidar.scan_many(world.positions, world.radii, world.walls, indices, yaws,
                                     scanners[0].fan,
                                     [scanner.fan.range_min for scanner in scanners],
-                                    'numba', world.static.scan_grid)
+                                    'numba', world.static.scan_grid, self.pool())
             stddev = scanners[0].fan.noise_stddev
             if stddev > 0.0:
                 # And every agent's noise in one (core.noise_kernel: each scanner's

@@ -52,14 +52,16 @@ def test_the_robots_case_scans_every_tenth_step_and_reports_each_figure(tmp_path
     all agents at once, 360 beams each), and the report gives every figure against the
     10 ms step."""
     yaml_path = warehouse.write(tmp_path)
-    args = argparse.Namespace(balls=40, agents=4, scan_rate=10.0, steps=30, warm_up=5, seed=1)
-    took, scanned, in_scans = map_agents.run(yaml_path, args)
-    assert len(took) == len(scanned) == len(in_scans) == 30
+    args = argparse.Namespace(balls=40, agents=4, scan_rate=10.0, steps=30, warm_up=5, seed=1,
+                              scan_threads=1)
+    took, scanned, in_scans, wall = map_agents.run(yaml_path, args)
+    assert len(took) == len(scanned) == len(in_scans) == len(wall) == 30
+    assert all(seconds > 0.0 for seconds in wall)
     # Timed steps 6 to 35 (after 5 warm-up steps): scans at steps 10, 20 and 30.
     assert [k for k, scan in enumerate(scanned) if scan] == [4, 14, 24]
     assert all(seconds > 0.0 for seconds, scan in zip(in_scans, scanned) if scan)
     assert all(part <= whole for part, whole in zip(in_scans, took))  # scans within a step
-    text = map_agents.report(took, scanned, in_scans, args, '1.0 1.0 1.0')
+    text = map_agents.report(took, scanned, in_scans, wall, args, '1.0 1.0 1.0')
     rows = [line for line in text.splitlines() if line.startswith('| ') and '---' not in line]
-    assert len(rows) == 5  # the header and four figures
+    assert len(rows) == 6  # the header and five figures
     assert 'real-time factor the step allows' in text

@@ -17,6 +17,7 @@ from ball_world.core.lidar import Fan, scan_many
 from ball_world.core.solid_cells import SolidCells
 from ball_world.core.static_geometry import ScanGrid
 from ball_world.map_files import load_map_file
+from ball_world.scans import ScanPool
 from ball_world.simulation import Simulation
 
 MAPS = Path(__file__).resolve().parents[1] / 'maps'
@@ -128,12 +129,13 @@ def test_a_swarms_noisy_scans_are_the_single_scanners_encoded_or_not():
 
 
 @pytest.mark.parametrize('name', ['depot', 'tb3_sandbox'])
-def test_long_scans_in_a_crowd_on_a_real_map_are_one_scan_per_agent(name):
+def test_long_scans_in_a_crowd_on_a_real_map_are_one_scan_per_agent_in_any_thread(
+        name, monkeypatch):
     """The default lidar (360 beams, 12 m) of many robots among many balls in a shipped
     nav2 map, as scan_many gathers each scan's balls within reach and tests their windows
-    (lidar_kernel._near_balls): equal bit for bit to the numpy reference and to one
-    Scanner each; with a scanner inside another ball (every range 0) and a fan of one
-    direction (every beam against every ball) among them."""
+    (lidar_kernel._near_balls), split into runs over two threads or not: equal bit for bit
+    to the numpy reference and to one Scanner each; with a scanner inside another ball
+    (every range 0) and a fan of one direction (every beam against every ball) among them."""
     cells = load_map_file(str(MAPS / f'{name}.yaml')).solid_cells().checked()
     grid = ScanGrid(cells)
     rng = np.random.default_rng(len(name))
@@ -152,12 +154,17 @@ def test_long_scans_in_a_crowd_on_a_real_map_are_one_scan_per_agent(name):
     agents = np.concatenate(([0], rng.choice(np.arange(2, count), count // 2, replace=False)))
     yaws = rng.uniform(-math.pi, math.pi, len(agents))
     range_mins = radii[agents] + 0.05
+    monkeypatch.setattr(lidar, 'MIN_RUN_BEAMS', 500)  # many runs, so threads share them
+    assert len(lidar.agent_runs(len(agents), 360, 2)) == 8
+    pool = ScanPool(2)
     for fan in (Fan.full_turn(360), Fan(-0.5, 1e-13, 5, 0.0, 12.0)):
         compiled = scan_many(positions, radii, walls, agents, yaws, fan, range_mins, 'numba',
                              grid)
+        threaded = scan_many(positions, radii, walls, agents, yaws, fan, range_mins, 'numba',
+                             grid, pool)
         reference = scan_many(positions, radii, walls, agents, yaws, fan, range_mins, 'numpy',
                               grid)
-        assert compiled.tobytes() == reference.tobytes()
+        assert compiled.tobytes() == reference.tobytes() == threaded.tobytes()
         assert compiled[0].tolist() == [-math.inf] * fan.samples  # inside ball 1: 0 < min
         finite = np.isfinite(compiled[1:])
         assert finite.mean() > 0.2 and not finite.all()
@@ -165,5 +172,5 @@ def test_long_scans_in_a_crowd_on_a_real_map_are_one_scan_per_agent(name):
         positions, radii, walls, positions[ball], yaw, ball, grid)
         for ball, yaw, low in zip(agents.tolist(), yaws.tolist(), range_mins.tolist())]
     assert np.array(one).tobytes() == scan_many(
-        positions, radii, walls, agents, yaws, Fan.full_turn(360), range_mins, 'numba',
-        grid).tobytes()
+        positions, radii, walls, agents, yaws, Fan.full_turn(360), range_mins, 'numba', grid,
+        pool).tobytes()

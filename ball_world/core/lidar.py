@@ -250,14 +250,20 @@ def ball_cells(positions, radii, reach):
 
 
 def scan_many(positions, radii, walls, agents, yaws, fan, range_mins, backend='auto',
-              grid=NO_MAP):
+              grid=NO_MAP, pool=None):
     """The noiseless scans (A, samples) of the balls `agents` (indices), each from its centre
     at heading yaws[a] with range_min range_mins[a] and the fan's beams and range_max, its
     own ball excluded: row a equals Scanner(fan).distances(...) of that agent, bit for bit.
 
     numpy: one scan per agent (the reference); numba: one compiled call for all of them,
     the balls sorted into cells (ball_cells) so that a short range tests only the balls
-    near each scanner (lidar_kernel.scan_agents)."""
+    near each scanner (lidar_kernel.scan_agents).
+
+    `pool` (None, or an object with `threads`, a count, and an Executor's `map`): numba's
+    call split into runs of agents (`agent_runs`) that its threads scan at once. The
+    kernel holds no GIL, and each agent's scan reads only the shared scene and writes only
+    its own row, so the rows are the same bits whatever thread made them; the caller
+    waits for them all."""
     positions = _float_array(positions).reshape(-1, 2)
     radii = _float_array(radii)
     walls = _segments(walls)
@@ -279,10 +285,40 @@ def scan_many(positions, radii, walls, agents, yaws, fan, range_mins, backend='a
     headings = yaws.tolist()
     cos = np.array([math.cos(yaw) for yaw in headings])
     sin = np.array([math.sin(yaw) for yaw in headings])
-    lidar_kernel.scan_agents(positions, radii, walls, grid.solid, _skips(grid), grid.frame,
-                             first, balls, cells, agents, cos, sin, body[0], body[1], body[2],
-                             body[3], range_mins, float(fan.range_max), out)
+    skips = _skips(grid)
+
+    def scan(run):
+        low, high = run
+        lidar_kernel.scan_agents(positions, radii, walls, grid.solid, skips, grid.frame,
+                                 first, balls, cells, agents[low:high], cos[low:high],
+                                 sin[low:high], body[0], body[1], body[2], body[3],
+                                 range_mins[low:high], float(fan.range_max), out[low:high])
+
+    runs = agent_runs(len(agents), fan.samples, 1 if pool is None else pool.threads)
+    if len(runs) == 1:
+        scan(runs[0])
+    else:
+        for _ in pool.map(scan, runs):  # (map re-raises a thread's exception here)
+            pass
     return out
+
+
+#: Least beams (agents x samples) a run of agent_runs holds: a run's scans must cost far
+#: more than handing it to a thread (tens of microseconds).
+MIN_RUN_BEAMS = 20_000
+#: Runs per thread: scans differ in cost (a beam down an aisle, a crowd of balls), so each
+#: thread takes several runs in turn rather than one long one that may finish last.
+RUNS_PER_THREAD = 4
+
+
+def agent_runs(count, samples, threads):
+    """[(low, high), ...]: `count` agents' scans cut into runs for `threads` threads, one
+    run when there is one thread or the scans are too few to share (one robot's scan never
+    waits on a thread)."""
+    runs = min(threads * RUNS_PER_THREAD, count * samples // MIN_RUN_BEAMS) if threads > 1 else 1
+    runs = max(runs, 1)
+    edges = [count * k // runs for k in range(runs + 1)]
+    return list(zip(edges[:-1], edges[1:]))
 
 
 def _skips(grid):
