@@ -119,23 +119,43 @@ MAX_SCAN_THREADS = 8
 
 
 class ScanPool:
-    """Threads that scan runs of agents at once (lidar.scan_many's `pool`), one per core
-    this process may use: the compiled scan holds no GIL, so 1,000 robots' lidars take both
-    cores of a 2-core machine for the scan step's burst instead of one (docs/performance.md).
-    One a process (`shared`); its threads start when a step first has scans enough to
-    share (lidar.agent_runs: never for one robot's scan), wait idle between scan steps and
-    end with the interpreter. The ranges are the same bits with or without it
-    (test_ring_scan)."""
+    """Threads that scan runs of agents at once (lidar.scan_many's `pool`), the calling
+    thread and one more per other core this process may use: the compiled scan holds no
+    GIL, so 1,000 robots' lidars can take both cores of a 2-core machine for the scan
+    step's burst instead of one (docs/performance.md). Each thread takes the next run
+    until none is left, so when the other cores are busy (other processes), the calling
+    thread does most of the runs itself rather than wait. One a process (`shared`); its
+    threads start when a step first has scans enough to share (lidar.agent_runs: never for
+    one robot's scan), wait idle between scan steps and end with the interpreter. The
+    ranges are the same bits with or without it (test_ring_scan)."""
 
     _shared = None
     _lock = threading.Lock()
 
     def __init__(self, threads):
         self.threads = threads
-        self._executor = ThreadPoolExecutor(threads, thread_name_prefix='ball_world_scan')
+        self._executor = ThreadPoolExecutor(threads - 1, thread_name_prefix='ball_world_scan')
 
-    def map(self, function, items):
-        return self._executor.map(function, items)
+    def run(self, function, items):
+        """function(item) for every item, on this thread and the pool's; returns when all
+        are done (re-raising the first failure)."""
+        items = iter(items)
+        taking = threading.Lock()
+
+        def work():
+            while True:
+                with taking:
+                    item = next(items, None)
+                if item is None:
+                    return
+                function(item)
+
+        helpers = [self._executor.submit(work) for _ in range(self.threads - 1)]
+        try:
+            work()
+        finally:
+            for helper in helpers:  # none may still write once this returns
+                helper.result()
 
     @classmethod
     def shared(cls):

@@ -174,3 +174,19 @@ def test_long_scans_in_a_crowd_on_a_real_map_are_one_scan_per_agent_in_any_threa
     assert np.array(one).tobytes() == scan_many(
         positions, radii, walls, agents, yaws, Fan.full_turn(360), range_mins, 'numba', grid,
         pool).tobytes()
+
+
+def test_a_scan_pool_runs_every_run_once_and_raises_a_failure():
+    """ScanPool.run: every item once, on this thread and the pool's, and a run's failure
+    raised to the caller once no thread works any more."""
+    pool = ScanPool(2)
+    seen = []
+    pool.run(seen.append, [(k, k + 1) for k in range(200)])
+    assert sorted(seen) == [(k, k + 1) for k in range(200)]
+
+    def failing(run):
+        if run[0] == 150:
+            raise ValueError('run 150')
+
+    with pytest.raises(ValueError, match='run 150'):
+        pool.run(failing, [(k, k + 1) for k in range(200)])

@@ -259,11 +259,11 @@ def scan_many(positions, radii, walls, agents, yaws, fan, range_mins, backend='a
     the balls sorted into cells (ball_cells) so that a short range tests only the balls
     near each scanner (lidar_kernel.scan_agents).
 
-    `pool` (None, or an object with `threads`, a count, and an Executor's `map`): numba's
+    `pool` (None, or an object with `threads`, a count, and `run(function, items)`, which
+    calls function on every item on its threads and returns when all are done): numba's
     call split into runs of agents (`agent_runs`) that its threads scan at once. The
     kernel holds no GIL, and each agent's scan reads only the shared scene and writes only
-    its own row, so the rows are the same bits whatever thread made them; the caller
-    waits for them all."""
+    its own row, so the rows are the same bits whatever thread made them."""
     positions = _float_array(positions).reshape(-1, 2)
     radii = _float_array(radii)
     walls = _segments(walls)
@@ -298,8 +298,7 @@ def scan_many(positions, radii, walls, agents, yaws, fan, range_mins, backend='a
     if len(runs) == 1:
         scan(runs[0])
     else:
-        for _ in pool.map(scan, runs):  # (map re-raises a thread's exception here)
-            pass
+        pool.run(scan, runs)
     return out
 
 
