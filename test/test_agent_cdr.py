@@ -183,6 +183,29 @@ def _scan_values(count, seed):
     return fields, ranges
 
 
+def test_laser_scans_of_many_fans_and_frames_in_turn_each_read_back_their_own():
+    """encode_laser_scan keeps the bytes of the fans and frames it saw (a scan step encodes
+    the same few a thousand times): scans of fans that differ in one bit (0.0 and -0.0,
+    NaN, the next float) and of many frames, in turn, each read back as their own."""
+    rng = np.random.default_rng(5)
+    fans = [rng.uniform(-4.0, 4.0, size=7) for _ in range(3)]
+    fans += [fans[0].copy() for _ in range(3)]
+    fans[3][5] = 0.0
+    fans[4][5] = -0.0
+    fans[5][6] = np.nextafter(np.float32(fans[0][6]), np.float32(np.inf))
+    fans.append(np.full(7, np.nan))
+    for turn in range(3):
+        for k, fields in enumerate(fans):
+            frame_id = f'ball_{(turn * 7 + k) % 5}/base_link'
+            ranges = rng.uniform(0.0, 12.0, size=k)
+            data = agent_cdr.encode_laser_scan(turn * 10 + k, frame_id, *fields, ranges)
+            decoded = agent_cdr.decode_laser_scan(data)
+            assert (decoded.stamp_ns, decoded.frame_id) == (turn * 10 + k, frame_id)
+            assert np.asarray(decoded[2:9], dtype=np.float32).tobytes() == (
+                fields.astype(np.float32).tobytes())
+            assert decoded.ranges.tobytes() == ranges.astype(np.float32).tobytes()
+
+
 @pytest.mark.parametrize('count', (0, 1, 3, 360))
 @pytest.mark.parametrize('with_intensities', (False, True))
 def test_laser_scan_reads_back_through_rclpy(count, with_intensities):
