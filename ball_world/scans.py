@@ -158,6 +158,13 @@ class ScanPool:
                 helper.result()
 
     @classmethod
+    def _forget(cls):
+        """In a forked child: the parent's threads are not there, so its pool would take
+        runs that no thread ever scans; the child makes its own when it needs one."""
+        cls._shared = None
+        cls._lock = threading.Lock()
+
+    @classmethod
     def shared(cls):
         """The process's pool, or None on one core."""
         with cls._lock:
@@ -169,6 +176,10 @@ class ScanPool:
                 threads = min(cores, MAX_SCAN_THREADS)
                 cls._shared = cls(threads) if threads > 1 else False
             return cls._shared or None
+
+
+if hasattr(os, 'register_at_fork'):
+    os.register_at_fork(after_in_child=ScanPool._forget)
 
 
 class AgentScans:

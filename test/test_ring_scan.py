@@ -190,3 +190,33 @@ def test_a_scan_pool_runs_every_run_once_and_raises_a_failure():
 
     with pytest.raises(ValueError, match='run 150'):
         pool.run(failing, [(k, k + 1) for k in range(200)])
+
+
+def test_a_forked_child_scans_with_a_pool_of_its_own():
+    """A process forked after its scan pool started has none of the pool's threads: the
+    child must make its own (scans.ScanPool._forget at fork), or its runs wait forever."""
+    import os
+    import time
+    import warnings
+    parent = ScanPool.shared()
+    if parent is None:
+        pytest.skip('one core: no scan pool to fork with')
+    parent.run(lambda run: None, [(k, k + 1) for k in range(8)])  # its threads started
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore', DeprecationWarning)  # (fork with threads running)
+        child = os.fork()
+    if child == 0:
+        done = []
+        ScanPool.shared().run(done.append, [(k, k + 1) for k in range(8)])
+        os._exit(0 if len(done) == 8 and ScanPool.shared() is not parent else 1)
+    deadline = time.monotonic() + 30.0
+    while True:
+        pid, status = os.waitpid(child, os.WNOHANG)
+        if pid:
+            break
+        if time.monotonic() > deadline:
+            os.kill(child, 9)
+            os.waitpid(child, 0)
+            pytest.fail('the forked child never finished its runs')
+        time.sleep(0.01)
+    assert os.waitstatus_to_exitcode(status) == 0
