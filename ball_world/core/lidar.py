@@ -303,8 +303,10 @@ def scan_many(positions, radii, walls, agents, yaws, fan, range_mins, backend='a
 
 
 #: Least beams (agents x samples) a run of agent_runs holds: a run's scans must cost far
-#: more than handing it to a thread (tens of microseconds).
-MIN_RUN_BEAMS = 20_000
+#: more than handing it to a thread (tens of microseconds): 5,000 beams are 0.3-0.5 ms of
+#: 12 m scans in the warehouse or of 2 m rings (docs/performance.md). One robot's scan
+#: (360 beams) is never shared; 100 robots' are.
+MIN_RUN_BEAMS = 5_000
 #: Runs per thread: scans differ in cost (a beam down an aisle, a crowd of balls), so each
 #: thread takes several runs in turn rather than one long one that may finish last.
 RUNS_PER_THREAD = 4
