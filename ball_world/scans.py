@@ -26,7 +26,7 @@ from ball_world.core import lidar
 from ball_world.core.noise_seed import EntropyRows
 from ball_world.core.parameters import ParameterError
 from ball_world.core.static_geometry import ScanGrid
-from ball_world.msgs.agent_cdr import encode_laser_scan
+from ball_world.msgs.agent_cdr import encode_laser_scan, encode_laser_scans
 
 #: range_min beyond the agent's radius when agent.scan.range_min is 0.
 CLEARANCE = 0.05
@@ -245,7 +245,16 @@ class AgentScans:
             if not encode:
                 return ScanTable(names, base_frames, table,
                                  [scanner.fan for scanner in scanners])
-            ranges_of = iter(table)
+            # Their LaserScan bytes at once too (encode_laser_scans: each robot's bytes
+            # as encode_laser_scan makes them, noise and all already in the table).
+            fan = scanners[0].fan
+            cdrs = encode_laser_scans(stamp_ns, base_frames, fan.angle_min, fan.angle_max,
+                                      fan.angle_increment, 0.0, self.period_ns * 1e-9,
+                                      [scanner.fan.range_min for scanner in scanners],
+                                      fan.range_max, table)
+            return tuple(AgentScan(name, frame_id, ranges, scanner.fan, cdr)
+                         for name, scanner, frame_id, ranges, cdr
+                         in zip(names, scanners, base_frames, table, cdrs))
         else:
             ranges_of = (scanner.distances(world.positions, world.radii, world.walls,
                                            world.positions[index], float(yaw), int(index),

@@ -183,6 +183,33 @@ def _scan_values(count, seed):
     return fields, ranges
 
 
+@pytest.mark.parametrize('beams', (0, 1, 7, 360))
+def test_laser_scans_encoded_at_once_are_each_scans_bytes(beams):
+    """encode_laser_scans: row k's bytes are encode_laser_scan's of that row, frame and
+    range_min, to the byte (infinities, NaN, -0.0, frames of every length, a stamp past
+    2**32 ns)."""
+    rng = np.random.default_rng(beams)
+    count = 40
+    table = rng.uniform(0.0, 12.0, size=(count, beams))
+    table[rng.random(table.shape) < 0.1] = np.inf
+    table[rng.random(table.shape) < 0.05] = -np.inf
+    table[rng.random(table.shape) < 0.02] = np.nan
+    table[rng.random(table.shape) < 0.02] = -0.0
+    frames = [f'r{"x" * (k % 6)}_{k}/base_link' for k in range(count)]
+    range_mins = rng.uniform(0.1, 0.4, count)
+    range_mins[3] = -0.0
+    shared = (-3.1, 3.05, 0.0175, 0.0, 0.1)
+    stamp = 2**32 + 12_345
+    batch = agent_cdr.encode_laser_scans(stamp, frames, *shared, range_mins.tolist(), 12.0,
+                                         table)
+    alone = [agent_cdr.encode_laser_scan(stamp, frame, *shared[:5], low, 12.0, row)
+             for frame, low, row in zip(frames, range_mins.tolist(), table)]
+    assert batch == alone
+    with pytest.raises(ValueError, match='one scan each'):
+        agent_cdr.encode_laser_scans(stamp, frames[:-1], *shared, range_mins.tolist(), 12.0,
+                                     table)
+
+
 def test_laser_scans_of_many_fans_and_frames_in_turn_each_read_back_their_own():
     """encode_laser_scan keeps the bytes of the fans and frames it saw (a scan step encodes
     the same few a thousand times): scans of fans that differ in one bit (0.0 and -0.0,

@@ -17,6 +17,7 @@ from ball_world.core.lidar import Fan, scan_many
 from ball_world.core.solid_cells import SolidCells
 from ball_world.core.static_geometry import ScanGrid
 from ball_world.map_files import load_map_file
+from ball_world.msgs.agent_cdr import encode_laser_scan
 from ball_world.scans import ScanPool
 from ball_world.simulation import Simulation
 
@@ -125,7 +126,12 @@ def test_a_swarms_noisy_scans_are_the_single_scanners_encoded_or_not():
                                  world.positions[index], float(yaw), int(index), step,
                                  world.static.scan_grid)
             assert kept.ranges.tobytes() == sent.ranges.tobytes() == alone.tobytes()
-            assert np.isfinite(alone).any() and sent.cdr
+            assert np.isfinite(alone).any()
+            fan = scanner.fan  # (range_min follows each radius)
+            assert sent.cdr == encode_laser_scan(
+                step * 10**6, sent.frame_id, fan.angle_min, fan.angle_max,
+                fan.angle_increment, 0.0, scans.period_ns * 1e-9, fan.range_min,
+                fan.range_max, alone)
 
 
 @pytest.mark.parametrize('name', ['depot', 'tb3_sandbox'])

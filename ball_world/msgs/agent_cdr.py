@@ -255,6 +255,34 @@ def encode_laser_scan(stamp_ns: int, frame_id: str, angle_min: float, angle_max:
                      _U32.pack(ranges.size), ranges.tobytes(), intensities_cdr))
 
 
+def encode_laser_scans(stamp_ns: int, frame_ids, angle_min: float, angle_max: float,
+                       angle_increment: float, time_increment: float, scan_time: float,
+                       range_mins, range_max: float, table) -> list:
+    """encode_laser_scan of every row of `table` (N, beams), row k in frame_ids[k] with
+    range_min range_mins[k], the other numbers shared, no intensities: the same bytes, made
+    at once. Why: a scan step of 1,000 robots made their messages one call each, each
+    casting its row and packing its numbers (2.5 us a robot of Python, more than half the
+    cost of the step's scans outside the compiled scan); here the table is cast once."""
+    table = np.ascontiguousarray(table, dtype='<f4')
+    count = len(frame_ids)
+    if table.ndim != 2 or table.shape[0] != count or len(range_mins) != count:
+        raise ValueError(f'{count} frames, {len(range_mins)} range_mins and a table of '
+                         f'shape {table.shape} do not make one scan each')
+    stamp = _STAMP.pack(*_split_stamp(stamp_ns))
+    samples = _U32.pack(table.shape[1])
+    rows = table.tobytes()
+    width = table.shape[1] * 4
+    messages = []
+    for k, (frame_id, range_min) in enumerate(zip(frame_ids, range_mins)):
+        prefix = stamp + _frame_string(frame_id)
+        messages.append(b''.join((
+            ENCAPSULATION, prefix, b'\x00' * _pad(len(prefix), 4),
+            _scan_fields(_FIELDS.pack(angle_min, angle_max, angle_increment, time_increment,
+                                      scan_time, range_min, range_max)),
+            samples, rows[k * width:(k + 1) * width], _NO_INTENSITIES)))
+    return messages
+
+
 #: An empty float32 sequence, as CDR has it: its length, 0.
 _NO_INTENSITIES = b'\x00' * 4
 #: LaserScan's seven numbers before its ranges, as float64 (a cache key: every bit counts,
