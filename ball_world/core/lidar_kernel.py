@@ -57,9 +57,10 @@ WALL_DEGENERATE = 1e-6
 MIN_INCREMENT = 1e-12
 #: A ball or wall further than range_max times (1 + this) cannot be hit within range_max.
 REACH_SLACK = 1e-6
-#: scan_sectors tests this many balls or fewer one by one (_ball), as it always did: for so
-#: few, gathering them first (two allocations) saves nothing (measured: 8 balls 1.01x).
-FEW_BALLS = 4
+#: A scan among this many balls or fewer tests them one by one (_ball), as it always did:
+#: for so few, gathering them first (_near_balls: another pass, allocations) saves nothing
+#: (measured, docs/performance.md).
+FEW_BALLS = 32
 #: A ball's window of at most this many beams is tested in a plain loop (_ball_window).
 SHORT_SPAN = 8
 #: Side (cells) of free_squares' tiles: 8 x 8 bytes, one cache line.
@@ -598,8 +599,8 @@ def within(mx, my, radius, reach):
 
 def _near_balls(px, py, ux, uy, positions, radii, near, count, reach, every, origin, sign,
                 per_radian, turn, lows, highs, out):
-    """The balls near[:count] (each `within` reach) against their sectors, as
-    _ball each: the same beams tested, the same closed forms, the same ranges.
+    """The balls near[:count] (each `within` reach) against their sectors, as _ball
+    each: the same beams tested, the same closed forms, the same ranges.
 
     Why apart from _ball: a long-range scan in a crowd tests hundreds of balls, and tested
     one by one, each a branch on its distance that a random crowd makes unpredictable and
@@ -728,12 +729,16 @@ def scan_agents(positions, radii, walls, solid, skips, frame, cell_first, cell_b
     (_ball's first test).
     """
     samples = bx.shape[0]
-    ux = np.empty(samples)
-    uy = np.empty(samples)
-    balls = positions.shape[0]
+    few = positions.shape[0] <= FEW_BALLS
+    balls = 0 if few else positions.shape[0]
+    # Few allocations a call (a call of one robot's scan pays them each time): the beams'
+    # directions and the gathered balls' windows in one, the gathered balls in another.
+    work = np.empty(2 * samples + 2 * balls)
+    ux = work[:samples]
+    uy = work[samples:2 * samples]
+    lows = work[2 * samples:2 * samples + balls]
+    highs = work[2 * samples + balls:]
     near = np.empty(balls, dtype=np.int64)
-    lows = np.empty(balls)
-    highs = np.empty(balls)
     x0 = grid[0]
     y0 = grid[1]
     side = grid[2]
@@ -749,11 +754,19 @@ def scan_agents(positions, radii, walls, solid, skips, frame, cell_first, cell_b
         ci = min(max(int(math.floor((px - x0) / side)), 0), columns - 1)
         cj = min(max(int(math.floor((py - y0) / side)), 0), rows - 1)
         # The balls within reach, gathered without a branch (each slot written, kept when
-        # the count moves past it): most fail, at random.
+        # the count moves past it): most fail, at random. (A few balls, one by one.)
         count = 0
         for i in range(max(ci - 1, 0), min(ci + 2, columns)):
             for j in range(max(cj - 1, 0), min(cj + 2, rows)):
                 cell = i * rows + j
+                if few:
+                    for slot in range(cell_first[cell], cell_first[cell + 1]):
+                        ball = cell_balls[slot]
+                        if ball != own:
+                            _ball(px, py, ux, uy, positions[ball, 0], positions[ball, 1],
+                                  radii[ball], reach, every, origin, sign, per_radian, turn,
+                                  row)
+                    continue
                 for slot in range(cell_first[cell], cell_first[cell + 1]):
                     ball = cell_balls[slot]
                     near[count] = ball
