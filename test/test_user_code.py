@@ -8,9 +8,11 @@ worker, no simulation: cheap); ball_world_score itself through three runs of the
 tool (a segfault with two workers, SystemExit(0) with one, a real Ctrl-C)."""
 import math
 import os
+from pathlib import Path
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 import uuid
 
@@ -18,7 +20,7 @@ from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
-from ball_world.user_code import checks
+from ball_world.user_code import checks, workers
 from ball_world.user_code.calls import call
 from ball_world.user_code.describe import describe_exit, shown, UserCodeError
 from ball_world.user_code.loading import load_class
@@ -373,3 +375,23 @@ def test_a_ctrl_c_or_sigterm_stops_the_scorer_and_its_workers(tmp_path, marked, 
 
 if __name__ == '__main__':
     sys.exit(pytest.main([__file__]))
+
+
+def test_a_pool_removes_the_notes_of_processes_that_are_gone(tmp_path, monkeypatch):
+    # A Ray worker's pool lives as long as its process, which Ray kills: its notes folder
+    # is removed by the next pool made on the machine, never a living process's.
+    monkeypatch.setattr(tempfile, 'tempdir', str(tmp_path))
+    child = subprocess.Popen(['true'])
+    child.wait()  # ended and reaped: no process has this pid now
+    dead = tmp_path / f'{workers.NOTES_PREFIX}{child.pid}_x'
+    living = tmp_path / f'{workers.NOTES_PREFIX}{os.getpid()}_y'
+    other = tmp_path / f'{workers.NOTES_PREFIX}of_someone'  # no pid: left alone
+    for folder in (dead, living, other):
+        folder.mkdir()
+        (folder / 'worker_0.txt').write_text('notes')
+    with LocalPool(1) as pool:
+        made = Path(pool._notes)
+        assert made.parent == tmp_path
+        assert made.name.startswith(f'{workers.NOTES_PREFIX}{os.getpid()}_')
+        assert not dead.exists() and living.exists() and other.exists()
+    assert not made.exists()

@@ -191,6 +191,38 @@ class _Worker:
         self.kill()
 
 
+#: A pool's notes folder in the temporary directory: NOTES_PREFIX<pid of its process>_<random>.
+NOTES_PREFIX = 'ball_world_workers_'
+
+
+def notes_folder():
+    """A new folder for a pool's notes, named after this process, having removed those of
+    processes that are gone. Why: a pool kept for a process's life (ray_pool's, one per Ray
+    worker) is never closed when Ray kills that process, and would leave its folder behind
+    on every run."""
+    root = tempfile.gettempdir()
+    try:
+        names = os.listdir(root)
+    except OSError:
+        names = []
+    for name in names:
+        pid = name[len(NOTES_PREFIX):].split('_', 1)[0]
+        if name.startswith(NOTES_PREFIX) and pid.isdigit() and not _alive(int(pid)):
+            shutil.rmtree(os.path.join(root, name), ignore_errors=True)
+    return tempfile.mkdtemp(prefix=f'{NOTES_PREFIX}{os.getpid()}_')
+
+
+def _alive(pid):
+    """Whether process `pid` exists (one of another user counts)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # PermissionError: it exists
+        return True
+    return True
+
+
 class LocalPool:
     """The local executor: `jobs` supervised worker processes on this machine.
 
@@ -205,7 +237,7 @@ class LocalPool:
         self.deadline_s = deadline_s
         self.deadline_text = deadline_text
         self._context = multiprocessing.get_context('spawn')
-        self._notes = tempfile.mkdtemp(prefix='ball_world_workers_')
+        self._notes = notes_folder()
         self._workers = []
 
     def __enter__(self):
