@@ -73,6 +73,8 @@ def run(yaml_path, args, sinks=()):
     """Per-step CPU seconds, whether each step scanned, and the scans' share of each."""
     simulation = Simulation(parameters(yaml_path, args.balls, args.agents, args.seed,
                                        args.scan_rate), sinks=sinks)
+    if args.no_messages:  # as the node when nobody takes them, ball_world_sim unrecorded
+        simulation.agents.encode = frozenset()
     timed = _TimedScans(simulation.agents.scans)
     simulation.agents.scans = timed
     assert isinstance(timed.scans, scans_module.AgentScans)
@@ -112,7 +114,9 @@ def report(took, scanned, in_scans, wall, args, load):
     threads = args.scan_threads or 'one per core'
     lines = [f'{args.agents} diff-drive agents scanning (360 beams, {args.scan_rate:g} Hz) '
              f'among {args.balls:,} balls in the warehouse, {RATE_HZ:g} Hz, {len(took)} steps, '
-             f'scan threads {threads}, load average {load}', '',
+             f'scan threads {threads}'
+             + (', no robot messages made' if args.no_messages else '')
+             + f', load average {load}', '',
              '| | ms | share of the 10 ms step |', '|---|---:|---:|']
     lines += [f'| {name} | {1e3 * value:.2f} | {value / budget:.0%} |' for name, value in rows]
     lines += ['', f'real-time factor the step allows: {min(budget / mean, float("inf")):.2f} '
@@ -141,7 +145,12 @@ def main(argv=None):
     parser.add_argument('--record', action='store_true', help='add the MCAP sink')
     parser.add_argument('--scan-threads', type=int, default=0,
                         help='threads the scans of a step share (1: this one; 0: one per core)')
+    parser.add_argument('--no-messages', action='store_true',
+                        help="make no robot's messages (odom, ground truth, /tf, LaserScan "
+                             'bytes): what a run nobody listens to or records needs')
     args = parser.parse_args(argv)
+    if args.no_messages and args.record:
+        parser.error('--no-messages leaves nothing to --record')
     if args.agents > args.balls:
         parser.error(f'{args.agents} agents need at least as many balls (--balls)')
     with tempfile.TemporaryDirectory() as directory:

@@ -9,6 +9,7 @@ import argparse
 
 from benchmarks import map_agents, map_speed, warehouse
 import numpy as np
+import pytest
 
 from ball_world.core.static_geometry import boundary_runs
 from ball_world.map_files import load_map_file
@@ -47,13 +48,14 @@ def test_the_report_gives_a_row_per_case(tmp_path):
         assert numbers and all(value > 0.0 for value in numbers)
 
 
-def test_the_robots_case_scans_every_tenth_step_and_reports_each_figure(tmp_path):
+@pytest.mark.parametrize('no_messages', [False, True])
+def test_the_robots_case_scans_every_tenth_step_and_reports_each_figure(tmp_path, no_messages):
     """benchmarks.map_agents: its agents scan at 10 Hz of the 100 Hz steps (one step in ten,
-    all agents at once, 360 beams each), and the report gives every figure against the
-    10 ms step."""
+    all agents at once, 360 beams each), with or without their messages' bytes, and the
+    report gives every figure against the 10 ms step."""
     yaml_path = warehouse.write(tmp_path)
     args = argparse.Namespace(balls=40, agents=4, scan_rate=10.0, steps=30, warm_up=5, seed=1,
-                              scan_threads=1)
+                              scan_threads=1, no_messages=no_messages)
     took, scanned, in_scans, wall = map_agents.run(yaml_path, args)
     assert len(took) == len(scanned) == len(in_scans) == len(wall) == 30
     assert all(seconds > 0.0 for seconds in wall)
@@ -65,3 +67,4 @@ def test_the_robots_case_scans_every_tenth_step_and_reports_each_figure(tmp_path
     rows = [line for line in text.splitlines() if line.startswith('| ') and '---' not in line]
     assert len(rows) == 6  # the header and five figures
     assert 'real-time factor the step allows' in text
+    assert ('no robot messages made' in text) == no_messages

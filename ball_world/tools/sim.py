@@ -99,6 +99,10 @@ def run(args):
         _close(controller, sinks)
         return 2
     simulation = Simulation(values, sinks, built=built, controller=controller)
+    if not sinks:
+        # Nobody reads the robots' messages (odom, ground truth, /tf, LaserScan bytes):
+        # none is made, as the node makes none nobody subscribes to.
+        simulation.agents.encode = frozenset()
     print(describe(simulation.world, simulation.dt_ns)
           + (f"; controller {values['controller']} at {values['controller.rate_hz']:g} Hz"
              if controller is not None else ''), flush=True)
