@@ -756,46 +756,22 @@ def _node_class():
     return TrackerNode
 
 
-def main(args=None):
-    import rclpy
-    from rclpy.utilities import remove_ros_args
+class MissingMessages(Exception):
+    """A message package the node needs is not installed (one line, exit 2)."""
 
-    from ball_world.ros.rcl_init import creating_node
-    from ball_world.ros.stopping import stopped_by_signal
-    argv = sys.argv if args is None else args
-    try:
-        own = remove_ros_args(argv)[1:]
-    except Exception as error:  # noqa: B902 - rcl reports bad arguments as generic errors
-        fail(f'bad ROS arguments: {error}')
-    if own in (['-h'], ['--help']):
-        print(f'usage: {PROG} [--ros-args -p NAME:=VALUE ...]\n\n{__doc__}\n{PARAMETERS}')
-        return 0
-    if own:
-        fail(f"unrecognized arguments: {' '.join(own)} (see --help)")
+
+def _make_node():
     try:
         node_class = _node_class()
     except ImportError as error:
-        fail(f'a message package is missing: {error}')
-    node = None
-    try:
-        with stopped_by_signal():
-            rclpy.init(args=argv)
-            with creating_node(PROG):
-                node = node_class()
-            while rclpy.ok():
-                rclpy.spin_once(node, timeout_sec=0.1)
-    except ParameterError as error:
-        fail(error)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+        raise MissingMessages(f'a message package is missing: {error}') from None
+    return node_class()
 
 
-def fail(message):
-    print(f'{PROG}: {message}', file=sys.stderr)
-    sys.exit(2)
+def main(args=None):
+    from ball_world.tools import node_tool
+    return node_tool.run(PROG, f'usage: {PROG} [--ros-args -p NAME:=VALUE ...]\n\n{__doc__}\n'
+                         f'{PARAMETERS}', _make_node, (ParameterError, MissingMessages), args)
 
 
 if __name__ == '__main__':
