@@ -247,12 +247,10 @@ def encode_laser_scan(stamp_ns: int, frame_id: str, angle_min: float, angle_max:
     else:
         intensities = np.ascontiguousarray(intensities, dtype='<f4').reshape(-1)
         intensities_cdr = _U32.pack(intensities.size) + intensities.tobytes()
-    prefix = _STAMP.pack(*_split_stamp(stamp_ns)) + _frame_string(frame_id)
-    return b''.join((ENCAPSULATION, prefix, b'\x00' * _pad(len(prefix), 4),
-                     _scan_fields(_FIELDS.pack(angle_min, angle_max, angle_increment,
-                                               time_increment, scan_time, range_min,
-                                               range_max)),
-                     _U32.pack(ranges.size), ranges.tobytes(), intensities_cdr))
+    return _laser_scan(_STAMP.pack(*_split_stamp(stamp_ns)), frame_id,
+                       (angle_min, angle_max, angle_increment, time_increment, scan_time,
+                        range_min, range_max),
+                       _U32.pack(ranges.size), ranges.tobytes(), intensities_cdr)
 
 
 def encode_laser_scans(stamp_ns: int, frame_ids, angle_min: float, angle_max: float,
@@ -274,13 +272,20 @@ def encode_laser_scans(stamp_ns: int, frame_ids, angle_min: float, angle_max: fl
     width = table.shape[1] * 4
     messages = []
     for k, (frame_id, range_min) in enumerate(zip(frame_ids, range_mins)):
-        prefix = stamp + _frame_string(frame_id)
-        messages.append(b''.join((
-            ENCAPSULATION, prefix, b'\x00' * _pad(len(prefix), 4),
-            _scan_fields(_FIELDS.pack(angle_min, angle_max, angle_increment, time_increment,
-                                      scan_time, range_min, range_max)),
-            samples, rows[k * width:(k + 1) * width], _NO_INTENSITIES)))
+        messages.append(_laser_scan(
+            stamp, frame_id, (angle_min, angle_max, angle_increment, time_increment,
+                              scan_time, range_min, range_max),
+            samples, rows[k * width:(k + 1) * width], _NO_INTENSITIES))
     return messages
+
+
+def _laser_scan(stamp, frame_id, numbers, *sequences):
+    """A LaserScan's bytes from its packed stamp, its frame, its seven numbers (float64,
+    sent as float32) and its two sequences as CDR has them (length, then float32s): what
+    both encoders above write."""
+    prefix = stamp + _frame_string(frame_id)
+    return b''.join((ENCAPSULATION, prefix, b'\x00' * _pad(len(prefix), 4),
+                     _scan_fields(_FIELDS.pack(*numbers)), *sequences))
 
 
 #: An empty float32 sequence, as CDR has it: its length, 0.
