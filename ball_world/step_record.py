@@ -136,7 +136,7 @@ class AppliedImpulses(_Batched):
         return len(part.balls)
 
     def pushes(self):
-        """The impulses that are not a swarm's batched drives, in order."""
+        """The impulses that are not batched drives (of either agent.topics), in order."""
         return tuple(part for part in self._parts if isinstance(part, AppliedImpulse))
 
     def __iter__(self):
