@@ -224,24 +224,21 @@ class AgentScans:
             scanners = [self.scanner(name, radius) for name, radius in zip(names, radii)]
             entropy = None  # made at the first noisy batch
             self._last = [names, radii, scanners, entropy]
-        noised = False
         if scanners and scanners[0].backend == 'numba':
             # Every agent's scan in one compiled call (lidar.scan_many: the same ranges as
             # one scan each, bit for bit, at a fraction of the cost when the range is short
             # and the robots many: benchmarks/ring_scan.py).
-            table = lidar.scan_many(world.positions, world.radii, world.walls, indices, yaws,
-                                    scanners[0].fan,
-                                    [scanner.fan.range_min for scanner in scanners],
-                                    'numba', world.static.scan_grid, self.pool())
             stddev = scanners[0].fan.noise_stddev
+            noise = None
             if stddev > 0.0:
-                # And every agent's noise in one (core.noise_kernel: each scanner's
-                # default_rng([seed, key, step]) draws, bit for bit).
                 if entropy is None:
                     entropy = self._last[3] = EntropyRows.of(
                         (scanner.seed, scanner.key) for scanner in scanners)
-                entropy.add_noise(table, slice(None), np.full(len(table), step_index), stddev)
-                noised = True
+                noise = _run_noise(entropy, step_index, stddev, len(scanners))
+            table = lidar.scan_many(world.positions, world.radii, world.walls, indices, yaws,
+                                    scanners[0].fan,
+                                    [scanner.fan.range_min for scanner in scanners],
+                                    'numba', world.static.scan_grid, self.pool(), noise)
             if not encode:
                 return ScanTable(names, base_frames, table,
                                  [scanner.fan for scanner in scanners])
@@ -264,13 +261,25 @@ class AgentScans:
         period = self.period_ns * 1e-9
         for name, scanner, frame_id, ranges in zip(names, scanners, base_frames, ranges_of):
             fan = scanner.fan
-            if fan.noise_stddev > 0.0 and not noised:
+            if fan.noise_stddev > 0.0:
                 lidar.add_noise(ranges, fan.noise_stddev, scanner.noise.generator(step_index))
             cdr = encode_laser_scan(stamp_ns, frame_id, fan.angle_min, fan.angle_max,
                                     fan.angle_increment, 0.0, period, fan.range_min,
                                     fan.range_max, ranges) if encode else b''
             scans.append(AgentScan(name, frame_id, ranges, fan, cdr))
         return tuple(scans)
+
+
+def _run_noise(entropy, step_index, stddev, count):
+    """lidar.scan_many's `then` for `count` agents' scans at step_index: each run of agents
+    noised on the thread that scanned it (core.noise_kernel: every scanner's
+    default_rng([seed, key, step]) draws, bit for bit; the kernel holds no GIL either), so
+    1,000 lidars' noise (4 ms a scan step) is shared by the scan pool's threads too."""
+    steps = np.full(count, step_index)
+
+    def noise(low, high, rows):
+        entropy.add_noise(rows, slice(low, high), steps[low:high], stddev)
+    return noise
 
 
 def hit_points(scan, x, y, yaw):

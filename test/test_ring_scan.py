@@ -99,18 +99,23 @@ def test_agents_scans_in_a_simulation_are_the_single_scanners():
         assert scan.ranges.tobytes() == alone.tobytes()
 
 
-def test_a_swarms_noisy_scans_are_the_single_scanners_encoded_or_not():
+@pytest.mark.parametrize('samples, threads', [(24, 1), (720, 2)])
+def test_a_swarms_noisy_scans_are_the_single_scanners_encoded_or_not(samples, threads):
     # Every agent's noise in one compiled call (core.noise_kernel) draws what each agent's
     # Scanner draws, whether the scans are encoded or kept as a table, at a step past 2**32
-    # (two entropy words) too.
+    # (two entropy words) too; with a pool, each run's noise is drawn by the thread that
+    # scanned it (15 agents of 720 beams: two runs).
     parameters = {'random.count': 60, 'arena': [0.0, 0.0, 10.0, 10.0], 'random.seed': 2**40,
-                  'agents': [f'ball_{i}' for i in range(0, 60, 4)], 'agent.scan.samples': 24,
-                  'agent.scan.range_max': 3.0, 'agent.scan.noise_stddev': 0.03,
-                  'agent.scan.rate_hz': 1000.0}
+                  'agents': [f'ball_{i}' for i in range(0, 60, 4)],
+                  'agent.scan.samples': samples, 'agent.scan.range_max': 3.0,
+                  'agent.scan.noise_stddev': 0.03, 'agent.scan.rate_hz': 1000.0}
     simulation = Simulation(parameters)
     simulation.step()
     world = simulation.world
     scans = simulation.agents.scans
+    pool = ScanPool(threads) if threads > 1 else None
+    scans.pool = lambda: pool
+    assert len(lidar.agent_runs(len(parameters['agents']), samples, threads)) == threads
     names = list(parameters['agents'])
     indices = np.array([int(name[5:]) for name in names])
     yaws = np.linspace(-3.0, 3.0, len(names))

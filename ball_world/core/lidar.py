@@ -250,7 +250,7 @@ def ball_cells(positions, radii, reach):
 
 
 def scan_many(positions, radii, walls, agents, yaws, fan, range_mins, backend='auto',
-              grid=NO_MAP, pool=None):
+              grid=NO_MAP, pool=None, then=None):
     """The noiseless scans (A, samples) of the balls `agents` (indices), each from its centre
     at heading yaws[a] with range_min range_mins[a] and the fan's beams and range_max, its
     own ball excluded: row a equals Scanner(fan).distances(...) of that agent, bit for bit.
@@ -263,7 +263,12 @@ def scan_many(positions, radii, walls, agents, yaws, fan, range_mins, backend='a
     calls function on every item on its threads and returns when all are done): numba's
     call split into runs of agents (`agent_runs`) that its threads scan at once. The
     kernel holds no GIL, and each agent's scan reads only the shared scene and writes only
-    its own row, so the rows are the same bits whatever thread made them."""
+    its own row, so the rows are the same bits whatever thread made them.
+
+    `then` (None, or a function of (low, high, rows)): called on each run's thread as soon
+    as its scans are made, with the run's agents low:high and their rows of the result, for
+    work on each scan alone (their noise: scans.AgentScans) to be shared by the threads too;
+    with the numpy backend, once for all the rows."""
     positions = _float_array(positions).reshape(-1, 2)
     radii = _float_array(radii)
     walls = _segments(walls)
@@ -278,6 +283,8 @@ def scan_many(positions, radii, walls, agents, yaws, fan, range_mins, backend='a
             out[row] = distances_numpy(positions, radii, walls, grid, positions[ball],
                                        math.cos(yaw), math.sin(yaw), body, ball, low,
                                        fan.range_max)
+        if then is not None:
+            then(0, len(agents), out)
         return out
     first, balls, cells = ball_cells(positions, radii, fan.range_max)
     # math's cos and sin, as Scanner.distances takes them (numpy's may differ in the last
@@ -293,6 +300,8 @@ def scan_many(positions, radii, walls, agents, yaws, fan, range_mins, backend='a
                                  first, balls, cells, agents[low:high], cos[low:high],
                                  sin[low:high], body[0], body[1], body[2], body[3],
                                  range_mins[low:high], float(fan.range_max), out[low:high])
+        if then is not None:
+            then(low, high, out[low:high])
 
     runs = agent_runs(len(agents), fan.samples, 1 if pool is None else pool.threads)
     if len(runs) == 1:
