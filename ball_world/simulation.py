@@ -399,31 +399,27 @@ class Simulation:
         if self._drive is not None:  # already applied for this step
             return 0, []
         end_ns = (self.step_index + 1) * self.dt_ns
-        self._drive = deque(self.agents.drive(self.world, self.index_of, self.dt_ns, end_ns))
+        self._drive = balls, jx, jy, names = self.agents.drive(self.world, self.index_of,
+                                                               self.dt_ns, end_ns)
         before = self._applied_count()
-        rejected = [] if self._apply_at_once(self._drive) else self._apply(self._drive,
-                                                                           drive=True)
+        if len(names) >= 2 and self._apply_at_once(balls, jx, jy, names):
+            rejected = []
+        else:
+            rejected = self._apply(deque(zip(names, jx.tolist(), jy.tolist())), drive=True)
         return self._applied_count() - before, rejected
 
     def _applied_count(self):
         """How many impulses were applied since the last step (a DriveBatch counts each)."""
         return len(self._applied) + self._batched
 
-    def _apply_at_once(self, drive):
+    def _apply_at_once(self, balls, jx, jy, names):
         """Apply the drive's impulses (distinct balls) together, if each would pass alone.
 
         The checks are velocity_after's, in the same order and arithmetic (the energy
         accumulated impulse by impulse), so the outcome is that of applying them one by one;
         when any would be refused this returns False and leaves everything to _apply.
         """
-        if len(drive) < 2:
-            return False
         world = self.world
-        index_of = self.index_of
-        names = [name for name, _, _ in drive]
-        balls = np.array([index_of[name] for name in names], dtype=np.int64)
-        jx = np.array([item[1] for item in drive])
-        jy = np.array([item[2] for item in drive])
         masses = world.masses[balls]
         old = world.velocities[balls]
         with np.errstate(over='ignore', invalid='ignore'):
@@ -441,7 +437,6 @@ class Simulation:
         world.apply_impulses(balls, jx, jy)
         stamp_ns = (self.step_index + 1) * self.dt_ns
         self.drive_applied += len(names)
-        drive.clear()
         # One batch, no object per drive (step_record.AppliedImpulses); drives are neither
         # recorded (recording.agent_topics) nor published: a swarm's have no bytes, the
         # others' are made when someone reads them.

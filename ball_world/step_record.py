@@ -223,7 +223,8 @@ class AgentFrame:
     # base_link), as published on <name>/ground_truth; () where not known (read back from
     # an older recording).
     ground_truth_cdr: tuple = ()
-    # Bumper of each agent hit in the step that ended here, agent order (none at step 0).
+    # Bumper of each agent hit in the step that ended here, agent order (none at step 0): a
+    # sequence (agents.frames.Bumpers, made at its first read) or a tuple.
     bumpers: tuple = ()
     # With agent.odom.noise: the odometry's state after this step, agent order: poses (A, 3)
     # x, y, yaw and covariances (A, 6) (core.odometry), which a split file resumes from.

@@ -352,7 +352,7 @@ def test_the_drive_applied_at_once_is_bit_for_bit_the_drive_one_by_one(monkeypat
                   'agents': [f'ball_{i}' for i in range(0, 60, 3)], 'agent.cmd_timeout': 0.0}
     batched = Simulation(parameters)
     single = Simulation(parameters)
-    monkeypatch.setattr(single, '_apply_at_once', lambda drive: False)
+    monkeypatch.setattr(single, '_apply_at_once', lambda *drive: False)
     for simulation in (batched, single):
         for k, name in enumerate(simulation.agents.names):
             simulation.command(name, 0.1 * k - 1.0, 0.05 * k, 0.3 * (k % 5) - 0.6)

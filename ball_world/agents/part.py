@@ -32,6 +32,9 @@ from ball_world.msgs.twist_cdr import encode_twist, encode_twist_stamped
 from ball_world.scans import AgentScans, check as check_scans
 from ball_world.step_record import AgentFrame, AppliedCommand, TakenCommands
 
+#: AgentPart.drive's answer without agents: no ball, no impulse.
+_NO_DRIVE = (np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0), [])
+
 
 def check(parameters, count):
     """The agents of a new world of `count` balls and their scanners' parameters, checked
@@ -262,12 +265,17 @@ class AgentPart:
     # 2. Before the step -----------------------------------------------------------------
 
     def drive(self, world, index_of, dt_ns, end_ns):
-        """The drive's impulses for the step ending end_ns: [(name, jx, jy)], agent order,
-        from the World's velocities now (after the impulses that arrived before the step)."""
+        """The drive's impulses for the step ending end_ns, agent order, from the World's
+        velocities now (after the impulses that arrived before the step): (the balls that
+        get one (int64 indices), jx, jy, their agents' names), arrays but the names (the
+        Simulation applies a crowd's at once, so no tuple is made per agent)."""
         if not len(self.state):
-            return []
-        return self.state.impulses(world.velocities, world.masses, index_of, dt_ns, end_ns,
-                                   rows=self.rows(index_of))
+            return _NO_DRIVE
+        rows = self.rows(index_of)
+        due, jx, jy = self.state.impulse_arrays(world.velocities, world.masses, rows, dt_ns,
+                                                end_ns)
+        names = self.state.names
+        return rows[due], jx, jy, [names[agent] for agent in due.tolist()]
 
     # 3. Around the step -----------------------------------------------------------------
 
