@@ -260,6 +260,34 @@ def test_the_drive_and_pushes_never_ring_the_bumper_and_a_wall_does():
     assert (bumper.x, bumper.y) == pytest.approx((-4.0, 0.0), abs=1e-12)
 
 
+def test_bumpers_made_at_first_read_are_each_hits_closed_form_and_pickle():
+    # agents.frames.Bumpers: made when first read, the same Bumpers every read, equal to a
+    # tuple of them, the forward and left parts the impulse turned into base_link, the bytes
+    # each hit's own Vector3Stamped (b'' when nobody takes them); a pickle reads the same.
+    import pickle
+    from ball_world.agents import frames
+    from ball_world.msgs.cdr import encode_vector3_stamped
+    names = ('a', 'b', 'c', 'd')
+    bases = tuple(f'{name}/base_link' for name in names)
+    yaws = np.array([0.0, 0.5, -2.0, 3.0])
+    impulses = np.array([[1.0, 2.0], [0.0, 0.0], [-0.5, 0.25], [0.0, -3.0]])
+    assert frames.bumpers(names, bases, yaws, np.zeros((4, 2)), 7) == ()
+    for encode in (True, False):
+        hits = frames.bumpers(names, bases, yaws, impulses, 7, encode)
+        assert len(hits) == 3 and bool(hits)
+        made = tuple(hits)
+        assert [b.name for b in made] == ['a', 'c', 'd'] and made[1] is hits[1]
+        for bumper, row in zip(made, (0, 2, 3)):
+            jx, jy = impulses[row]
+            cos, sin = math.cos(yaws[row]), math.sin(yaws[row])
+            assert (bumper.x, bumper.y) == pytest.approx(
+                (cos * jx + sin * jy, cos * jy - sin * jx), abs=1e-12)
+            assert bumper.frame_id == bases[row]
+            assert bumper.cdr == (encode_vector3_stamped(7, bases[row], bumper.x, bumper.y,
+                                                         0.0) if encode else b'')
+        assert hits == made and pickle.loads(pickle.dumps(hits)) == made
+
+
 @pytest.mark.parametrize('value, words', [
     ([0.1, 0.1, 0.1], 'expected 4 numbers'), ([0.0, -0.1, 0.0, 0.0], 'entries must be between'),
     ([0.0, 0.0, 11.0, 0.0], 'entries must be between 0 and 10')])
