@@ -109,6 +109,7 @@ class AgentTopics:
                                                    kinds.BUMPER, kinds.SCAN)}
         self._survey = None  # [(name, kind, publisher)], made again when publishers change
         self._cursor = 0
+        self._drains = None  # [(name, cmd_vel's handle, type)], made again after sync()
         self._io = None  # the node of the per-agent entities, made with the first agent
         self.stamped = stamped
         self._message_type = TwistStamped if stamped else Twist
@@ -137,6 +138,7 @@ class AgentTopics:
         if not self.each:
             return
         self._survey = None
+        self._drains = None
         names = self.simulation.agents.names
         if names and self._io is None:
             world = self.node
@@ -223,6 +225,7 @@ class AgentTopics:
         """
         if self._io is None:
             return
+        self._drains = None
         deadline = time.monotonic() + budget
         node = self._io
         entities = self._topics.values()
@@ -271,16 +274,23 @@ class AgentTopics:
         """Take every waiting command, in arrival order per agent, before a step.
 
         As the node does for impulses: the executor hands over one message per wait, too
-        few for a flood; take_message is what it calls itself (rclpy Jazzy).
+        few for a flood; take_message is what it calls itself (rclpy Jazzy). Each
+        subscription's handle is taken without rclpy's `with handle:` guard, which keeps
+        another thread from destroying it meanwhile: only sync() and destroy() destroy
+        them, on this thread, and they drop this list first. Why: the guard and the
+        `handle` property cost 1-2 us a subscription, and a step looks at every one: with
+        1,000 robots the drain was half the node's main thread (py-spy, 2026-12-08).
         """
-        for name, entities in list(self._topics.items()):
-            subscription = entities.cmd_vel
-            with subscription.handle:
-                while True:
-                    taken = subscription.handle.take_message(subscription.msg_type, True)
-                    if taken is None:
-                        break
-                    self.take(name, taken[0])
+        drains = self._drains
+        if drains is None:
+            drains = self._drains = [(name, entities.cmd_vel.handle, entities.cmd_vel.msg_type)
+                                     for name, entities in self._topics.items()]
+        take = self.take
+        for name, handle, message_type in drains:
+            taken = handle.take_message(message_type, True)
+            while taken is not None:
+                take(name, taken[0])
+                taken = handle.take_message(message_type, True)
 
     def publish(self, record, tf=True):
         """Publish a step's odom and ground truth of every agent, its bumpers, scans and /tf,
@@ -307,9 +317,11 @@ class AgentTopics:
                 for name, data in zip(frame.names, messages):
                     if name in wanted:
                         getattr(topics[name], kind).publish(data)
-        for bumper in frame.bumpers:
-            if bumper.name in listened[kinds.BUMPER]:
-                topics[bumper.name].bumper.publish(bumper.cdr)
+        bumped = listened[kinds.BUMPER]
+        if bumped:  # (a step's Bumpers are made only when someone reads them)
+            for bumper in frame.bumpers:
+                if bumper.name in bumped:
+                    topics[bumper.name].bumper.publish(bumper.cdr)
         if self._bumper_markers.get_subscription_count():
             markers = bumper_markers(record, self.simulation.frame_id)
             if markers is not None:
