@@ -41,6 +41,7 @@ import time
 from geometry_msgs.msg import Twist, TwistStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import LaserScan
@@ -109,7 +110,7 @@ class AgentTopics:
                                                    kinds.BUMPER, kinds.SCAN)}
         self._survey = None  # [(name, kind, publisher)], made again when publishers change
         self._cursor = 0
-        self._drains = None  # [(name, cmd_vel's handle, type)], made again after sync()
+        self._drains = None  # _CommandWaits of the cmd_vel subscriptions, made after sync()
         self._io = None  # the node of the per-agent entities, made with the first agent
         self.stamped = stamped
         self._message_type = TwistStamped if stamped else Twist
@@ -138,7 +139,7 @@ class AgentTopics:
         if not self.each:
             return
         self._survey = None
-        self._drains = None
+        self._drop_drains()
         names = self.simulation.agents.names
         if names and self._io is None:
             world = self.node
@@ -225,7 +226,7 @@ class AgentTopics:
         """
         if self._io is None:
             return
-        self._drains = None
+        self._drop_drains()
         deadline = time.monotonic() + budget
         node = self._io
         entities = self._topics.values()
@@ -274,23 +275,32 @@ class AgentTopics:
         """Take every waiting command, in arrival order per agent, before a step.
 
         As the node does for impulses: the executor hands over one message per wait, too
-        few for a flood; take_message is what it calls itself (rclpy Jazzy). Each
-        subscription's handle is taken without rclpy's `with handle:` guard, which keeps
-        another thread from destroying it meanwhile: only sync() and destroy() destroy
-        them, on this thread, and they drop this list first. Why: the guard and the
-        `handle` property cost 1-2 us a subscription, and a step looks at every one: with
-        1,000 robots the drain was half the node's main thread (py-spy, 2026-12-08).
+        few for a flood; take_message is what it calls itself (rclpy Jazzy). Which
+        subscriptions hold a message is asked of one rcl wait set (waited on with a zero
+        timeout, without the GIL) rather than by a take from each: at 1,000 robots every
+        step looked at 1,000 subscriptions, and the empty takes (about 2 us each while DDS
+        is busy) made the drain half of the node's main thread; the wait set costs a third
+        less (py-spy of the node, 2026-12-08, docs/performance.md). Handles are used without
+        rclpy's `with handle:` guard, which keeps another thread from destroying one
+        meanwhile: only sync() and destroy() destroy them, on this thread, and they drop
+        the wait set first.
         """
-        drains = self._drains
-        if drains is None:
-            drains = self._drains = [(name, entities.cmd_vel.handle, entities.cmd_vel.msg_type)
-                                     for name, entities in self._topics.items()]
+        if self._io is None:
+            return
+        if self._drains is None:
+            self._drains = _CommandWaits(self._io.context, (
+                (name, entities.cmd_vel) for name, entities in self._topics.items()))
         take = self.take
-        for name, handle, message_type in drains:
+        for name, handle, message_type in self._drains.ready():
             taken = handle.take_message(message_type, True)
             while taken is not None:
                 take(name, taken[0])
                 taken = handle.take_message(message_type, True)
+
+    def _drop_drains(self):
+        if self._drains is not None:
+            self._drains.close()
+            self._drains = None
 
     def publish(self, record, tf=True):
         """Publish a step's odom and ground truth of every agent, its bumpers, scans and /tf,
@@ -371,3 +381,38 @@ class AgentTopics:
         """Publish a step's /tf (every odom -> base_link), if it has one."""
         if record.agents is not None and record.agents.tf_cdr and self._tf is not None:
             self._tf.publish(record.agents.tf_cdr)
+
+
+class _CommandWaits:
+    """The cmd_vel subscriptions of the agents, and the rcl wait set that tells which hold a
+    message (AgentTopics.drain)."""
+
+    def __init__(self, context, subscriptions):
+        self._entries = [(name, subscription.handle, subscription.msg_type)
+                         for name, subscription in subscriptions]
+        self._by_pointer = {handle.pointer: (name, handle, message_type)
+                            for name, handle, message_type in self._entries}
+        with context.handle:
+            self._wait_set = rclpy_implementation.WaitSet(len(self._entries), 0, 0, 0, 0, 0,
+                                                          context.handle)
+
+    def ready(self):
+        """[(name, handle, message type)] of the subscriptions holding a message now, in
+        agent order (none without agents: rcl refuses to wait on nothing)."""
+        if not self._entries:
+            return []
+        wait_set = self._wait_set
+        wait_set.clear_entities()
+        add = wait_set.add_subscription
+        for _, handle, _ in self._entries:
+            add(handle)
+        wait_set.wait(0)
+        by_pointer = self._by_pointer
+        return [by_pointer[pointer] for pointer in wait_set.get_ready_entities('subscription')]
+
+    def close(self):
+        """Let the wait set go (before its subscriptions or the context do)."""
+        self._wait_set.clear_entities()
+        self._wait_set.destroy_when_not_in_use()
+        self._entries = []
+        self._by_pointer = {}
