@@ -108,7 +108,7 @@ class AgentTopics:
         # kind -> names of the agents whose publisher of that kind has subscribers
         self._listened = {kind: set() for kind in (kinds.ODOM, kinds.GROUND_TRUTH,
                                                    kinds.BUMPER, kinds.SCAN)}
-        self._survey = None  # [(name, kind, publisher)], made again when publishers change
+        self._survey = None  # [(name, kind, publisher's handle)], made again when they change
         self._cursor = 0
         self._drains = None  # _CommandWaits of the cmd_vel subscriptions, made after sync()
         self._io = None  # the node of the per-agent entities, made with the first agent
@@ -227,6 +227,7 @@ class AgentTopics:
         if self._io is None:
             return
         self._drop_drains()
+        self._survey = None
         deadline = time.monotonic() + budget
         node = self._io
         entities = self._topics.values()
@@ -348,7 +349,11 @@ class AgentTopics:
     def _look_at_subscribers(self):
         """Look at the subscriber counts of the next SURVEY_PER_STEP per-agent publishers."""
         if self._survey is None:
-            self._survey = [(name, kind, publisher) for name, entities in self._topics.items()
+            # The publishers' rcl handles, asked without rclpy's `with handle:` guard (as
+            # drain takes): only sync() and destroy() destroy them, on this thread, and they
+            # drop this list first.
+            self._survey = [(name, kind, publisher.handle)
+                            for name, entities in self._topics.items()
                             for kind, publisher in entities.by_kind()]
             self._cursor = 0
             for names in self._listened.values():
@@ -358,8 +363,8 @@ class AgentTopics:
             return
         count = len(survey)
         for offset in range(min(count, SURVEY_PER_STEP)):
-            name, kind, publisher = survey[(self._cursor + offset) % count]
-            if publisher.get_subscription_count():
+            name, kind, handle = survey[(self._cursor + offset) % count]
+            if handle.get_subscription_count():
                 self._listened[kind].add(name)
             else:
                 self._listened[kind].discard(name)
