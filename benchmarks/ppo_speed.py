@@ -57,12 +57,13 @@ def train(make, threads, steps):
     import torch
     from stable_baselines3 import PPO
 
-    from ball_world.envs.ppo import HYPERPARAMETERS, NET
+    from ball_world.envs.ppo import HYPERPARAMETERS, NET, quiet_logger
     torch.set_num_threads(threads)
     venv = make()
     venv.seed(0)
     model = PPO('MlpPolicy', venv, seed=0, device='cpu', policy_kwargs={'net_arch': NET},
                 **HYPERPARAMETERS)
+    quiet_logger(model)
     wall, cpu = time.perf_counter(), time.process_time()
     model.learn(total_timesteps=steps)
     return model.num_timesteps / (time.perf_counter() - wall), \

@@ -20,6 +20,15 @@ NET = [128, 128]
 LOG_SECONDS = 20.0
 
 
+def quiet_logger(model):
+    """Give an SB3 model a logger that writes nothing: without one of its own, every
+    learn() at verbose 0 and no tensorboard makes an empty folder in the temporary
+    directory (SB3 2.x's `configure`: tmp/SB3-<date and time>), one per training run."""
+    from stable_baselines3.common.logger import Logger
+    model.set_logger(Logger(folder=None, output_formats=[]))
+    return model
+
+
 def train(path, minutes=15.0, timesteps=800_000, num_envs=16, seed=0, threads=1,
           hyperparameters=None, log=print, **options):
     """Train PPO for `timesteps` env steps or `minutes` of wall time, whichever ends first;
@@ -37,6 +46,7 @@ def train(path, minutes=15.0, timesteps=800_000, num_envs=16, seed=0, threads=1,
     settings = dict(HYPERPARAMETERS, **(hyperparameters or {}))
     model = ppo('MlpPolicy', envs, seed=seed, device='cpu', verbose=0,
                 policy_kwargs={'net_arch': list(NET)}, **settings)
+    quiet_logger(model)
     began = time.monotonic()
     deadline = began + 60.0 * minutes
 
