@@ -147,50 +147,49 @@ def _high_product(a, b):
     return a_high * b_high + (high_low >> _S32) + (middle >> _S32)
 
 
-def _lcg_step(bits):
-    """One step of PCG64's LCG on bits (state high, state low, inc high, inc low), in place:
-    state = state * multiplier + inc, modulo 2**128."""
-    high = bits[0]
-    low = bits[1]
+def _pcg_next(high, low, inc_high, inc_low):
+    """PCG64's next 64 bits from the state (high, low) and increment (inc_high, inc_low):
+    (the bits, the new state's high, low). A step of the 128-bit LCG (state = state *
+    multiplier + inc, modulo 2**128), then XSL-RR of the new state.
+
+    Why the state goes in and out as plain values, not in an array: the draws of a scan
+    then keep it in registers; read and written through an array (which the scan's row
+    might alias, for all the compiler knows) every draw cost about twice as much
+    (docs/performance.md)."""
     product_low = low * _MULT_LOW
     product_high = _high_product(low, _MULT_LOW) + low * _MULT_HIGH + high * _MULT_LOW
-    new_low = product_low + bits[3]
-    bits[0] = product_high + bits[2] + (_U1 if new_low < product_low else _U0)
-    bits[1] = new_low
+    new_low = product_low + inc_low
+    new_high = product_high + inc_high + (_U1 if new_low < product_low else _U0)
+    folded = new_high ^ new_low
+    turn = new_high >> _S58
+    return (folded >> turn) | (folded << ((_S64 - turn) & _S63)), new_high, new_low
 
 
-def _seed_pcg(bits, words):
-    """bits as PCG64 seeded by SeedSequence's state words (s1, s0, i1, i0): inc = (i << 1)
-    | 1; state = 0; step; state += s; step."""
-    bits[2] = (words[2] << _U1) | (words[3] >> _S63)
-    bits[3] = (words[3] << _U1) | _U1
-    low = bits[3] + words[1]  # step(0) is inc
-    bits[0] = bits[2] + words[0] + (_U1 if low < words[1] else _U0)
-    bits[1] = low
-    _lcg_step(bits)
+def _seeded(words):
+    """PCG64 seeded by SeedSequence's state words (s1, s0, i1, i0): (state high, low, inc
+    high, low), as numpy makes it: inc = (i << 1) | 1; state = 0; step; state += s;
+    step."""
+    inc_high = (words[2] << _U1) | (words[3] >> _S63)
+    inc_low = (words[3] << _U1) | _U1
+    low = inc_low + words[1]  # step(0) is inc
+    high = inc_high + words[0] + (_U1 if low < words[1] else _U0)
+    _, high, low = _pcg_next(high, low, inc_high, inc_low)
+    return high, low, inc_high, inc_low
 
 
-def _next_uint64(bits):
-    """PCG64's next 64 bits: a step, then XSL-RR of the new state."""
-    _lcg_step(bits)
-    high = bits[0]
-    folded = high ^ bits[1]
-    turn = high >> _S58
-    return (folded >> turn) | (folded << ((_S64 - turn) & _S63))
-
-
-def _next_double(bits):
-    """numpy's next_double: the top 53 bits of next_uint64 as a double in [0, 1)."""
-    return np.float64(_next_uint64(bits) >> _S11) * _DOUBLE_UNIT
+def _to_double(bits):
+    """numpy's next_double: the top 53 bits of 64 as a double in [0, 1)."""
+    return np.float64(bits >> _S11) * _DOUBLE_UNIT
 
 
 # The normal ziggurat ------------------------------------------------------------------
 
-def _standard_normal(bits, rare):
-    """numpy's random_standard_normal from PCG64 `bits`. Counts the rare branches: rare[0]
-    the draws that went to the tail, rare[1] the wedge tests (the tests assert both ran)."""
+def _standard_normal(high, low, inc_high, inc_low, rare):
+    """numpy's random_standard_normal from PCG64's state: (the draw, the new state's high,
+    low). Counts the rare branches: rare[0] the draws that went to the tail, rare[1] the
+    wedge tests (the tests assert both ran)."""
     while True:
-        r = _next_uint64(bits)
+        r, high, low = _pcg_next(high, low, inc_high, inc_low)
         idx = r & _BYTE
         r >>= _S8
         rabs = (r >> _U1) & _BITS52
@@ -198,21 +197,24 @@ def _standard_normal(bits, rare):
         if r & _U1:
             x = -x
         if rabs < ki_double[idx]:
-            return x  # 99.3% of draws
+            return x, high, low  # 99.3% of draws
         if idx == _U0:
             rare[0] += 1
             while True:
-                xx = -ziggurat_nor_inv_r * math.log1p(-_next_double(bits))
-                yy = -math.log1p(-_next_double(bits))
+                first, high, low = _pcg_next(high, low, inc_high, inc_low)
+                second, high, low = _pcg_next(high, low, inc_high, inc_low)
+                xx = -ziggurat_nor_inv_r * math.log1p(-_to_double(first))
+                yy = -math.log1p(-_to_double(second))
                 if yy + yy > xx * xx:
                     if (rabs >> _S8) & _U1:
-                        return -(ziggurat_nor_r + xx)
-                    return ziggurat_nor_r + xx
+                        return -(ziggurat_nor_r + xx), high, low
+                    return ziggurat_nor_r + xx, high, low
         else:
             rare[1] += 1
-            if ((fi_double[idx - _U1] - fi_double[idx]) * _next_double(bits)
+            uniform, high, low = _pcg_next(high, low, inc_high, inc_low)
+            if ((fi_double[idx - _U1] - fi_double[idx]) * _to_double(uniform)
                     + fi_double[idx]) < math.exp(-0.5 * x * x):
-                return x
+                return x, high, low
 
 
 # Many scans ---------------------------------------------------------------------------
@@ -224,16 +226,16 @@ def _add_noise(ranges, words, lengths, steps, scale):
     entropy = np.empty(words.shape[1] + 2, dtype=np.uint64)
     pool = np.empty(POOL_SIZE, dtype=np.uint64)
     state = np.empty(4, dtype=np.uint64)
-    bits = np.empty(4, dtype=np.uint64)
     rare = np.zeros(2, dtype=np.int64)
     loc = 0.0
     for row in range(ranges.shape[0]):
         count = _with_step(entropy, words[row], lengths[row], steps[row])
         _state_words(entropy, count, pool, state)
-        _seed_pcg(bits, state)
+        high, low, inc_high, inc_low = _seeded(state)
         out = ranges[row]
         for beam in range(out.shape[0]):
-            noise = loc + scale * _standard_normal(bits, rare)
+            draw, high, low = _standard_normal(high, low, inc_high, inc_low, rare)
+            noise = loc + scale * draw
             if math.isfinite(out[beam]):
                 out[beam] += noise
     return rare[0], rare[1]
@@ -246,14 +248,13 @@ def _standard_normals(out, words, lengths, steps):
     entropy = np.empty(words.shape[1] + 2, dtype=np.uint64)
     pool = np.empty(POOL_SIZE, dtype=np.uint64)
     state = np.empty(4, dtype=np.uint64)
-    bits = np.empty(4, dtype=np.uint64)
     rare = np.zeros(2, dtype=np.int64)
     for row in range(out.shape[0]):
         count = _with_step(entropy, words[row], lengths[row], steps[row])
         _state_words(entropy, count, pool, state)
-        _seed_pcg(bits, state)
+        high, low, inc_high, inc_low = _seeded(state)
         for column in range(out.shape[1]):
-            out[row, column] = _standard_normal(bits, rare)
+            out[row, column], high, low = _standard_normal(high, low, inc_high, inc_low, rare)
 
 
 if njit is not None:
@@ -263,10 +264,9 @@ if njit is not None:
     _state_words = njit(nogil=True)(_state_words)
     _with_step = njit(nogil=True)(_with_step)
     _high_product = njit(nogil=True)(_high_product)
-    _lcg_step = njit(nogil=True)(_lcg_step)
-    _seed_pcg = njit(nogil=True)(_seed_pcg)
-    _next_uint64 = njit(nogil=True)(_next_uint64)
-    _next_double = njit(nogil=True)(_next_double)
+    _pcg_next = njit(nogil=True)(_pcg_next)
+    _seeded = njit(nogil=True)(_seeded)
+    _to_double = njit(nogil=True)(_to_double)
     _standard_normal = njit(nogil=True)(_standard_normal)
     seed_words = njit(cache=True, nogil=True)(seed_words)
     add_noise = njit(cache=True, nogil=True)(_add_noise)
