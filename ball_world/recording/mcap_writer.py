@@ -30,6 +30,11 @@ simulated time, not every step: see MARKERS_PERIOD_NS for the cost.
 The file is claimed first (recording.files): an existing file is refused unless
 overwrite=True, and the file stays locked until the sink is closed.
 
+The records are written by recording.mcap_records, the messages of a step in one call: the
+`mcap` package's Writer took about 9 us a message, and 1,000 robots with their own topics
+record 30,000 messages a second (docs/performance.md). The records are those its Writer
+wrote, so every MCAP reader reads these files as before.
+
 Crash safety: chunks are cut only between steps, and flush() closes the open chunk and hands
 it to the OS. After a SIGKILL the file has no summary, but every chunk before the last
 flush() is complete; `ball_world_repair` turns such a file into a complete one.
@@ -41,7 +46,6 @@ import json
 import os
 
 from mcap import __version__ as MCAP_VERSION
-from mcap.writer import CompressionType, Writer
 import numpy as np
 import yaml
 
@@ -51,6 +55,7 @@ from ball_world.msgs.definitions import message_definition, type_hash
 from ball_world.recording import agent_topics
 from ball_world.recording.bag import FileSummary, TopicCount
 from ball_world.recording.files import claim_output, OutputClaim
+from ball_world.recording.mcap_records import COMPRESSORS, McapRecords
 from ball_world.recording.resume import RESUME_STEP
 from ball_world.step_record import PACKAGE_NAME
 
@@ -60,8 +65,7 @@ from ball_world.step_record import PACKAGE_NAME
 #: at 1,000 balls and 0.9 ms at 10,000 (p99 2.2 ms), zstd 0.23 ms and 3.6 ms (p99 9.5 ms,
 #: more than the 7 ms the 10,000-ball physics step takes). zstd files are 2-2.6x smaller
 #: (19 vs 49 kB per step at 1,000 balls, 260 vs 505 kB at 10,000): choose it for archives.
-COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
-                'none': CompressionType.NONE}
+COMPRESSIONS = tuple(COMPRESSORS)
 DEFAULT_COMPRESSION = 'lz4'
 
 #: Uncompressed bytes after which the open chunk is closed (at the end of a step). The writer
@@ -108,6 +112,8 @@ MARKERS_PERIOD_NS = 100_000_000
 #: Name of the per-segment metadata record, and the node name of its parameters document.
 METADATA_NAME = PACKAGE_NAME
 NODE_NAME = PACKAGE_NAME
+#: The Header's library: the `mcap` package's version too, as when its Writer wrote the records
+#: (recording.mcap_records writes the same ones; topic_bag's files still use its Writer).
 LIBRARY = f'{PACKAGE_NAME} {__version__} (mcap-python {MCAP_VERSION})'
 
 #: Parameters whose recorded value is '' so that running with a recording's parameters
@@ -155,8 +161,6 @@ ROLE_QOS = {
     agent_topics.BUMPER: offered_qos_profiles(10),
     agent_topics.COMMANDS: offered_qos_profiles(10),  # a swarm's commands, recorded only
 }
-
-_SEQUENCE_MODULO = 2 ** 32  # MCAP message sequence numbers are uint32
 
 
 class _ParamsDumper(yaml.SafeDumper):
@@ -352,13 +356,11 @@ class McapSink:
         self._channels = {}  # topic -> channel id
         self._roles = {}  # logical name -> channel id, for the current segment
         self._topics = {}  # logical name -> recorded topic, for the current segment
-        self._sequences = {}  # channel id -> last sequence number
-        self._counts = {}  # channel id -> messages written
         self._channel_info = {}  # channel id -> (topic, type name, role)
-        self._first_ns = None  # log times of the first and last message written
-        self._end_ns = None
+        # The messages of the step being written (channel ids, bytes): one call writes them.
+        self._batch_channels = []
+        self._batch_data = []
         self.removed = False  # closed before any segment: the file was removed
-        self._pending = 0  # uncompressed bytes in the open chunk
         self._last_log_ns = None
         self._clock = False  # whether this segment records /clock
         self._agent_parameters = {}  # the segment's parameters (agent.cmd_vel_stamped)
@@ -367,9 +369,8 @@ class McapSink:
         self._attached = set()  # (YAML bytes, image bytes) of the maps attached to this file
         self._file = claim.writer()
         self._closed = False
-        # Chunks are cut here, between steps, never by the Writer in the middle of one.
-        self._writer = Writer(self._file, chunk_size=2 ** 62,
-                              compression=COMPRESSIONS[compression])
+        # Chunks are cut here, between steps, never in the middle of one.
+        self._records = McapRecords(self._file, compression)
         try:
             self._guard(self._start)
         except McapRecordingError:
@@ -377,20 +378,21 @@ class McapSink:
             raise
 
     def _start(self):
-        self._writer.start(profile='ros2', library=LIBRARY)
+        self._records.start(profile='ros2', library=LIBRARY)
         self._file.flush()  # a full disk or read-only file fails here, at start
 
     @property
     def bytes_written(self):
         """Bytes handed to the file so far plus the open chunk's (uncompressed): about the
         size of the file were it finished now, less its summary."""
-        return self._file.tell() + self._pending
+        return self._records.position + self._records.pending
 
     # Sink protocol ----------------------------------------------------------------------
 
     def start_segment(self, world, info):
         self._check_open()
         self._segments += 1
+        self._clear_batch()
         self._guard(self._start_segment, world, info)
 
     def write_step(self, record):
@@ -398,6 +400,7 @@ class McapSink:
         if self._last_log_ns is not None and record.log_time_ns < self._last_log_ns:
             raise ValueError(f'log time went back from {self._last_log_ns} to '
                              f'{record.log_time_ns} ns')
+        self._clear_batch()
         self._guard(self._write_step, record)
 
     def write_pending(self, events):
@@ -411,7 +414,9 @@ class McapSink:
         if self._last_log_ns is not None and events.log_time_ns <= self._last_log_ns:
             raise ValueError(f'log time went back from {self._last_log_ns} to '
                              f'{events.log_time_ns} ns')
+        self._clear_batch()
         self._guard(self._write_events, events.log_time_ns, events.impulses, events.edits)
+        self._guard(self._write_batch, events.log_time_ns)
         self._last_log_ns = events.log_time_ns
 
     def flush(self):
@@ -447,13 +452,15 @@ class McapSink:
         """What metadata.yaml says of this file (recording.bag.FileSummary), from what was
         written: no need to read the file back."""
         topics = {}
-        for channel, count in sorted(self._counts.items()):
+        counts = self._records.counts()
+        for channel, count in sorted(counts.items()):
             topic, type_name, role = self._channel_info[channel]
             topics[topic] = TopicCount(topic=topic, type=type_name, message_count=count,
                                        offered_qos_profiles=ROLE_QOS[role],
                                        type_hash=type_hash(type_name))
-        return FileSummary(path=self.path, start_ns=self._first_ns, end_ns=self._end_ns,
-                           message_count=sum(self._counts.values()), topics=topics)
+        return FileSummary(path=self.path, start_ns=self._records.start_time,
+                           end_ns=self._records.end_time,
+                           message_count=self._records.message_count, topics=topics)
 
     # Implementation ---------------------------------------------------------------------
 
@@ -468,17 +475,17 @@ class McapSink:
                        if role not in LAZY_ROLES}
         # Close the previous segment's chunk first, so that in file order the metadata
         # record sits between the two segments' messages.
-        self._writer.flush()
-        self._pending = 0
+        self._records.flush()
         start_ns = segment_start_ns(world, info)
         if occupancy_map is not None:
             self._attach_map(occupancy_map.files, start_ns)
-        self._writer.add_metadata(METADATA_NAME, segment_metadata(world, info, topics))
+        self._records.metadata(METADATA_NAME, segment_metadata(world, info, topics))
         self._restart_markers(world, start_ns)
         if occupancy_map is not None and world.map_cdr is not None:
             # /map as the node latched it, at the segment's (or this file's) first log time,
             # so `ros2 bag play` and Foxglove have the map from the file alone.
             self._add('map', start_ns, world.map_cdr)
+        self._write_batch(start_ns)
 
     def _attach_map(self, files, log_time_ns):
         """Keep the map's files in this file as attachments, once per file per map.
@@ -489,8 +496,8 @@ class McapSink:
         if key in self._attached:
             return
         for name, media_type, data in map_attachments(files):
-            self._writer.add_attachment(create_time=0, log_time=log_time_ns, name=name,
-                                        media_type=media_type, data=data)
+            self._records.attachment(log_time=log_time_ns, create_time=0, name=name,
+                                     media_type=media_type, data=data)
         self._attached.add(key)
 
     def _restart_markers(self, world, log_time_ns):
@@ -510,10 +517,10 @@ class McapSink:
         if channel is None:
             schema = self._schemas.get(type_name)
             if schema is None:
-                schema = self._writer.register_schema(
+                schema = self._records.schema(
                     type_name, 'ros2msg', message_definition(type_name).encode('utf-8'))
                 self._schemas[type_name] = schema
-            channel = self._writer.register_channel(
+            channel = self._records.channel(
                 topic, 'cdr', schema, metadata={'offered_qos_profiles': ROLE_QOS[role],
                                                 'topic_type_hash': type_hash(type_name)})
             self._channels[topic] = channel
@@ -521,29 +528,30 @@ class McapSink:
         return channel
 
     def _add(self, role, log_time_ns, data):
+        """A message of the batch being made (all at log_time_ns: _write_batch writes it)."""
         channel = self._roles.get(role)
         if channel is None:  # a LAZY_ROLES topic's first message
             channel = self._roles[role] = self._channel(self._topics[role], role)
-        self._put(channel, log_time_ns, data)
+        self._batch_channels.append(channel)
+        self._batch_data.append(data)
 
     def _add_agent(self, log_time_ns, topic, type_name, role, data):
         """An agent message (recording.agent_topics): its channel is made at its first one."""
         channel = self._channels.get(topic)
         if channel is None:
             channel = self._channel(topic, role, type_name)
-        self._put(channel, log_time_ns, data)
+        self._batch_channels.append(channel)
+        self._batch_data.append(data)
 
-    def _put(self, channel, log_time_ns, data):
-        sequence = (self._sequences.get(channel, 0) + 1) % _SEQUENCE_MODULO
-        self._sequences[channel] = sequence
-        self._counts[channel] = self._counts.get(channel, 0) + 1
-        if self._first_ns is None or log_time_ns < self._first_ns:
-            self._first_ns = log_time_ns
-        if self._end_ns is None or log_time_ns > self._end_ns:
-            self._end_ns = log_time_ns
-        self._writer.add_message(channel, log_time=log_time_ns, data=data,
-                                 publish_time=log_time_ns, sequence=sequence)
-        self._pending += len(data) + 31  # message record overhead
+    def _write_batch(self, log_time_ns):
+        """The messages added since the last batch, at their log time, in order."""
+        channels, data = self._batch_channels, self._batch_data
+        self._batch_channels, self._batch_data = [], []
+        self._records.messages(log_time_ns, channels, data)
+
+    def _clear_batch(self):
+        """Forget a batch a failed call left half made (a write error ends the sink)."""
+        self._batch_channels, self._batch_data = [], []
 
     def _write_events(self, log_time_ns, impulses, edits):
         """Impulses and edits in the order they were applied (each edit's impulses_before)."""
@@ -577,21 +585,20 @@ class McapSink:
             self._add('clock', log_time_ns, encode_clock(record.stamp_ns))
         if self._markers is not None and self._markers.due(record.stamp_ns):
             self._add('markers', log_time_ns, self._markers.build(record))
+        self._write_batch(log_time_ns)
         self._last_log_ns = log_time_ns
-        if self._pending >= self.chunk_bytes:
-            self._writer.flush()
-            self._pending = 0
+        if self._records.pending >= self.chunk_bytes:
+            self._records.flush()
 
     def _flush(self):
-        # mcap's Writer.flush() closes the open chunk (with its message indexes), writes it
-        # and flushes the Python buffer to the OS; it does not fsync.
-        self._writer.flush()
-        self._pending = 0
+        # Close the open chunk (with its message indexes), write it and flush the Python
+        # buffer to the OS; fsync only when asked.
+        self._records.flush()
         if self.fsync:
             os.fsync(self._file.fileno())
 
     def _finish(self):
-        self._writer.finish()
+        self._records.finish()
         self._file.close()
 
     def _check_open(self):
