@@ -9,12 +9,20 @@ timed apart (in the node it runs on the writer thread, but holds the GIL as long
 messages a step records are counted. Wall time of this process, for `--steps` steps; the
 load average goes in the report. Never a timed assertion. `--profile` prints the sink's
 cProfile instead.
+
+`--against TREE` runs this benchmark of another source tree (an older commit: `git archive
+<commit> | tar -x -C TREE`) and this tree's alternately, `--repeats` times each, each in a
+process of its own with the same Python, and prints their lines. `--agents 0` records a plain
+world of balls (the 1,000- and 10,000-ball worlds of `make bench`'s MCAP row).
 """
 import argparse
 import cProfile
 import math
 import os
+from pathlib import Path
 import pstats
+import subprocess
+import sys
 import tempfile
 import time
 
@@ -80,7 +88,12 @@ def main(argv=None):
     parser.add_argument('--agents', type=int, default=1000)
     parser.add_argument('--steps', type=int, default=300)
     parser.add_argument('--profile', action='store_true')
+    parser.add_argument('--against', metavar='TREE',
+                        help='another source tree whose McapSink is timed alternately')
+    parser.add_argument('--repeats', type=int, default=1)
     args = parser.parse_args(argv)
+    if args.against:
+        return compare(args)
     with tempfile.TemporaryDirectory() as folder:
         path = os.path.join(folder, 'robots.mcap')
         if args.profile:
@@ -108,6 +121,19 @@ def main(argv=None):
           f'{1e3 * recorded / steps:.2f} ms, its write_step {1e3 * timed.spent / steps:.2f} ms '
           f'({messages / (steps + 1):.0f} messages a step, {size:.1f} MB); load average '
           f'{os.getloadavg()[0]:.1f}')
+    return 0
+
+
+def compare(args):
+    """This benchmark of this tree and of args.against, alternately, a process each run."""
+    trees = {'this tree': Path(__file__).resolve().parents[1], args.against: args.against}
+    command = [sys.executable, '-m', 'benchmarks.robots_recording', '--balls',
+               str(args.balls), '--agents', str(args.agents), '--steps', str(args.steps)]
+    for _ in range(args.repeats):
+        for name, tree in trees.items():
+            done = subprocess.run(command, cwd=tree, capture_output=True, text=True)
+            lines = (done.stdout or done.stderr).strip().splitlines() or ['(no output)']
+            print(f'{name}: {lines[-1]}', flush=True)
     return 0
 
 

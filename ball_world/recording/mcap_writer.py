@@ -357,6 +357,7 @@ class McapSink:
         self._roles = {}  # logical name -> channel id, for the current segment
         self._topics = {}  # logical name -> recorded topic, for the current segment
         self._channel_info = {}  # channel id -> (topic, type name, role)
+        self._agent_kinds = {}  # (namespace, role) -> the last agents' names, their channels
         # The messages of the step being written (channel ids, bytes): one call writes them.
         self._batch_channels = []
         self._batch_data = []
@@ -546,6 +547,34 @@ class McapSink:
                                  for topic, type_name, role, _ in messages]
         self._batch_data += [message[3] for message in messages]
 
+    def _add_kind(self, namespace, messages):
+        """One kind of agent message (agent_topics.AgentMessages) into the batch."""
+        if messages.names is None:
+            self._add_agents([(messages.topic, messages.type_name, messages.role, data)
+                              for data in messages.data])
+            return
+        self._batch_channels += self._agent_channels(namespace, messages)
+        self._batch_data += messages.data
+
+    def _agent_channels(self, namespace, messages):
+        """The channel of each agent's topic of messages.role, made at its first message.
+
+        The last names of each kind are kept with their channels: the agents are mostly the
+        same step after step (one tuple, compared by identity), so 1,000 robots' odometry
+        needs no topic strings.
+        """
+        key = (namespace, messages.role)
+        names, channels = self._agent_kinds.get(key, ((), []))
+        if names != messages.names:
+            known, role = self._channels, messages.role
+            channels = []
+            for name in messages.names:
+                topic = agent_topics.agent_topic(namespace, name, role)
+                channels.append(known.get(topic)
+                                or self._channel(topic, role, messages.type_name))
+            self._agent_kinds[key] = (messages.names, channels)
+        return channels
+
     def _write_batch(self, log_time_ns):
         """The messages added since the last batch, at their log time, in order."""
         channels, data = self._batch_channels, self._batch_data
@@ -581,7 +610,8 @@ class McapSink:
         self._add('balls', log_time_ns, record.balls_cdr)
         self._add('state', log_time_ns, record.state_cdr)
         self._add('stats', log_time_ns, record.stats_cdr)
-        self._add_agents(agent_topics.after_step(record, namespace))
+        for messages in agent_topics.after_step(record):
+            self._add_kind(namespace, messages)
         if self._clock:
             self._add('clock', log_time_ns, encode_clock(record.stamp_ns))
         if self._markers is not None and self._markers.due(record.stamp_ns):
