@@ -5,23 +5,26 @@ one by one through a BytesIO, about 9 us a message in Python; 1,000 robots with 
 topics record 30,000 messages a second, on a writer thread that shares the GIL with the
 stepping one (docs/performance.md). Here the messages of one log time are one call: a few
 numpy operations make all their record headers (sequence numbers included) and their message
-index entries, and the records wait as a list of byte strings until the chunk is closed; a
-chunk's message indexes are made from its entries as arrays. The Python work per message is
-a few list items.
+index entries, and the batch becomes one byte string that is CRC'd and compressed into the
+open chunk at once (ChunkBody); a chunk's message indexes are made from its entries as
+arrays when it is closed. The Python work per message is a few list items.
 
 What a file holds is what the `mcap` package's Writer (1.6, as McapSink used it) wrote, record
 for record: the magic and the Header; Schema and Channel records inside the open chunk, ahead
-of the first message that needs them; Chunks (lz4, zstd or uncompressed, each with the CRC of
+of the batch that first needs them; Chunks (lz4, zstd or uncompressed, each with the CRC of
 its records) closed only when the caller says so, each followed by one MessageIndex per
 channel in it; Metadata and Attachment records (with their CRC) between chunks; DataEnd (no
 data section CRC); then the summary: every Schema and Channel, the Statistics, the
 ChunkIndexes, AttachmentIndexes and MetadataIndexes, one SummaryOffset per group; the Footer
-with the summary's CRC; the magic. Two things may differ in bytes, never in what a reader
-gets: the message indexes of a chunk and the counts in the Statistics go in channel order
-(the Writer's: first message order), and a chunk's uncompressed size is exact.
+with the summary's CRC; the magic. What may differ in bytes, never in what a reader gets: a
+chunk's message indexes and the Statistics' counts go in channel order (the Writer's: first
+message order); a chunk's uncompressed size counts its schemas and channels too, so a chunk
+may be cut a step apart from where the Writer's was; an lz4 chunk is a frame of independent
+64 kB blocks without its content size (the Writer's: linked blocks, the size stated), which
+every lz4 reader takes and which compresses as small in about a third less time here.
 
 Compression, zlib's CRC and the file writes release the GIL on buffers this size (lz4's frame
-compress around LZ4F_compressFrame, zstandard's C extension, zlib.crc32 past 5 kB), so on the
+compress around LZ4F_compressUpdate, zstandard's C extension, zlib.crc32 past 5 kB), so on the
 writer thread they run beside stepping. An OSError from the stream is not caught: the caller
 (McapSink) makes it one line.
 """
@@ -51,9 +54,10 @@ MESSAGE_HEAD = _MESSAGE.itemsize  # 31 bytes
 #: A MessageIndex record up to its entries: opcode, length, channel, the entries' byte length.
 _INDEX_HEAD = np.dtype([('opcode', 'u1'), ('length', '<u8'), ('channel', '<u2'),
                         ('entries', '<u4')])
-#: One (log time, offset) entry of a MessageIndex; one (channel, offset) of a ChunkIndex's map.
-_INDEX_ENTRY = np.dtype([('log_time', '<u8'), ('offset', '<u8')])
+#: One (channel, offset) entry of a ChunkIndex's map (a MessageIndex's are two uint64).
 _CHANNEL_OFFSET = np.dtype([('channel', '<u2'), ('offset', '<u8')])
+#: A Channel record up to its topic: opcode, length, id, schema id, the topic's length.
+_CHANNEL_HEAD = struct.Struct('<BQHHI')
 _CHUNK_TIMES = struct.Struct('<QQQI')  # start, end, uncompressed size, uncompressed CRC
 _STATISTICS = struct.Struct('<QHIIIIQQ')
 
@@ -141,7 +145,7 @@ class McapRecords:
         self._position = 0  # bytes handed to the stream
         self._schemas = []  # Schema records, id order
         self._channels = []  # Channel records, id order
-        self._maps = {}  # channel metadata (its items) -> its bytes
+        self._tails = {}  # a channel's encoding and metadata -> their bytes
         self._counts = np.zeros(256, dtype=np.int64)  # messages of each channel id
         self._marks = np.zeros_like(self._counts)  # scratch of _sequences
         self.message_count = 0
@@ -199,13 +203,16 @@ class McapRecords:
         channel_id = len(self._channels) + 1
         if channel_id > MAX_ID:
             raise ValueError(f'an MCAP file holds at most {MAX_ID:,} channels')
-        key = tuple(metadata.items())
-        if key not in self._maps:  # the same few for thousands of robots' topics
-            self._maps[key] = string_map(metadata)
-        body = (_U16.pack(channel_id) + _U16.pack(schema_id) + text(topic)
-                + text(message_encoding) + self._maps[key])
-        self._channels.append(record(Opcode.CHANNEL, body))
-        self._add_part(self._channels[-1])
+        # The encoding and metadata are the same few for thousands of robots' topics.
+        key = (message_encoding, *metadata.items())
+        tail = self._tails.get(key)
+        if tail is None:
+            tail = self._tails[key] = text(message_encoding) + string_map(metadata)
+        name = topic.encode('utf-8')
+        channel = _CHANNEL_HEAD.pack(Opcode.CHANNEL, 8 + len(name) + len(tail), channel_id,
+                                     schema_id, len(name)) + name + tail
+        self._channels.append(channel)
+        self._add_part(channel)
         if channel_id >= len(self._counts):
             self._counts = np.concatenate([self._counts, np.zeros_like(self._counts)])
             self._marks = np.zeros_like(self._counts)
@@ -314,32 +321,44 @@ class McapRecords:
         self._new_chunk()
 
     def _message_indexes(self, start):
-        """The closing chunk's MessageIndex records (one per channel, channel order), which
-        begin at file offset `start`, and the ChunkIndex's map of where each one is."""
+        """The closing chunk's MessageIndex records (one per channel), which begin at file
+        offset `start`, and the ChunkIndex's map of where each one is.
+
+        Channels with as many messages in the chunk (most of them: every robot's odometry)
+        have records of one size, made as one structured array; the records go by that size,
+        then channel (the map says where each is; no reader needs an order).
+        """
         ids = np.concatenate([batch[0] for batch in self._batches])
-        times = np.concatenate([np.full(len(batch[0]), batch[1], dtype=np.uint64)
-                                for batch in self._batches])
+        times = np.repeat(np.array([batch[1] for batch in self._batches], dtype=np.uint64),
+                          [len(batch[0]) for batch in self._batches])
         offsets = np.concatenate([batch[2] for batch in self._batches])
-        order = np.argsort(ids, kind='stable')  # each channel's messages in file order
+        # Each channel's messages in file order (ids fit 16 bits: numpy's radix sort).
+        order = np.argsort(ids.astype(np.uint16), kind='stable')
         ranked = ids[order]
         first, sizes = _runs(ranked)
-        entries = np.empty(len(ids), dtype=_INDEX_ENTRY)
-        entries['log_time'] = times[order]
-        entries['offset'] = offsets[order]
-        heads = np.empty(len(first), dtype=_INDEX_HEAD)
-        heads['opcode'] = Opcode.MESSAGE_INDEX
-        heads['length'] = 6 + 16 * sizes
-        heads['channel'] = ranked[first]
-        heads['entries'] = 16 * sizes
-        where = np.empty(len(first), dtype=_CHANNEL_OFFSET)
-        where['channel'] = ranked[first]
-        where['offset'] = start + _INDEX_HEAD.itemsize * np.arange(len(first)) + 16 * first
-        entry_bytes = entries.tobytes()
-        bounds = (16 * np.append(first, len(ids))).tolist()
-        parts = [None] * (2 * len(first))
-        parts[0::2] = heads.view(f'V{_INDEX_HEAD.itemsize}').tolist()
-        parts[1::2] = [entry_bytes[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
-        return b''.join(parts), where.tobytes()
+        entries = np.empty((len(ids), 2), dtype='<u8')  # (log time, offset), as bytes
+        entries[:, 0] = times[order]
+        entries[:, 1] = offsets[order]
+        entries = entries.view('V16').reshape(-1)  # one item each: rows gather fast
+        records, maps, at = [], [], start
+        for size in np.flatnonzero(np.bincount(sizes)).tolist():
+            chosen = first[sizes == size]
+            heads = np.empty(len(chosen), dtype=_INDEX_HEAD)
+            heads['opcode'] = Opcode.MESSAGE_INDEX
+            heads['length'] = 6 + 16 * size
+            heads['channel'] = ranked[chosen]
+            heads['entries'] = 16 * size
+            block = np.empty((len(chosen), _INDEX_HEAD.itemsize + 16 * size), dtype=np.uint8)
+            block[:, :_INDEX_HEAD.itemsize] = heads.view(np.uint8).reshape(len(chosen), -1)
+            block[:, _INDEX_HEAD.itemsize:] = entries[
+                chosen[:, None] + np.arange(size)].view(np.uint8).reshape(len(chosen), -1)
+            where = np.empty(len(chosen), dtype=_CHANNEL_OFFSET)
+            where['channel'] = ranked[chosen]
+            where['offset'] = at + block.shape[1] * np.arange(len(chosen))
+            records.append(block.tobytes())
+            maps.append(where.tobytes())
+            at += block.nbytes
+        return b''.join(records), b''.join(maps)
 
     def metadata(self, name, values):
         """A Metadata record (values: {str: str}), at once."""
