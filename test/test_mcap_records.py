@@ -23,6 +23,7 @@ from mcap.records import Channel, Chunk, Message, MessageIndex
 from mcap.stream_reader import breakup_chunk, StreamReader
 from mcap.writer import CompressionType, Writer
 from mcap_ros2.decoder import DecoderFactory
+import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message
 from rosbags.rosbag2 import Reader as RosbagsReader
@@ -367,8 +368,22 @@ def test_random_batches_read_back_in_order_with_sequences_and_indexes(tmp_path_f
         check_message_indexes(path)
 
 
-def test_an_empty_file_and_the_refusals(tmp_path):
+def test_an_empty_file_reads(tmp_path):
     path = tmp_path / 'empty.mcap'
+    with open(path, 'wb') as stream:
+        records = McapRecords(stream, 'lz4')
+        records.start('ros2', 'test')
+        records.channel('/t', 'cdr', records.schema('s', 'ros2msg', b''), {})
+        records.flush()  # a chunk of a channel alone stays open: no empty chunk
+        records.finish()
+    with open(path, 'rb') as stream:
+        summary = make_reader(stream).get_summary()
+    assert (summary.statistics.message_count, summary.statistics.chunk_count,
+            summary.statistics.message_start_time, list(summary.channels)) == (0, 0, 0, [1])
+
+
+def test_refused_messages_leave_nothing_behind(tmp_path):
+    path = tmp_path / 'refused.mcap'
     with open(path, 'wb') as stream:
         records = McapRecords(stream, 'none')
         records.start('ros2', 'test')
@@ -378,14 +393,18 @@ def test_an_empty_file_and_the_refusals(tmp_path):
             records.messages(5, [channel + 1], [b'x'])
         with pytest.raises(ValueError, match='1 channels for 2 messages'):
             records.messages(5, [channel], [b'x', b'y'])
+        with pytest.raises(ValueError, match='message data must be bytes, a byte an item'):
+            records.messages(5, [channel, channel], [b'x', np.zeros(2)])
+        records.messages(6, [channel], [b'kept'])  # the refusals left nothing behind
         records.metadata('m', {'k': 'v'})
         records.finish()
     with open(path, 'rb') as stream:
         reader = make_reader(stream)
         summary = reader.get_summary()
         assert (summary.statistics.message_count, summary.statistics.channel_count,
-                len(summary.chunk_indexes)) == (0, 1, 0)
+                len(summary.chunk_indexes)) == (1, 1, 1)
         assert [m.metadata for m in reader.iter_metadata()] == [{'k': 'v'}]
+    assert messages_of(path) == [('/t', 1, 6, 6, b'kept')]
     with pytest.raises(ValueError, match='compression must be one of zstd, lz4, none'):
         McapRecords(io.BytesIO(), 'gzip')
     records = McapRecords(io.BytesIO(), 'none')

@@ -226,9 +226,10 @@ class McapRecords:
     def messages(self, log_time, channels, datas):
         """Messages at one log time (also their publish time) into the open chunk, in order.
 
-        channels: the channel id of each (from channel()); datas: their bytes. Each message's
-        sequence is its channel's count in this file, modulo 2**32, as the node's publishers
-        number them from 1.
+        channels: the channel id of each (from channel()); datas: their bytes (bytes-like, a
+        byte an item: anything else is refused before it is written). Each message's sequence
+        is its channel's count in this file, modulo 2**32, as the node's publishers number
+        them from 1.
         """
         count = len(datas)
         if not count:
@@ -243,15 +244,21 @@ class McapRecords:
         heads['opcode'] = Opcode.MESSAGE
         heads['length'] = lengths + (MESSAGE_HEAD - 9)
         heads['channel'] = ids
+        counts = self._counts[ids]
         heads['sequence'] = (self._sequences(ids) % _SEQUENCE_MODULO).astype(np.uint32)
         heads['log_time'] = log_time
         heads['publish_time'] = log_time
         sizes = lengths + MESSAGE_HEAD
-        self._batches.append((ids, log_time, np.cumsum(sizes) - sizes + self.pending))
         parts = [None] * (2 * count)
         parts[0::2] = heads.view(f'V{MESSAGE_HEAD}').tolist()
         parts[1::2] = datas
-        self._body.add(b''.join(self._take_loose() + parts))
+        batch = b''.join(self._loose + parts)
+        if len(batch) != self._loose_size + int(sizes.sum()):  # len() was not their bytes
+            self._counts[ids] = counts
+            raise ValueError('message data must be bytes, a byte an item')
+        self._batches.append((ids, log_time, np.cumsum(sizes) - sizes + self.pending))
+        self._loose, self._loose_size = [], 0
+        self._body.add(batch)
         self.message_count += count
         if self._chunk_start is None:
             self._chunk_start = self._chunk_end = log_time
@@ -263,10 +270,6 @@ class McapRecords:
         else:
             self.start_time = min(self.start_time, log_time)
             self.end_time = max(self.end_time, log_time)
-
-    def _take_loose(self):
-        loose, self._loose, self._loose_size = self._loose, [], 0
-        return loose
 
     def _sequences(self, ids):
         """Each message's sequence number before the modulo, and its channel counted."""
@@ -300,7 +303,8 @@ class McapRecords:
     def _close_chunk(self):
         body = self._body
         if self._loose:
-            body.add(b''.join(self._take_loose()))
+            body.add(b''.join(self._loose))
+            self._loose, self._loose_size = [], 0
         pieces = body.finish()
         compressed = sum(map(len, pieces))
         head = (_CHUNK_TIMES.pack(self._chunk_start, self._chunk_end, body.size, body.crc)
