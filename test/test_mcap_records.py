@@ -326,6 +326,25 @@ def test_ros2_decoding_rosbags_and_ball_world_tools_read_both_alike(files, capsy
     assert steps[0] == steps[1]
 
 
+@pytest.mark.parametrize('compression', ['zstd', 'none'])
+def test_rosbags_and_mcap_read_every_compression(tmp_path, compression):
+    new, old = tmp_path / 'new.mcap', tmp_path / 'old.mcap'
+    simulation = Simulation(sandbox_parameters(), sinks=[
+        McapSink(new, compression=compression, chunk_bytes=16 << 10),
+        reference_sink(old, compression=compression, chunk_bytes=16 << 10)])
+    for _ in range(12):
+        simulation.command('ball_0', 0.2, 0.0, 1.0)
+        simulation.step()
+    simulation.close()
+    assert messages_of(new) == messages_of(old)
+    assert check_message_indexes(new) > 1
+    counts = []
+    for path in (new, old):
+        with RosbagsReader(path) as reader:
+            counts.append(sum(1 for _ in reader.messages()))
+    assert counts[0] == counts[1] == len(messages_of(old))
+
+
 # McapRecords on its own ---------------------------------------------------------------
 
 batches = st.lists(st.tuples(st.lists(st.integers(1, 5), max_size=12), st.booleans()),

@@ -92,9 +92,10 @@ class ChunkBody:
     A batch's records arrive as one byte string while they are still in the CPU's cache: its
     CRC is carried on, and lz4 compresses it into the chunk's frame at once (a frame
     without its content size, which lz4's readers do not need). zstd compresses the whole
-    chunk when it is closed, so its frame states its size (rosbags needs that); 'none'
-    keeps the byte strings. Either way no chunk is ever joined from thousands of pieces:
-    that took about 5 ms a 4 MiB chunk, more than compressing it.
+    chunk when it is closed, so its frame states its size, as the Writer's did (a reader
+    may size its output from it); 'none' keeps the byte strings. Either way no chunk is
+    ever joined from thousands of pieces: that took about 5 ms a 4 MiB chunk, more than
+    compressing it.
     """
 
     def __init__(self, compression):
