@@ -10,6 +10,10 @@ messages a step records are counted. Wall time of this process, for `--steps` st
 load average goes in the report. Never a timed assertion. `--profile` prints the sink's
 cProfile instead.
 
+`--thread` writes on a writer thread as the node does (recording.writer_thread.BackgroundSink)
+and times the steps until the sink is closed: how much the writer, sharing the GIL, slows the
+stepping thread.
+
 `--against TREE` runs this benchmark of another source tree (an older commit: `git archive
 <commit> | tar -x -C TREE`) and this tree's alternately, `--repeats` times each, each in a
 process of its own with the same Python, and prints their lines. `--agents 0` records a plain
@@ -28,6 +32,7 @@ import time
 
 from ball_world.msgs.twist_cdr import encode_twist
 from ball_world.recording.mcap_writer import McapSink
+from ball_world.recording.writer_thread import BackgroundSink
 from ball_world.simulation import Simulation
 
 
@@ -63,8 +68,9 @@ class TimedSink:
         self.sink.close()
 
 
-def run(args, sink=None):
-    """Seconds for args.steps steps (commands included), the sink's flushed once a second."""
+def run(args, sink=None, until_closed=False):
+    """Seconds for args.steps steps (commands included), the sink's flushed once a second;
+    until_closed: and until the sink is closed (a writer thread done with its queue)."""
     simulation = Simulation(parameters(args.balls, args.agents),
                             sinks=[sink] if sink is not None else [])
     command = encode_twist(1.0, 0.0, 0.5)
@@ -79,7 +85,7 @@ def run(args, sink=None):
             simulation.flush()
     spent = time.perf_counter() - began
     simulation.close()
-    return spent
+    return time.perf_counter() - began if until_closed else spent
 
 
 def main(argv=None):
@@ -91,6 +97,8 @@ def main(argv=None):
     parser.add_argument('--against', metavar='TREE',
                         help='another source tree whose McapSink is timed alternately')
     parser.add_argument('--repeats', type=int, default=1)
+    parser.add_argument('--thread', action='store_true',
+                        help='write on a writer thread, as the node does')
     args = parser.parse_args(argv)
     if args.against:
         return compare(args)
@@ -109,6 +117,13 @@ def main(argv=None):
             pstats.Stats(profile).sort_stats('cumulative').print_stats(20)
             return 0
         alone = run(args)
+        if args.thread:
+            threaded = run(args, BackgroundSink(McapSink(path)), until_closed=True)
+            print(f'{args.balls:,} balls, {args.agents:,} robots with topics, {args.steps} '
+                  f'steps: the steps alone {1e3 * alone / args.steps:.2f} ms a step; with an '
+                  f'McapSink on its writer thread {1e3 * threaded / args.steps:.2f} ms; load '
+                  f'average {os.getloadavg()[0]:.1f}')
+            return 0
         timed = TimedSink(McapSink(path))
         recorded = run(args, timed)
         messages = sum(timed.sink.summary().topics[t].message_count
@@ -128,7 +143,8 @@ def compare(args):
     """This benchmark of this tree and of args.against, alternately, a process each run."""
     trees = {'this tree': Path(__file__).resolve().parents[1], args.against: args.against}
     command = [sys.executable, '-m', 'benchmarks.robots_recording', '--balls',
-               str(args.balls), '--agents', str(args.agents), '--steps', str(args.steps)]
+               str(args.balls), '--agents', str(args.agents), '--steps', str(args.steps),
+               *(['--thread'] if args.thread else [])]
     for _ in range(args.repeats):
         for name, tree in trees.items():
             done = subprocess.run(command, cwd=tree, capture_output=True, text=True)
