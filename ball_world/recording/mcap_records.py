@@ -54,8 +54,9 @@ MESSAGE_HEAD = _MESSAGE.itemsize  # 31 bytes
 #: A MessageIndex record up to its entries: opcode, length, channel, the entries' byte length.
 _INDEX_HEAD = np.dtype([('opcode', 'u1'), ('length', '<u8'), ('channel', '<u2'),
                         ('entries', '<u4')])
-#: One (channel, offset) entry of a ChunkIndex's map (a MessageIndex's are two uint64).
-_CHANNEL_OFFSET = np.dtype([('channel', '<u2'), ('offset', '<u8')])
+#: One entry of a map<uint16, uint64>: a ChunkIndex's (channel, offset of its MessageIndex),
+#: the Statistics' (channel, messages). A MessageIndex's entries are two uint64 each.
+_CHANNEL_VALUE = np.dtype([('channel', '<u2'), ('value', '<u8')])
 #: A Channel record up to its topic: opcode, length, id, schema id, the topic's length.
 _CHANNEL_HEAD = struct.Struct('<BQHHI')
 _CHUNK_TIMES = struct.Struct('<QQQI')  # start, end, uncompressed size, uncompressed CRC
@@ -357,9 +358,9 @@ class McapRecords:
             block[:, :_INDEX_HEAD.itemsize] = heads.view(np.uint8).reshape(len(chosen), -1)
             block[:, _INDEX_HEAD.itemsize:] = entries[
                 chosen[:, None] + np.arange(size)].view(np.uint8).reshape(len(chosen), -1)
-            where = np.empty(len(chosen), dtype=_CHANNEL_OFFSET)
+            where = np.empty(len(chosen), dtype=_CHANNEL_VALUE)
             where['channel'] = ranked[chosen]
-            where['offset'] = at + block.shape[1] * np.arange(len(chosen))
+            where['value'] = at + block.shape[1] * np.arange(len(chosen))
             records.append(block.tobytes())
             maps.append(where.tobytes())
             at += block.nbytes
@@ -385,9 +386,9 @@ class McapRecords:
     def statistics(self):
         """The Statistics record of what was written."""
         counts = np.flatnonzero(self._counts)
-        table = np.empty(len(counts), dtype=_CHANNEL_OFFSET)
+        table = np.empty(len(counts), dtype=_CHANNEL_VALUE)
         table['channel'] = counts
-        table['offset'] = self._counts[counts]
+        table['value'] = self._counts[counts]
         return record(Opcode.STATISTICS, _STATISTICS.pack(
             self.message_count, len(self._schemas), len(self._channels),
             len(self._attachment_indexes), len(self._metadata_indexes), self._chunk_count,
