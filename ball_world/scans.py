@@ -235,10 +235,10 @@ class AgentScans:
                     entropy = self._last[3] = EntropyRows.of(
                         (scanner.seed, scanner.key) for scanner in scanners)
                 noise = _run_noise(entropy, step_index, stddev, len(scanners))
+            range_mins = [scanner.fan.range_min for scanner in scanners]
             table = lidar.scan_many(world.positions, world.radii, world.walls, indices, yaws,
-                                    scanners[0].fan,
-                                    [scanner.fan.range_min for scanner in scanners],
-                                    'numba', world.static.scan_grid, self.pool(), noise)
+                                    scanners[0].fan, range_mins, 'numba',
+                                    world.static.scan_grid, self.pool(), noise)
             if not encode:
                 return ScanTable(names, base_frames, table,
                                  [scanner.fan for scanner in scanners])
@@ -247,8 +247,7 @@ class AgentScans:
             fan = scanners[0].fan
             cdrs = encode_laser_scans(stamp_ns, base_frames, fan.angle_min, fan.angle_max,
                                       fan.angle_increment, 0.0, self.period_ns * 1e-9,
-                                      [scanner.fan.range_min for scanner in scanners],
-                                      fan.range_max, table)
+                                      range_mins, fan.range_max, table)
             return tuple(AgentScan(name, frame_id, ranges, scanner.fan, cdr)
                          for name, scanner, frame_id, ranges, cdr
                          in zip(names, scanners, base_frames, table, cdrs))

@@ -326,26 +326,24 @@ class Agents:
         """The headings at the end of the step ending end_ns (their yaw rates applied)."""
         return wrapped(self._yaws + self.yaw_rates(end_ns) * (dt_ns * 1e-9))
 
-    def impulses(self, velocities, masses, index_of, dt_ns, end_ns, rows=None):
+    def impulses(self, velocities, masses, index_of, dt_ns, end_ns):
         """The drive's impulses for the step ending end_ns: [(name, jx, jy)], agent order.
 
         velocities and masses are the world's arrays (after the impulses that arrived before
-        the step), index_of maps names to indices; rows, when given, are the agents' indices
-        already looked up (agent order). An agent already at its target gets none.
+        the step), index_of maps names to indices. An agent already at its target gets none.
         """
         if not self._names:
             return []
-        if rows is None:
-            rows = np.array([index_of.get(name, -1) for name in self._names], dtype=np.int64)
+        rows = np.array([index_of.get(name, -1) for name in self._names], dtype=np.int64)
         due, jx, jy = self.impulse_arrays(velocities, masses, rows, dt_ns, end_ns)
         names = self._names
         due, jx, jy = due.tolist(), jx.tolist(), jy.tolist()
         return [(names[agent], x, y) for agent, x, y in zip(due, jx, jy)]
 
     def impulse_arrays(self, velocities, masses, rows, dt_ns, end_ns):
-        """impulses() as arrays, for callers that step many agents (envs.arenas): (the
-        agents due, in agent order, jx, jy); `rows` are the agents' indices into velocities
-        and masses (-1: not in the world)."""
+        """impulses() as arrays, for callers that step many agents (envs.arenas,
+        AgentPart.drive): (the agents due, in agent order, jx, jy); `rows` are the agents'
+        indices into velocities and masses (-1: not in the world)."""
         limits = self.limits
         present = rows >= 0
         active = self._in_force(end_ns)
